@@ -1,0 +1,3 @@
+"""SOfAR: safe overtaking for autonomous racing."""
+
+__version__ = "0.1.0"

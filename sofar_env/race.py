@@ -1,0 +1,258 @@
+"""The race world: controlled cars, scripted opponents, events and metrics.
+
+``Race`` is the one simulation core under the Gymnasium and PettingZoo
+adapters. It holds ``n_cars`` controlled cars (the ego is car 0; the
+PettingZoo environment uses several) integrated by :class:`~sofar_env.vehicle.Plant`,
+plus a field of scripted :class:`~sofar_env.opponents.Opponents` (single-ego
+races only). Every step it reports, per controlled car:
+
+* ``collision``: its footprint (an oriented ``length x width`` rectangle)
+  intersects the footprint of an opponent or of another controlled car;
+* ``off_track``: a corner of its footprint lies beyond an edge, i.e. the
+  corner's Frenet offset exceeds ``width_left(s)`` or ``-width_right(s)`` at the
+  corner's own arc length;
+* ``overtakes``: scripted opponents counted as overtaken (and respawned), or,
+  between controlled cars, another car that was ahead and fell
+  ``overtake_threshold`` behind;
+* ``progress``: arc length gained along the track [m]; laps = total progress /
+  track length.
+
+All randomness comes from the ``numpy.random.Generator`` passed to
+:meth:`Race.reset`: the start arc length (uniform on the raceline) and the start
+speed (uniform in ``start_speed_fraction`` x the speed profile there).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .geometry import footprint_corners, rectangles_intersect
+from .opponents import OpponentConfig, Opponents
+from .vehicle import AV21, Plant, VehicleParams
+
+__all__ = ["RaceConfig", "CarEvents", "Race"]
+
+
+@dataclass(frozen=True)
+class RaceConfig:
+    """World parameters."""
+
+    dt: float = 0.1
+    """Control period of the plant [s]."""
+    duration: float = 200.0
+    """Episode horizon [s]."""
+    plant_substeps: int = 4
+    """RK4 sub-steps per control period."""
+    random_start: bool = True
+    """Draw the ego start arc length uniformly on the raceline; otherwise use ``start_s``."""
+    start_s: float = 0.0
+    """Start arc length when ``random_start`` is False [m]."""
+    start_speed_fraction: tuple[float, float] = (0.5, 0.9)
+    """Start speed drawn uniformly in this range times the speed profile at the start [-]."""
+    car_spacing: float = 40.0
+    """Arc-length spacing of the controlled cars at the start of a multi-car race [m]."""
+    car_offsets: tuple[float, ...] = (0.0, 2.5, -2.5)
+    """Lateral start offsets of controlled cars 1, 2, ... (cycled; car 0 starts on the raceline) [m]."""
+    vehicle: VehicleParams = AV21
+    """Parameters of every car."""
+    opponents: OpponentConfig = field(default_factory=OpponentConfig)
+    """The scripted opponent field."""
+
+    def __post_init__(self) -> None:
+        if self.dt <= 0 or self.duration <= 0:
+            raise ValueError("dt and duration must be positive")
+        lo, hi = self.start_speed_fraction
+        if not (0.0 <= lo <= hi):
+            raise ValueError("start_speed_fraction must be an ordered pair of non-negative numbers")
+
+    @property
+    def max_steps(self) -> int:
+        return int(round(self.duration / self.dt))
+
+
+@dataclass
+class CarEvents:
+    """What happened to one controlled car during one step."""
+
+    collision: bool = False
+    off_track: bool = False
+    overtakes: int = 0
+    progress: float = 0.0
+    """Arc length gained [m]."""
+
+
+def _wrap_angle(a):
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+class Race:
+    """Controlled cars and scripted opponents on one track."""
+
+    def __init__(self, track, config: RaceConfig | None = None, n_cars: int = 1):
+        self.track = track
+        self.config = config or RaceConfig()
+        if n_cars < 1:
+            raise ValueError("n_cars must be >= 1")
+        self.n_cars = int(n_cars)
+        self.plant = Plant(self.config.vehicle, self.config.dt, self.config.plant_substeps)
+        self.opponents = Opponents(track, self.config.opponents)
+        self.states = np.zeros((self.n_cars, 5))
+        """Cartesian state (x, y, psi, v, delta) of each controlled car."""
+        self.frenet = np.zeros((self.n_cars, 5))
+        """Frenet state (s, n, e, v, delta) of each controlled car."""
+        self.active = np.ones(self.n_cars, bool)
+        self.time = 0.0
+        self.steps = 0
+        self.distance = np.zeros(self.n_cars)
+        self.overtakes = np.zeros(self.n_cars, int)
+        self._car_rel = np.zeros((self.n_cars, self.n_cars))
+        self._car_ahead = np.zeros((self.n_cars, self.n_cars), bool)
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, rng: np.random.Generator, *, start_s: float | None = None, start_speed: float | None = None,
+              rho: float | None = None, n_opponents: int | None = None) -> None:
+        """Start a new race. Draws the start from ``rng`` unless given explicitly."""
+        cfg = self.config
+        L = self.track.length
+        if start_s is None:
+            start_s = float(rng.uniform(0.0, L)) if cfg.random_start else cfg.start_s
+        start_s = float(self.track.wrap(start_s))
+        frac = float(rng.uniform(*cfg.start_speed_fraction))
+        self.time = 0.0
+        self.steps = 0
+        self.active[:] = True
+        self.distance[:] = 0.0
+        self.overtakes[:] = 0
+        for k in range(self.n_cars):
+            s_k = float(self.track.wrap(start_s - k * cfg.car_spacing))
+            n_k = 0.0 if k == 0 else float(cfg.car_offsets[(k - 1) % len(cfg.car_offsets)])
+            v_k = float(start_speed) if start_speed is not None else frac * float(self.track.speed(s_k))
+            if not math.isfinite(v_k) or v_k < 0:
+                raise ValueError(f"start speed must be finite and >= 0, got {v_k}")
+            x, y = self.track.to_cartesian(s_k, n_k)
+            psi = float(self.track.heading(s_k))
+            self.states[k] = (float(x), float(y), psi, v_k, 0.0)
+            self.frenet[k] = (s_k, n_k, 0.0, v_k, 0.0)
+        if n_opponents and self.n_cars > 1:
+            raise ValueError("scripted opponents are supported in single-car races only")
+        self.opponents.reset(self.frenet[0, 0], rho=rho, n_opponents=0 if self.n_cars > 1 else n_opponents)
+        gaps = self.track.gap(self.frenet[None, :, 0], self.frenet[:, None, 0])  # [i, j] = s_j - s_i
+        self._car_rel = np.asarray(gaps, float).reshape(self.n_cars, self.n_cars)
+        self._car_ahead = self._car_rel > 0.0
+
+    # ------------------------------------------------------------------ queries
+    def opponent_frenet(self, car: int = 0) -> np.ndarray:
+        """Rows (s, n, v) of everything car ``car`` must avoid: scripted opponents and other active cars.
+
+        ``s`` is absolute arc length [m], ``v`` the arc-length speed ds/dt [m/s].
+        """
+        rows = [np.column_stack([self.opponents.s, self.opponents.n, self.opponents.v])] if self.opponents.count else []
+        others = [j for j in range(self.n_cars) if j != car and self.active[j]]
+        if others:
+            f = self.frenet[others]
+            kappa = np.asarray(self.track.curvature(f[:, 0]), float)
+            s_dot = f[:, 3] * np.cos(f[:, 2]) / (1.0 - kappa * f[:, 1])
+            rows.append(np.column_stack([f[:, 0], f[:, 1], s_dot]))
+        return np.concatenate(rows) if rows else np.zeros((0, 3))
+
+    def obstacle_corners(self, car: int = 0) -> np.ndarray:
+        """Footprint corners (m, 4, 2) of everything car ``car`` can collide with."""
+        p = self.config.vehicle
+        parts = []
+        if self.opponents.count:
+            x, y, psi = self.opponents.poses()
+            parts.append(footprint_corners(x, y, psi, p))
+        others = [j for j in range(self.n_cars) if j != car and self.active[j]]
+        if others:
+            st = self.states[others]
+            parts.append(footprint_corners(st[:, 0], st[:, 1], st[:, 2], p))
+        return np.concatenate(parts) if parts else np.zeros((0, 4, 2))
+
+    def laps(self, car: int = 0) -> float:
+        """Completed laps of car ``car``: arc length driven / track length."""
+        return float(self.distance[car] / self.track.length)
+
+    @property
+    def truncated(self) -> bool:
+        return self.steps >= self.config.max_steps
+
+    # ------------------------------------------------------------------ step
+    def step(self, controls) -> list[CarEvents]:
+        """Advance the world by one control period with ``controls`` (n_cars, 2) = (a, delta_dot).
+
+        Inactive cars (crashed in a multi-car race) are left where they were and removed
+        from the obstacle lists. Returns the events of every car (all False for inactive ones).
+        """
+        u = np.asarray(controls, float).reshape(self.n_cars, 2)
+        if not np.all(np.isfinite(u[self.active])):
+            raise ValueError(f"non-finite control {u.tolist()}")
+        dt = self.config.dt
+        for k in np.flatnonzero(self.active):
+            self.states[k] = self.plant.step(self.states[k], u[k])
+        self.opponents.advance(dt)
+        self.time += dt
+        self.steps += 1
+        events = [CarEvents() for _ in range(self.n_cars)]
+        for k in np.flatnonzero(self.active):
+            s_old = self.frenet[k, 0]
+            x, y, psi, v, delta = self.states[k]
+            s, n = self.track.to_frenet(x, y, s_hint=s_old)
+            s, n = float(s), float(n)
+            e = float(_wrap_angle(psi - float(self.track.heading(s))))
+            self.frenet[k] = (s, n, e, v, delta)
+            ev = events[k]
+            ev.progress = float(self.track.gap(s, s_old))
+            self.distance[k] += ev.progress
+            ev.off_track = self._off_track(k)
+            ev.collision = self._collides(k)
+        if self.n_cars == 1:
+            passed = self.opponents.update_overtakes(self.frenet[0, 0])
+            events[0].overtakes = int(passed.size)
+        else:
+            self._update_car_overtakes(events)
+        for k in range(self.n_cars):
+            self.overtakes[k] += events[k].overtakes
+        return events
+
+    def deactivate(self, car: int) -> None:
+        """Remove a car from the race (it no longer moves or counts as an obstacle)."""
+        self.active[car] = False
+
+    # ------------------------------------------------------------------ events
+    def _off_track(self, k: int) -> bool:
+        x, y, psi = self.states[k, :3]
+        corners = footprint_corners(x, y, psi, self.config.vehicle)
+        s, n = self.track.to_frenet(corners[:, 0], corners[:, 1], s_hint=np.full(4, self.frenet[k, 0]))
+        s = np.asarray(s, float)
+        n = np.asarray(n, float)
+        return bool(np.any(n > self.track.width_left(s)) or np.any(n < -np.asarray(self.track.width_right(s))))
+
+    def _collides(self, k: int) -> bool:
+        obstacles = self.obstacle_corners(k)
+        if obstacles.shape[0] == 0:
+            return False
+        # cheap distance prefilter: only cars within 10 m can touch
+        x, y = self.states[k, :2]
+        centres = obstacles.mean(axis=1)
+        near = np.hypot(centres[:, 0] - x, centres[:, 1] - y) < 10.0
+        if not near.any():
+            return False
+        ego = footprint_corners(x, y, self.states[k, 2], self.config.vehicle)
+        return bool(np.any(rectangles_intersect(ego[None], obstacles[near])))
+
+    def _update_car_overtakes(self, events: list[CarEvents]) -> None:
+        L = self.track.length
+        s = self.frenet[:, 0]
+        gaps = np.asarray(self.track.gap(s[None, :], s[:, None]), float)
+        delta = (gaps - self._car_rel + 0.5 * L) % L - 0.5 * L
+        self._car_rel += delta
+        self._car_ahead |= self._car_rel > 0.0
+        thr = self.config.opponents.overtake_threshold
+        for i in np.flatnonzero(self.active):
+            for j in np.flatnonzero(self.active):
+                if i != j and self._car_ahead[i, j] and self._car_rel[i, j] <= -thr:
+                    events[i].overtakes += 1
+                    self._car_ahead[i, j] = False
