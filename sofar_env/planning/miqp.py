@@ -1,0 +1,606 @@
+"""Passing-side planner: a mixed-integer QP over a coarse lateral horizon.
+
+This is the high-level overtaking decision of the paper (eq. ``miqp``): a lateral
+offset profile ``d_k`` (relative to the raceline, Frenet ``n``) over a coarse
+horizon, one binary side decision per group of relevant opponents, Big-M side
+constraints with an L1-penalised slack, and deviation, smoothness and consistency
+costs.
+
+Problem solved at every :meth:`PassingSidePlanner.plan` call
+------------------------------------------------------------
+Unknowns: ``b_c in {0, 1}``, one binary per *cluster* of relevant opponents
+(``b = 1``: pass on the left, ``d >= n_i + safe_lat``; ``b = 0``: on the right,
+``d <= n_i - safe_lat``); ``d_k``, the lateral offset at node ``k`` [m];
+``xi_p >= 0``, the slack of the side constraint of active pair ``p = (i, k)`` [m].
+
+Cost::
+
+    sum_k w_dev (d_k - n_ref_k)^2 + sum_k w_smooth (d_{k+1} - d_k)^2
+    + sum_k w_prev (d_k - d_prev_k)^2                   (only with a previous plan)
+    + sum_i w_switch (b_c(i) - b_prev_i)^2               (only with a previous side)
+    + w_slack sum_p xi_p
+
+``d_prev`` is the previous plan re-expressed at the new nodes (shifted by
+``progress``, constant beyond its end). ``b_prev_i`` is the side chosen in the
+previous call for the same car, identified as the nearest previous opponent once
+propagated at its speed (within ``cluster_gap`` along and ``safe_lat`` across the
+track; otherwise no hysteresis). For binary b, ``(b - b_prev)^2`` is linear.
+
+Constraints:
+
+* track (hard): ``n_min_k + track_margin <= d_k <= n_max_k - track_margin``;
+  where the corridor is narrower than two margins it collapses to its centre;
+* continuity (hard, never infeasible): ``|d_0 - e| <= continuity`` where ``e`` is
+  the ego offset clipped into the node-0 corridor;
+* Big-M side constraints for every active pair ``(i, k)``::
+
+      d_k <= n_i - safe_lat + Ma_ik * b + xi_ik
+      d_k >= n_i + safe_lat - Mb_ik * (1 - b) - xi_ik
+
+  with the tightest valid constants ``Ma_ik = max(0, hi_k - n_i + safe_lat)`` and
+  ``Mb_ik = max(0, n_i + safe_lat - lo_k)`` (each is the smallest value that makes
+  the relaxed row redundant inside the corridor ``[lo_k, hi_k]``). They are at most
+  the track width plus ``safe_lat``, instead of the reference's 2000, which keeps
+  the relaxations tight and the problem well conditioned.
+
+Relevance and activation. With the longitudinal gap ``g_ik = s_i + v_i t_k -
+s_nodes_k`` (opponent minus ego, opponents at constant speed and offset), the side
+constraint of opponent i is imposed at *both* end nodes of every node interval on
+which the linearly interpolated gap enters ``(-safe_lon, safe_lon)``, and at every
+node inside it. Since the plan is itself linear between nodes, the clearance then
+holds on the whole interpolated path whenever the cars overlap, whatever the node
+spacing (6-12 m at 40-80 m/s, more against slow cars): no overlap can fall between
+nodes, without having to inflate ``safe_lon``. An opponent with no active node is
+not relevant: side 0 and no variables. Relevant opponents closer than
+``cluster_gap`` to each other at a node where the ego overlaps either of them
+share one binary (connected components), so the planner never threads between
+them. Without any
+relevant opponent the plan is ``n_ref`` clipped into the corridor (status
+``"no_opponents"``, no continuity or smoothing applied).
+
+Solvers. ``"daqp"`` uses DAQP's built-in branch-and-bound: binaries are simple
+bounds ``0 <= b <= 1`` flagged binary (``sense`` 16). If it fails, the
+enumeration below is tried before giving up. ``"enumerate"`` solves one QP per
+side pattern (``2^C``, C <= 4 in practice) and keeps the best. Both are exact; the
+reported objective is the cost above evaluated at the returned ``(d, b)`` with the
+minimal slack (violations under 1e-6 m, i.e. solver tolerance, count as zero), so
+the two routes are directly comparable.
+
+Numerics. With ``H_d = R'R`` (Cholesky, computed once per planner), the solvers
+work in ``u = R d``: DAQP then sees a *diagonal* Hessian, for which its set-up is
+O(n) instead of a dense factorisation; ``d = R^-1 u`` enters through fixed rows.
+DAQP needs a strictly positive-definite Hessian, so binaries get curvature
+``_Q_BIN`` (cancelled exactly at 0/1 by a linear term, so the relaxation stays a
+valid lower bound) and slacks a small curvature ``_Q_SLACK`` (a perturbation of
+order 1e-7 of the objective when slack is used, none otherwise). Slacks start in
+DAQP's working set at their bound (warm start), which saves one active-set
+iteration per pair.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+try:  # DAQP is a hard dependency, but plan() must never raise because of it.
+    import daqp
+except ImportError:  # pragma: no cover - exercised only in broken installs
+    daqp = None
+
+__all__ = ["MIQPConfig", "PlanResult", "PassingSidePlanner"]
+
+logger = logging.getLogger(__name__)
+
+_INF = 1e30          # DAQP's notion of an infinite bound
+_Q_BIN = 1.0         # curvature added to each binary; cancelled at 0/1 by a linear term
+_Q_SLACK = 1e-2      # curvature added to each slack [1/m^2] (DAQP needs H > 0)
+_DAQP_OK = (1, 2)    # DAQP exit flags that mean "optimal" (2: optimal with soft constraints)
+_SLACK_TOL = 1e-6    # [m] violations below this are solver tolerance, not slack use
+_SENSE_BINARY = 16
+_SENSE_ACTIVE_LOWER = 3   # DAQP: ACTIVE (1) | LOWER (2): start with this bound in the working set
+
+
+@dataclass(frozen=True)
+class MIQPConfig:
+    """Parameters of the passing-side MIQP."""
+
+    nodes: int = 76
+    """Number of coarse horizon nodes N [-] (node k is at time k * node_dt)."""
+    node_dt: float = 0.15
+    """Time between nodes [s]; the horizon spans (nodes - 1) * node_dt (11.25 s)."""
+    w_dev: float = 1.0
+    """Weight of the deviation (d_k - n_ref_k)^2 [1/m^2]."""
+    w_smooth: float = 100.0
+    """Weight of the smoothness (d_{k+1} - d_k)^2 [1/m^2]."""
+    w_prev: float = 1.0
+    """Weight of the consistency (d_k - d_prev_k)^2 with the previous plan [1/m^2]."""
+    w_switch: float = 500.0
+    """Hysteresis: cost of choosing a side different from the previous decision for
+    the same opponent [-] (per opponent, (b - b_prev)^2 is linear in binary b)."""
+    w_slack: float = 5e4
+    """L1 penalty on the Big-M slack xi [1/m]."""
+    safe_lat: float = 3.75
+    """Lateral clearance from an opponent's centreline when passing it [m]."""
+    safe_lon: float = 8.0
+    """Longitudinal half-window [m]: an opponent's side constraint is active where
+    the ego and its prediction are closer than this along the track. Coverage
+    between nodes is handled separately (both end nodes of every node interval that
+    touches the window are constrained, see the module docstring), so this is the
+    car length plus a margin, not a node-spacing allowance; the effective window is
+    at most one relative step (relative speed * node_dt) wider on each side."""
+    track_margin: float = 1.2
+    """Distance kept from each track edge [m]."""
+    continuity: float = 0.3
+    """Maximum |d_0 - ego_n| [m] (ego_n clipped into the corridor first, so the
+    constraint can never be infeasible)."""
+    cluster_gap: float = 10.0
+    """Opponents closer than this to each other along the track [m], at a node where
+    the ego overlaps either of them, share one side decision (no threading between
+    them); linking is transitive."""
+    solver: str = "daqp"
+    """"daqp" (DAQP branch-and-bound) or "enumerate" (one QP per side pattern)."""
+
+    def __post_init__(self) -> None:
+        if self.nodes < 2:
+            raise ValueError("nodes must be >= 2")
+        if not self.node_dt > 0.0:
+            raise ValueError("node_dt must be > 0")
+        if not self.w_dev > 0.0:
+            raise ValueError("w_dev must be > 0 (it makes the Hessian positive definite)")
+        for name in ("w_smooth", "w_prev", "w_switch", "w_slack", "safe_lat",
+                     "safe_lon", "track_margin", "continuity", "cluster_gap"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name} must be >= 0")
+        if self.solver not in ("daqp", "enumerate"):
+            raise ValueError(f"unknown solver {self.solver!r} (use 'daqp' or 'enumerate')")
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """Outcome of one :meth:`PassingSidePlanner.plan` call."""
+
+    d: np.ndarray
+    """(nodes,) planned lateral offsets [m]."""
+    s: np.ndarray
+    """(nodes,) node arc lengths relative to the ego [m]."""
+    sides: np.ndarray
+    """(M,) int per input opponent: +1 pass left, -1 pass right, 0 not relevant."""
+    objective: float
+    """Cost of the returned plan (see the module docstring) [-]; nan on fallback."""
+    status: str
+    """"optimal", "no_opponents" or "fallback"."""
+    success: bool
+    """False only for a fallback plan."""
+    solve_time: float
+    """Wall time of plan() [s]."""
+    n_binaries: int
+    """Number of binary variables (side clusters) in the solved problem."""
+    max_slack: float = 0.0
+    """Largest side-constraint violation of the plan [m] (0: every clearance met)."""
+    slack_sum: float = 0.0
+    """Sum of the side-constraint violations over active pairs [m]."""
+
+    def lateral_at(self, s_query) -> np.ndarray:
+        """Plan interpolated at relative arc lengths ``s_query`` [m], constant beyond the ends."""
+        return np.interp(np.asarray(s_query, dtype=float), self.s, self.d)
+
+
+@dataclass
+class _Problem:
+    """Per-call data shared by the two solver routes (internal)."""
+
+    lo: np.ndarray           # (N,) lower bounds on d (continuity included)
+    hi: np.ndarray           # (N,) upper bounds on d
+    f_d: np.ndarray          # (N,) linear cost on d (0.5 x'Hx + f'x convention)
+    Rinv: np.ndarray         # (N, N) d = Rinv u
+    RinvT: np.ndarray        # (N, N) its transpose (u-space cost f_u = RinvT f_d)
+    pair_k: np.ndarray       # (P,) node of each active pair
+    pair_c: np.ndarray       # (P,) cluster of each active pair
+    pair_n: np.ndarray       # (P,) opponent offset of each active pair
+    n_clusters: int
+    f_b: np.ndarray          # (C,) linear hysteresis cost per cluster
+    n_ref: np.ndarray
+    d_prev: np.ndarray | None
+    b_prev: np.ndarray       # (R,) previous side (1 left, 0 right, -1 unknown) per relevant opponent
+    rel_cluster: np.ndarray  # (R,) cluster of each relevant opponent
+
+
+class PassingSidePlanner:
+    """Chooses the passing side of every relevant opponent and a lateral plan.
+
+    Stateful only through the previous plan and decisions (consistency and
+    hysteresis terms); :meth:`reset` forgets them. Never raises inside
+    :meth:`plan` on numerical trouble: it returns a fallback plan with
+    ``success=False`` and increments :attr:`n_failures`.
+    """
+
+    def __init__(self, config: MIQPConfig = MIQPConfig()):
+        self.config = config
+        N = config.nodes
+        # Hessian blocks of d, built once: 2 * (w_dev I + w_smooth D'D [+ w_prev I]).
+        D = np.diff(np.eye(N), axis=0)
+        base = 2.0 * (config.w_dev * np.eye(N) + config.w_smooth * (D.T @ D))
+        # Change of variables u = R d with H_d = R'R, so DAQP sees a diagonal
+        # Hessian (its O(n) set-up path) and d = R^-1 u enters through fixed rows.
+        self._fact = {}
+        for key, H_d in ((False, base), (True, base + 2.0 * config.w_prev * np.eye(N))):
+            R = np.linalg.cholesky(H_d).T                 # upper triangular, H_d = R'R
+            Rinv = np.linalg.solve(R, np.eye(N))          # d = Rinv u
+            self._fact[key] = (H_d, np.ascontiguousarray(Rinv), np.ascontiguousarray(Rinv.T))
+        self._t = np.arange(N) * config.node_dt
+        self.n_failures = 0
+        self._prev_s: np.ndarray | None = None
+        self._prev_d: np.ndarray | None = None
+        self._prev_opp: np.ndarray | None = None
+        self._prev_sides: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget the previous plan and decisions, and zero the failure counter."""
+        self._prev_s = None
+        self._prev_d = None
+        self._prev_opp = None
+        self._prev_sides = None
+        self.n_failures = 0
+
+    # ------------------------------------------------------------------- main
+    def plan(self, s_nodes, n_ref, n_min, n_max, ego_n: float, opponents,
+             progress: float = 0.0) -> PlanResult:
+        """Plan the lateral offsets and passing sides.
+
+        Args:
+            s_nodes: (nodes,) ego arc length at the node times, relative to the ego
+                (``s_nodes[0] = 0``), non-decreasing [m].
+            n_ref: (nodes,) nominal lateral reference (usually 0, the raceline) [m].
+            n_min: (nodes,) right edge, ``-width_right`` [m] (raw, margin applied here).
+            n_max: (nodes,) left edge, ``+width_left`` [m].
+            ego_n: current ego lateral offset [m].
+            opponents: (M, 3) rows ``(s_rel, n, v)`` at time 0 [m, m, m/s], predicted
+                at constant speed and offset. Rows may be reordered or filtered
+                between calls: the hysteresis matches each opponent to the nearest
+                (motion-propagated) opponent of the previous call.
+            progress: metres the ego advanced since the previous call, used to
+                re-express the previous plan at the new nodes [m].
+
+        Raises:
+            ValueError: only for arrays of the wrong shape (a programming error).
+        """
+        t0 = time.perf_counter()
+        cfg = self.config
+        N = cfg.nodes
+        s_nodes = np.asarray(s_nodes, dtype=float).reshape(-1)
+        n_ref = np.asarray(n_ref, dtype=float).reshape(-1)
+        n_min = np.asarray(n_min, dtype=float).reshape(-1)
+        n_max = np.asarray(n_max, dtype=float).reshape(-1)
+        for name, arr in (("s_nodes", s_nodes), ("n_ref", n_ref), ("n_min", n_min), ("n_max", n_max)):
+            if arr.shape != (N,):
+                raise ValueError(f"{name} must have shape ({N},), got {arr.shape}")
+        opp = np.asarray(opponents, dtype=float)
+        if opp.size == 0:
+            opp = np.zeros((0, 3))
+        if opp.ndim != 2 or opp.shape[1] != 3:
+            raise ValueError(f"opponents must have shape (M, 3), got {opp.shape}")
+        M = opp.shape[0]
+
+        lo, hi = self._corridor(n_min, n_max)
+        # A sum is finite iff every term is (the magnitudes here cannot overflow).
+        total = (s_nodes.sum() + n_ref.sum() + lo.sum() + hi.sum() + opp.sum()
+                 + float(ego_n) + float(progress))
+        if not np.isfinite(total):
+            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None,
+                                  "non-finite input")
+
+        try:
+            active = self._activation(s_nodes, opp)
+            relevant = np.flatnonzero(active.any(axis=1))
+            if relevant.size == 0:
+                d = np.clip(n_ref, lo, hi)
+                self._remember(s_nodes, d, opp, np.zeros(M, dtype=int))
+                return PlanResult(d=d, s=s_nodes.copy(), sides=np.zeros(M, dtype=int),
+                                  objective=self._cost(d, n_ref, None, 0.0, 0.0),
+                                  status="no_opponents", success=True,
+                                  solve_time=time.perf_counter() - t0, n_binaries=0)
+            prob = self._build(s_nodes, n_ref, lo, hi, float(ego_n), float(progress), opp,
+                               active, relevant)
+        except Exception as exc:  # numerical trouble while building: never raise
+            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None,
+                                  f"build failed: {exc!r}")
+
+        prior = self._prior_sides(relevant, prob.b_prev, M)
+        sol = None
+        routes = ((self._solve_bnb, self._solve_enumerate) if cfg.solver == "daqp"
+                  else (self._solve_enumerate,))
+        for route in routes:  # branch-and-bound first, enumeration as its fallback
+            try:
+                sol = route(prob)
+            except Exception as exc:
+                sol = None
+                logger.debug("MIQP route %s raised %r", route.__name__, exc)
+            if sol is not None:
+                break
+        if sol is None:
+            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, prior,
+                                  "solver failed")
+        d, b = sol
+        d = np.clip(d, prob.lo, prob.hi)  # remove solver tolerance outside the hard bounds
+        obj, xi = self._evaluate(prob, d, b)
+        if not np.isfinite(obj):
+            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, prior,
+                                  "non-finite objective")
+        sides = np.zeros(M, dtype=int)
+        sides[relevant] = np.where(b[prob.rel_cluster] > 0.5, 1, -1)
+        self._remember(s_nodes, d, opp, sides)
+        return PlanResult(d=d, s=s_nodes.copy(), sides=sides, objective=obj,
+                          status="optimal", success=True,
+                          solve_time=time.perf_counter() - t0, n_binaries=prob.n_clusters,
+                          max_slack=float(xi.max(initial=0.0)), slack_sum=float(xi.sum()))
+
+    # ------------------------------------------------------------ components
+    def _corridor(self, n_min: np.ndarray, n_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        m = self.config.track_margin
+        lo = n_min + m
+        hi = n_max - m
+        narrow = lo > hi
+        if np.any(narrow):
+            mid = 0.5 * (n_min + n_max)
+            lo = np.where(narrow, mid, lo)
+            hi = np.where(narrow, mid, hi)
+        return lo, hi
+
+    def _activation(self, s_nodes: np.ndarray, opp: np.ndarray) -> np.ndarray:
+        """(M, N) bool: node k carries opponent i's side constraint."""
+        N = self.config.nodes
+        L = self.config.safe_lon
+        if opp.shape[0] == 0:
+            return np.zeros((0, N), dtype=bool)
+        gap = opp[:, :1] + opp[:, 2:3] * self._t[None, :] - s_nodes[None, :]
+        a, b = gap[:, :-1], gap[:, 1:]
+        seg = (np.minimum(a, b) < L) & (np.maximum(a, b) > -L)
+        active = np.abs(gap) < L
+        active[:, :-1] |= seg
+        active[:, 1:] |= seg
+        return active
+
+    def _clusters(self, opp_rel: np.ndarray, act_rel: np.ndarray) -> tuple[int, np.ndarray]:
+        """Connected components of the relation "must be passed on the same side".
+
+        Two relevant opponents are linked when, at some node where the ego overlaps
+        either of them (``act_rel``), they are closer than ``cluster_gap`` to each
+        other along the track: the ego cannot thread between them there. (Opponents
+        that only converge after the ego has passed them stay independent.)
+        """
+        R = opp_rel.shape[0]
+        if R == 1:
+            return 1, np.zeros(1, dtype=int)
+        pos = opp_rel[:, :1] + opp_rel[:, 2:3] * self._t[None, :]          # (R, N)
+        close = np.abs(pos[:, None, :] - pos[None, :, :]) < self.config.cluster_gap
+        either = act_rel[:, None, :] | act_rel[None, :, :]
+        linked = (close & either).any(axis=2).tolist()
+        labels = [-1] * R
+        n = 0
+        for i in range(R):
+            if labels[i] >= 0:
+                continue
+            labels[i] = n
+            stack = [i]
+            while stack:
+                j = stack.pop()
+                for k in range(R):
+                    if labels[k] < 0 and linked[j][k]:
+                        labels[k] = n
+                        stack.append(k)
+            n += 1
+        return n, np.asarray(labels, dtype=int)
+
+    def _previous_plan_at(self, s_nodes: np.ndarray, progress: float) -> np.ndarray | None:
+        if self._prev_d is None:
+            return None
+        return np.interp(s_nodes + progress, self._prev_s, self._prev_d)
+
+    def _previous_sides(self, s_nodes: np.ndarray, progress: float, opp_rel: np.ndarray,
+                        relevant: np.ndarray) -> np.ndarray:
+        """Previous side per relevant opponent: 1 left, 0 right, -1 unknown.
+
+        Each current opponent inherits the side of the nearest opponent of the
+        previous call (among those with a side), after propagating that one by the
+        elapsed time estimated from ``progress`` and the ego speed, provided it lies
+        within ``cluster_gap`` longitudinally and ``safe_lat`` laterally. Row order
+        may therefore change between calls, and a respawned car (far away) does not
+        inherit a stale decision.
+        """
+        cfg = self.config
+        out = -np.ones(relevant.size, dtype=int)
+        if self._prev_sides is None or self._prev_opp is None:
+            return out
+        had_side = self._prev_sides != 0
+        if not had_side.any():
+            return out
+        prev_opp = self._prev_opp[had_side]
+        prev_side = self._prev_sides[had_side]
+        v_ego = (s_nodes[1] - s_nodes[0]) / cfg.node_dt
+        dt = progress / v_ego if v_ego > 0.1 and progress > 0.0 else 0.0
+        s_pred = prev_opp[:, 0] + prev_opp[:, 2] * dt - progress
+        ds = np.abs(opp_rel[:, :1] - s_pred[None, :]) / cfg.cluster_gap     # (R, Mp)
+        dn = np.abs(opp_rel[:, 1:2] - prev_opp[None, :, 1]) / max(cfg.safe_lat, 1e-9)
+        score = np.where((ds < 1.0) & (dn < 1.0), ds + dn, np.inf)
+        best = np.argmin(score, axis=1)
+        found = np.isfinite(score[np.arange(relevant.size), best])
+        out[found] = np.where(prev_side[best[found]] > 0, 1, 0)
+        return out
+
+    def _build(self, s_nodes, n_ref, lo, hi, ego_n, progress, opp, active, relevant) -> _Problem:
+        cfg = self.config
+        opp_rel = opp[relevant]
+        n_clusters, labels = self._clusters(opp_rel, active[relevant])
+
+        lo = lo.copy()
+        hi = hi.copy()
+        e = min(max(ego_n, lo[0]), hi[0])
+        lo[0] = max(lo[0], e - cfg.continuity)
+        hi[0] = min(hi[0], e + cfg.continuity)
+
+        d_prev = self._previous_plan_at(s_nodes, progress)
+        _, Rinv, RinvT = self._fact[d_prev is not None]
+        if d_prev is None:
+            f_d = -2.0 * cfg.w_dev * n_ref
+        else:
+            f_d = -2.0 * (cfg.w_dev * n_ref + cfg.w_prev * d_prev)
+
+        b_prev = self._previous_sides(s_nodes, progress, opp_rel, relevant)
+        f_b = np.zeros(n_clusters)
+        known = b_prev >= 0
+        # w (b - bp)^2 = w (1 - 2 bp) b + w bp for binary b and bp (constant dropped).
+        np.add.at(f_b, labels[known], cfg.w_switch * (1.0 - 2.0 * b_prev[known]))
+
+        rows, ks = np.nonzero(active[relevant])
+        return _Problem(lo=lo, hi=hi, f_d=f_d, Rinv=Rinv, RinvT=RinvT, pair_k=ks,
+                        pair_c=labels[rows], pair_n=opp_rel[rows, 1], n_clusters=n_clusters,
+                        f_b=f_b, n_ref=n_ref, d_prev=d_prev, b_prev=b_prev, rel_cluster=labels)
+
+    # ------------------------------------------------------------- solvers
+    def _solve_bnb(self, prob: _Problem) -> tuple[np.ndarray, np.ndarray] | None:
+        """DAQP branch-and-bound over x = [b (C), xi (P), u (N)], d = Rinv u.
+
+        Simple bounds: b in [0, 1] (binary), xi >= 0. General rows: the corridor
+        lo <= Rinv u <= hi, then the two Big-M rows of every active pair.
+        """
+        if daqp is None:
+            return None
+        cfg = self.config
+        C, N, P = prob.n_clusters, prob.lo.size, prob.pair_k.size
+        nv = C + P + N
+        sl = cfg.safe_lat
+        lo_k, hi_k = prob.lo[prob.pair_k], prob.hi[prob.pair_k]
+        Ma = np.maximum(0.0, hi_k - prob.pair_n + sl)
+        Mb = np.maximum(0.0, prob.pair_n + sl - lo_k)
+
+        H = np.empty(nv)
+        H[:C] = _Q_BIN
+        H[C:C + P] = _Q_SLACK
+        H[C + P:] = 1.0
+        f = np.concatenate([prob.f_b - 0.5 * _Q_BIN, np.full(P, cfg.w_slack),
+                            prob.RinvT @ prob.f_d])
+        A = np.zeros((N + 2 * P, nv))
+        A[:N, C + P:] = prob.Rinv
+        rows_d = prob.Rinv[prob.pair_k]
+        r = np.arange(P)
+        A[N:N + P, C + P:] = rows_d
+        A[N + r, prob.pair_c] = -Ma
+        A[N + r, C + r] = -1.0
+        A[N + P:, C + P:] = rows_d
+        A[N + P + r, prob.pair_c] = -Mb
+        A[N + P + r, C + r] = 1.0
+        bupper = np.concatenate([np.ones(C), np.full(P, _INF), prob.hi,
+                                 prob.pair_n - sl, np.full(P, _INF)])
+        blower = np.concatenate([np.zeros(C), np.zeros(P), prob.lo,
+                                 np.full(P, -_INF), prob.pair_n + sl - Mb])
+        sense = np.zeros(C + P + N + 2 * P, dtype=np.int32)
+        sense[:C] = _SENSE_BINARY
+        # Slacks start at their bound xi = 0: without this warm start the active set
+        # needs one iteration per pair just to add the xi >= 0 bounds.
+        sense[C:C + P] = _SENSE_ACTIVE_LOWER
+        x, _, flag, _ = daqp.solve(np.diag(H), f, A, bupper, blower, sense, presolve=0)
+        if flag not in _DAQP_OK:
+            logger.debug("DAQP branch-and-bound exit flag %d", flag)
+            return None
+        x = np.asarray(x)
+        return prob.Rinv @ x[C + P:], np.round(x[:C])
+
+    def _solve_enumerate(self, prob: _Problem) -> tuple[np.ndarray, np.ndarray] | None:
+        """One QP over x = [xi (P), u (N)] per side pattern (2^C of them)."""
+        if daqp is None:
+            return None
+        cfg = self.config
+        C, N, P = prob.n_clusters, prob.lo.size, prob.pair_k.size
+        nv = P + N
+        sl = cfg.safe_lat
+        H = np.diag(np.concatenate([np.full(P, _Q_SLACK), np.ones(N)]))
+        f = np.concatenate([np.full(P, cfg.w_slack), prob.RinvT @ prob.f_d])
+        r = np.arange(P)
+        A = np.zeros((N + P, nv))
+        A[:N, P:] = prob.Rinv
+        A[N:, P:] = prob.Rinv[prob.pair_k]
+        bup = np.concatenate([np.full(P, _INF), prob.hi, np.empty(P)])
+        blo = np.concatenate([np.zeros(P), prob.lo, np.empty(P)])
+        sense = np.zeros(P + N + P, dtype=np.int32)
+        sense[:P] = _SENSE_ACTIVE_LOWER  # warm start: slacks at zero
+        best = None
+        best_cost = np.inf
+        for pattern in range(1 << C):
+            b = np.array([(pattern >> c) & 1 for c in range(C)], dtype=float)
+            left = b[prob.pair_c] > 0.5
+            # left: d_k + xi >= n + sl;  right: d_k - xi <= n - sl
+            A[N + r, r] = np.where(left, 1.0, -1.0)
+            bup[P + N:] = np.where(left, _INF, prob.pair_n - sl)
+            blo[P + N:] = np.where(left, prob.pair_n + sl, -_INF)
+            x, fval, flag, _ = daqp.solve(H, f, A, bup, blo, sense)
+            if flag not in _DAQP_OK:
+                logger.debug("DAQP exit flag %d for side pattern %d", flag, pattern)
+                return None
+            cost = fval + float(prob.f_b @ b)
+            if cost < best_cost:
+                best_cost = cost
+                best = (prob.Rinv @ np.asarray(x)[P:], b)
+        return best
+
+    # ----------------------------------------------------------- evaluation
+    def _cost(self, d, n_ref, d_prev, switch_cost, slack_cost) -> float:
+        cfg = self.config
+        dd = np.diff(d)
+        val = cfg.w_dev * float(np.sum((d - n_ref) ** 2)) + cfg.w_smooth * float(dd @ dd)
+        if d_prev is not None:
+            val += cfg.w_prev * float(np.sum((d - d_prev) ** 2))
+        return val + switch_cost + slack_cost
+
+    def _evaluate(self, prob: _Problem, d: np.ndarray, b: np.ndarray) -> tuple[float, np.ndarray]:
+        """Exact cost of ``(d, b)`` with the minimal slack, and that slack per pair."""
+        cfg = self.config
+        left = b[prob.pair_c] > 0.5
+        dk = d[prob.pair_k]
+        xi = np.where(left, prob.pair_n + cfg.safe_lat - dk, dk - (prob.pair_n - cfg.safe_lat))
+        xi = np.where(xi > _SLACK_TOL, xi, 0.0)
+        known = prob.b_prev >= 0
+        bi = b[prob.rel_cluster][known]
+        switch = cfg.w_switch * float(np.sum((bi - prob.b_prev[known]) ** 2))
+        return self._cost(d, prob.n_ref, prob.d_prev, switch, cfg.w_slack * float(xi.sum())), xi
+
+    # ------------------------------------------------------------- helpers
+    def _prior_sides(self, relevant: np.ndarray, b_prev: np.ndarray, M: int) -> np.ndarray:
+        sides = np.zeros(M, dtype=int)
+        sides[relevant] = np.where(b_prev == 1, 1, np.where(b_prev == 0, -1, 0))
+        return sides
+
+    def _remember(self, s_nodes, d, opp, sides) -> None:
+        self._prev_s = s_nodes.copy()
+        self._prev_d = d.copy()
+        self._prev_opp = opp.copy()
+        self._prev_sides = sides.copy()
+
+    def _fallback(self, t0, s_nodes, n_ref, lo, hi, progress, opp, prior, reason) -> PlanResult:
+        """Previous plan shifted by ``progress`` (if any), else n_ref, clipped to the corridor."""
+        self.n_failures += 1
+        logger.warning("MIQP fallback (%s); failures so far: %d", reason, self.n_failures)
+        M = opp.shape[0]
+        s_out = np.nan_to_num(s_nodes, nan=0.0)
+        shift = float(progress) if np.isfinite(progress) else 0.0
+        d = None
+        if self._prev_d is not None:
+            d = np.interp(s_out + shift, self._prev_s, self._prev_d)
+        if d is None or not np.all(np.isfinite(d)):
+            d = np.nan_to_num(n_ref, nan=0.0, posinf=0.0, neginf=0.0)
+        hi_f = np.nan_to_num(hi, nan=np.inf)
+        lo_f = np.minimum(np.nan_to_num(lo, nan=-np.inf), hi_f)
+        d = np.nan_to_num(np.clip(d, lo_f, hi_f), nan=0.0)
+        sides = prior.copy() if prior is not None else np.zeros(M, dtype=int)
+        if self._prev_d is not None:
+            self._prev_d = d.copy()
+            self._prev_s = s_out.copy()
+        if prior is not None:
+            self._prev_opp = opp.copy()
+            self._prev_sides = sides.copy()
+        return PlanResult(d=d, s=s_out.copy(), sides=sides, objective=float("nan"),
+                          status="fallback", success=False,
+                          solve_time=time.perf_counter() - t0, n_binaries=0)
