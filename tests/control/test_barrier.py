@@ -1,0 +1,94 @@
+"""Velocity-aware elliptic barrier: analytic values, numpy/CasADi agreement, closing speed."""
+
+import numpy as np
+import pytest
+
+from sofar_env.control.barrier import BarrierParams, barrier, casadi_barrier, semi_axis_s, softplus
+
+P = BarrierParams()
+
+
+def _h(ds, dn, v=30.0, v_o=30.0, p=P):
+    """h for an opponent at gap ds ahead, dn to the left, ego at the origin."""
+    return float(barrier(np.array([0.0, 0.0, v]), np.array([ds, dn, v_o]), p))
+
+
+def test_defaults_and_validation():
+    assert (P.a0, P.b, P.a_brake) == (7.0, 2.7, 10.0)
+    with pytest.raises(ValueError):
+        BarrierParams(b=0.0)
+    with pytest.raises(ValueError):
+        BarrierParams(a0=float("nan"))
+
+
+def test_zero_on_the_ellipse_at_equal_speed():
+    # equal speeds: v_close = 0, a = a0 + softplus(0)^2 / (2 a_brake)
+    a = P.a0 + (np.log(2.0) / P.sharpness) ** 2 / (2.0 * P.a_brake)
+    for ang in np.linspace(0.0, 2.0 * np.pi, 13):
+        assert _h(a * np.cos(ang), P.b * np.sin(ang)) == pytest.approx(0.0, abs=1e-12)
+    assert _h(0.0, 0.0) == pytest.approx(-1.0)
+    assert _h(0.0, P.b) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_collision_set_is_inside_the_zero_level_set():
+    # centres (4.9 m, 1.9 m) apart: two 4.9 x 1.9 m rectangles touch at the corner
+    for sx in (-1.0, 1.0):
+        for sy in (-1.0, 1.0):
+            assert _h(sx * 4.9, sy * 1.9) < 0.0
+    # the whole Minkowski rectangle is unsafe
+    ds, dn = np.meshgrid(np.linspace(-4.9, 4.9, 41), np.linspace(-1.9, 1.9, 17))
+    opp = np.stack([ds, dn, np.full_like(ds, 30.0)], axis=-1)
+    assert np.all(barrier(np.array([0.0, 0.0, 30.0]), opp) < 0.0)
+    # analytic corner value with v_close = 0 (a exceeds a0 by the softplus offset, 1.5 mm)
+    a = P.a0 + (np.log(2.0) / P.sharpness) ** 2 / (2.0 * P.a_brake)
+    assert _h(4.9, 1.9) == pytest.approx((4.9 / a) ** 2 + (1.9 / 2.7) ** 2 - 1.0, abs=1e-12)
+    assert _h(4.9, 1.9) == pytest.approx((4.9 / 7.0) ** 2 + (1.9 / 2.7) ** 2 - 1.0, abs=5e-4)
+    # and a car fully beside (just outside b) is safe
+    assert _h(0.0, 2.71) > 0.0
+
+
+def test_semi_axis_grows_with_closing_speed_only_for_the_car_ahead():
+    # ego faster by 20 m/s: ahead -> a ~ a0 + 400 / 20 = 27 m; behind -> a ~ a0
+    a_ahead = semi_axis_s(30.0, 50.0, 30.0, P)
+    a_behind = semi_axis_s(-30.0, 50.0, 30.0, P)
+    assert a_ahead == pytest.approx(7.0 + 20.0 ** 2 / 20.0, rel=1e-3)
+    assert a_behind == pytest.approx(7.0, abs=1e-3)
+    # an opponent behind that is faster closes in: its ellipse grows
+    assert semi_axis_s(-30.0, 30.0, 50.0, P) == pytest.approx(27.0, rel=1e-3)
+    # so the same gap is less safe ahead than behind
+    assert _h(20.0, 0.0, v=50.0, v_o=30.0) < 0.0 < _h(-20.0, 0.0, v=50.0, v_o=30.0)
+
+
+def test_softplus_is_a_smooth_upper_bound_of_max():
+    x = np.linspace(-50.0, 50.0, 2001)
+    sp = softplus(x, 4.0)
+    assert np.all(sp >= np.maximum(x, 0.0))
+    assert np.max(sp - np.maximum(x, 0.0)) == pytest.approx(np.log(2.0) / 4.0, rel=1e-6)
+    assert np.isfinite(softplus(np.array([1e6, -1e6]), 4.0)).all()
+
+
+def test_numpy_and_casadi_agree_values_and_broadcast():
+    f = casadi_barrier(P)
+    rng = np.random.default_rng(0)
+    xs = np.column_stack([rng.uniform(-5, 5, 50), rng.uniform(-4, 4, 50), rng.uniform(-0.2, 0.2, 50),
+                          rng.uniform(0, 60, 50), rng.uniform(-0.2, 0.2, 50)])
+    os_ = np.column_stack([rng.uniform(-40, 60, 50), rng.uniform(-4, 4, 50), rng.uniform(0, 60, 50)])
+    num = barrier(xs, os_, P)
+    sym = np.array([float(f(x, o)) for x, o in zip(xs, os_)])
+    np.testing.assert_allclose(num, sym, rtol=1e-12, atol=1e-12)
+    # (s, n, v) and full-state inputs agree; broadcasting gives one value per opponent
+    np.testing.assert_allclose(barrier(xs[:, [0, 1, 3]], os_, P), num)
+    assert barrier(xs[0], os_, P).shape == (50,)
+    with pytest.raises(ValueError):
+        barrier(np.zeros(4), os_, P)
+
+
+def test_gradient_is_finite_at_equal_speed_and_zero_gap():
+    import casadi as ca
+
+    x = ca.SX.sym("x", 5)
+    o = ca.SX.sym("o", 3)
+    g = ca.Function("g", [x, o], [ca.gradient(casadi_barrier(P)(x, o), x)])
+    for ds in (0.0, 5.0, -5.0):
+        val = np.array(g([0.0, 0.0, 0.0, 30.0, 0.0], [ds, 0.5, 30.0])).ravel()
+        assert np.all(np.isfinite(val))

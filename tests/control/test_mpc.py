@@ -1,0 +1,222 @@
+"""MPC-DCBF real-time iteration: agreement with IPOPT, closed-loop DCBF, gamma, failures, cache."""
+
+import logging
+import math
+
+import numpy as np
+import pytest
+
+from sofar_env.control import MPCConfig, MPCDCBF, MPCStageData, barrier
+from sofar_env.vehicle import AV21, frenet_rhs, rk4_step
+
+N = 20
+
+
+@pytest.fixture(scope="module")
+def cache_dir(tmp_path_factory):
+    return str(tmp_path_factory.mktemp("sofar_cache"))
+
+
+def make_stage(v_ref=40.0, n_ref=0.0, kappa=0.0, half_width=6.0, n=N):
+    return MPCStageData(kappa=np.full(n + 1, kappa), n_ref=np.full(n + 1, n_ref), v_ref=np.full(n + 1, v_ref),
+                        n_min=np.full(n + 1, -half_width), n_max=np.full(n + 1, half_width))
+
+
+def plant_step(x, u, dt, kappa=0.0):
+    """Numeric Frenet plant: RK4 of the same model, two sub-steps per control period."""
+    return np.array(rk4_step(lambda xx, uu: frenet_rhs(xx, uu, kappa, AV21), list(x), list(u), dt, 2))
+
+
+# --------------------------------------------------------------------------------------
+# RTI vs converged IPOPT
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kappa", [0.0, 1.0 / 150.0])
+def test_rti_first_control_matches_ipopt(cache_dir, kappa):
+    """At a fixed state, repeated RTI steps (no shift) converge to the NLP optimum."""
+    cfg = MPCConfig(control_dt=0.0, cache_dir=cache_dir)
+    rng = np.random.default_rng(1)
+    for _ in range(4):
+        x0 = np.array([0.0, rng.uniform(-1.5, 1.5), rng.uniform(-0.01, 0.01), rng.uniform(30.0, 45.0),
+                       kappa * AV21.wheelbase + rng.uniform(-0.005, 0.005)])
+        # references close to the state, so that the optimal inputs are mostly not saturated
+        stage = make_stage(v_ref=x0[3] + rng.uniform(-1.0, 1.0), n_ref=x0[1] + rng.uniform(-0.2, 0.2), kappa=kappa)
+        # one opponent ahead and one behind in the neighbouring lane: barrier rows present
+        side = -np.sign(x0[1] + 1e-9)
+        opp = np.array([[rng.uniform(25.0, 45.0), 4.0 * side, 32.0], [-25.0, 4.5 * side, 38.0]])
+        gamma = rng.uniform(0.1, 0.9)
+        rti = MPCDCBF(cfg)
+        for _ in range(8):
+            res = rti.solve(x0, stage, opp, gamma)
+            assert res.success
+        ref = MPCDCBF(cfg).solve_converged(x0, stage, opp, gamma)
+        assert ref.success and ref.status == "solved"
+        logging.getLogger(__name__).info("RTI %s IPOPT %s", res.u, ref.u)
+        assert abs(res.u[0] - ref.u[0]) < 0.05, (res.u, ref.u)
+        assert abs(res.u[1] - ref.u[1]) < 0.005, (res.u, ref.u)
+        np.testing.assert_allclose(res.x_pred[:, 1], ref.x_pred[:, 1], atol=0.02)
+
+
+def test_first_solve_shapes_bounds_and_predicted_s(cache_dir):
+    mpc = MPCDCBF(MPCConfig(cache_dir=cache_dir))
+    np.testing.assert_allclose(mpc.predicted_s(v0=40.0), 40.0 * MPCConfig().time_grid())
+    res = mpc.solve(np.array([0.0, 0.5, 0.0, 40.0, 0.0]), make_stage(kappa=1 / 200), np.zeros((0, 3)), 0.5)
+    assert res.success and res.status == "solved"
+    assert res.x_pred.shape == (N + 1, 5) and res.u_pred.shape == (N, 2)
+    assert res.barrier_min == math.inf and res.slack["barrier"] == 0.0
+    assert AV21.a_min <= res.u[0] <= AV21.a_max and abs(res.u[1]) <= AV21.steer_rate_max
+    assert np.all(np.abs(res.x_pred[1:, 4]) <= AV21.steer_max + 1e-6)
+    s_next = mpc.predicted_s()
+    assert s_next[0] == 0.0 and np.all(np.diff(s_next) > 0.0)
+    # the warm start is the plan shifted by control_dt and re-anchored where the car will be then
+    t = MPCConfig().time_grid()
+    s_plan = np.interp(t + 0.1, t, res.x_pred[:, 0])
+    np.testing.assert_allclose(s_next[:-2], (s_plan - s_plan[0])[:-2], atol=1e-9)
+
+
+# --------------------------------------------------------------------------------------
+# Closed loop on a straight road
+# --------------------------------------------------------------------------------------
+
+
+def closed_loop(gamma, cache_dir, opp0=(40.0, -1.5, 30.0), v=40.0, steps=60):
+    """Ego at v in the middle of a 12 m road (n_ref = 0), a slower opponent ahead on a collision course."""
+    cfg = MPCConfig(cache_dir=cache_dir)
+    mpc = MPCDCBF(cfg)
+    x = np.array([0.0, 0.0, 0.0, v, 0.0])
+    o = np.array(opp0, dtype=float)
+    stage = make_stage(v_ref=v, n_ref=0.0)
+    log = []
+    for _ in range(steps):
+        x0 = x.copy()
+        x0[0] = 0.0
+        res = mpc.solve(x0, stage, np.array([[o[0] - x[0], o[1], o[2]]]), gamma)
+        h0 = float(barrier(x, o, cfg.barrier))
+        x = plant_step(x, res.u, cfg.control_dt)
+        o = o + np.array([o[2] * cfg.control_dt, 0.0, 0.0])
+        h1 = float(barrier(x, o, cfg.barrier))
+        collide = abs(o[0] - x[0]) < AV21.length and abs(o[1] - x[1]) < AV21.width
+        log.append((res, h0, h1, collide, math.hypot(o[0] - x[0], o[1] - x[1])))
+    return log
+
+
+@pytest.mark.parametrize("opp_n", [0.0, -1.5])
+@pytest.mark.parametrize("gamma", [0.2, 0.6])
+def test_closed_loop_dcbf_condition_and_no_collision(cache_dir, gamma, opp_n):
+    log = closed_loop(gamma, cache_dir, opp0=(40.0, opp_n, 30.0))
+    checked = 0
+    for res, h0, h1, collide, _ in log:
+        assert res.success
+        assert not collide
+        if res.barrier_slack_first < 1e-6:
+            assert h1 >= (1.0 - gamma) * h0 - 1e-3
+            checked += 1
+    assert checked > 0.9 * len(log)
+    # the barrier was actually engaged: the opponent got close in h
+    assert min(h1 for _, _, h1, _, _ in log) < 1.0
+
+
+def test_smaller_gamma_keeps_more_distance(cache_dir):
+    cautious = closed_loop(0.05, cache_dir)
+    bold = closed_loop(0.5, cache_dir)
+    h_c = min(e[2] for e in cautious)
+    h_b = min(e[2] for e in bold)
+    d_c = min(e[4] for e in cautious)
+    d_b = min(e[4] for e in bold)
+    assert h_c > h_b + 0.1
+    assert d_c > d_b + 1.0
+
+
+# --------------------------------------------------------------------------------------
+# Failures and malformed arguments
+# --------------------------------------------------------------------------------------
+
+
+def test_infeasible_state_falls_back_without_raising(cache_dir, caplog):
+    mpc = MPCDCBF(MPCConfig(cache_dir=cache_dir))
+    stage = make_stage()
+    # steering far beyond its hard bound: delta_1 <= 0.25 cannot be reached in one step
+    absurd = np.array([0.0, 50.0, 0.3, 40.0, 0.8])
+    with caplog.at_level(logging.DEBUG, logger="sofar_env.control.mpc"):
+        res = mpc.solve(absurd, stage, np.array([[20.0, 50.0, 30.0]]), 0.5)
+    assert not res.success and res.status == "fallback_brake"
+    assert res.u[0] == pytest.approx(AV21.a_min / 2) and res.u[1] == pytest.approx(-AV21.steer_rate_max)
+    assert mpc.n_failures == 1
+    assert any("failed" in r.message for r in caplog.records)
+    # with a previous plan, the shifted plan's first control is used
+    good = np.array([0.0, 0.0, 0.0, 40.0, 0.0])
+    ok = mpc.solve(good, stage, np.zeros((0, 3)), 0.5)
+    assert ok.success
+    res = mpc.solve(absurd, stage, np.zeros((0, 3)), 0.5)
+    assert res.status == "fallback_shift" and mpc.n_failures == 2
+    np.testing.assert_allclose(res.u, np.clip(ok.u_pred[1], [AV21.a_min, -0.35], [AV21.a_max, 0.35]), atol=1e-9)
+    # and it recovers
+    assert mpc.solve(good, stage, np.zeros((0, 3)), 0.5).success
+    mpc.reset()
+    assert mpc.n_failures == 0
+
+
+def test_malformed_arguments_raise(cache_dir):
+    mpc = MPCDCBF(MPCConfig(cache_dir=cache_dir))
+    x0 = np.array([0.0, 0.0, 0.0, 40.0, 0.0])
+    stage = make_stage()
+    with pytest.raises(ValueError):
+        mpc.solve(x0, stage, np.zeros((0, 3)), float("nan"))
+    with pytest.raises(ValueError):
+        mpc.solve(x0, stage, np.zeros((0, 3)), 1.5)
+    with pytest.raises(ValueError):
+        mpc.solve(x0[:4], stage, np.zeros((0, 3)), 0.5)
+    with pytest.raises(ValueError):
+        mpc.solve(x0, stage, np.zeros((2, 2)), 0.5)
+    with pytest.raises(ValueError):
+        mpc.solve(x0, make_stage(n=N - 1), np.zeros((0, 3)), 0.5)
+    with pytest.raises(ValueError):
+        MPCConfig(qp_solver="gurobi")
+    assert mpc.n_failures == 0
+
+
+def test_many_opponents_use_the_most_relevant_slots(cache_dir):
+    mpc = MPCDCBF(MPCConfig(cache_dir=cache_dir, max_opponents=2))
+    x0 = np.array([0.0, 0.0, 0.0, 40.0, 0.0])
+    opp = np.array([[400.0, 0.0, 30.0],  # out of range
+                    [30.0, 0.0, 30.0],  # close, in lane: relevant
+                    [80.0, 4.0, 38.0],
+                    [-8.0, 3.5, 41.0],  # just behind, beside: relevant
+                    [120.0, -4.0, 35.0]])
+    res = mpc.solve(x0, make_stage(), opp, 0.5)
+    assert res.success and res.n_opponents == 2
+    assert res.barrier_min == pytest.approx(float(barrier(x0, opp).min()))
+
+
+def test_osqp_backend_runs(cache_dir):
+    mpc = MPCDCBF(MPCConfig(cache_dir=cache_dir, qp_solver="osqp"))
+    res = mpc.solve(np.array([0.0, 0.3, 0.0, 40.0, 0.0]), make_stage(), np.array([[30.0, 3.0, 35.0]]), 0.5)
+    assert res.u.shape == (2,) and res.status in ("solved", "fallback_brake")
+
+
+# --------------------------------------------------------------------------------------
+# Code generation cache
+# --------------------------------------------------------------------------------------
+
+
+def test_compiled_library_is_cached(tmp_path):
+    first = MPCDCBF(MPCConfig(cache_dir=str(tmp_path)))
+    if not first.codegen_info.compiled:
+        pytest.skip(f"no working C compiler: {first.codegen_info.message}")
+    assert first.codegen_info.built_now
+    second = MPCDCBF(MPCConfig(cache_dir=str(tmp_path)))
+    assert second.codegen_info.compiled and not second.codegen_info.built_now
+    assert second.codegen_info.path == first.codegen_info.path
+    assert len(list(tmp_path.glob("*.so"))) == 1
+    # a different problem definition gets its own library
+    third = MPCDCBF(MPCConfig(cache_dir=str(tmp_path), max_opponents=3))
+    assert third.codegen_info.built_now and third.codegen_info.path != first.codegen_info.path
+    # compiled and CasADi evaluation give the same control
+    x0 = np.array([0.0, 0.4, 0.01, 38.0, 0.01])
+    opp = np.array([[25.0, 0.5, 30.0]])
+    plain = MPCDCBF(MPCConfig(cache_dir=str(tmp_path), compile=False))
+    assert not plain.codegen_info.compiled
+    a = second.solve(x0, make_stage(), opp, 0.3)
+    b = plain.solve(x0, make_stage(), opp, 0.3)
+    np.testing.assert_allclose(a.u, b.u, atol=1e-6)
