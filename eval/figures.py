@@ -1,0 +1,74 @@
+"""The paper's Fig. 5: histogram of gamma and nearest-opponent distance vs gamma.
+
+    python eval/figures.py                                  # 3 adaptive episodes on Laguna Seca, then plot
+    python eval/figures.py --episodes 5 --rhos 0.3 0.5 --policy runs/pasta/pasta_final.json
+    python eval/figures.py --trace results/table1_trace.csv # plot a trace written by `eval/table.py --trace`
+
+PNG files go to results/figures/ (--out). Recorded episodes are kept in
+<out>/episodes.csv and <out>/trace.csv and reused on a rerun. The logic lives in
+sofar_agents.evaluation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from sofar_agents import evaluation as ev
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--trace", default=None, help="plot this per-step trace CSV instead of running episodes")
+    p.add_argument("--strategy", default="adaptive", help="strategy of the trace to plot")
+    p.add_argument("--out", default="results/figures", help="output folder")
+    p.add_argument("--policy", default=None, help="policy checkpoint (default: the shipped one)")
+    p.add_argument("--track", default="LagunaSeca")
+    p.add_argument("--episodes", type=int, default=3, help="episodes per rho")
+    p.add_argument("--rhos", nargs="+", type=float, default=[0.3])
+    p.add_argument("--duration", type=float, default=200.0, help="episode horizon [s]")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=None)
+    p.add_argument("--max-distance", type=float, default=100.0, help="x range of the distance plot [m]")
+    p.add_argument("--log-level", default="WARNING")
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
+    out = Path(args.out)
+    if args.trace:
+        trace_path = Path(args.trace)
+    else:
+        policy = ev.resolve_policy_path(args.policy)
+        if policy is None:
+            print("error: no adaptive policy to record (train one or pass --policy PATH)", file=sys.stderr)
+            return 2
+        strategies = [ev.Strategy.adaptive(policy)]
+        tasks = ev.table1_tasks(strategies, [args.track], args.rhos, args.episodes, args.seed, args.duration,
+                                trace=True)
+        trace_path = out / "trace.csv"
+        stats = ev.run_sweep(tasks, out / "episodes.csv", workers=args.workers, trace_path=trace_path)
+        if stats.failed:
+            print(f"warning: {stats.failed} episodes failed", file=sys.stderr)
+    trace = ev.read_trace_csv(trace_path, strategy=args.strategy)
+    if trace["gamma"].size == 0:
+        print(f"error: no steps of strategy {args.strategy!r} in {trace_path}", file=sys.stderr)
+        return 2
+    paths = ev.plot_gamma_figures(trace, out, max_distance=args.max_distance)
+    g = trace["gamma"]
+    print(f"{g.size} steps: gamma mean {g.mean():.3f}, median {np.median(g):.3f}, "
+          f"5-95% [{np.percentile(g, 5):.3f}, {np.percentile(g, 95):.3f}]")
+    for p in paths:
+        print(f"Wrote {p}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
