@@ -75,6 +75,7 @@ class Opponents:
     """Unwrapped gap to the ego, s_opp - s_ego [m] (> 0 ahead)."""
     was_ahead: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     rho: float = 0.0
+    _pose_cache: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def count(self) -> int:
@@ -105,10 +106,14 @@ class Opponents:
         """Move every opponent ``dt`` [s] along the raceline (midpoint speed rule)."""
         if self.count == 0:
             return
-        v0 = self._speed(self.s)
-        v_mid = self._speed(self.track.wrap(self.s + 0.5 * dt * v0))
-        self.s = self.track.wrap(self.s + dt * v_mid)
-        self.v = self._speed(self.s)
+        track, rho = self.track, self.rho
+        # a scalar loop: for a handful of cars the track's scalar paths beat its array paths
+        s_new = []
+        for s in self.s.tolist():
+            v0 = rho * track.speed(s)
+            s_new.append(track.wrap(s + dt * rho * track.speed(s + 0.5 * dt * v0)))
+        self.s = np.array(s_new)
+        self.v = np.array([rho * track.speed(s) for s in s_new])
 
     def update_overtakes(self, ego_s: float) -> np.ndarray:
         """Update the gaps after a step; count and respawn overtaken opponents.
@@ -142,9 +147,22 @@ class Opponents:
         self.v[i] = self._speed(np.array([self.s[i]]))[0]
 
     def poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Cartesian position and yaw of every opponent: (x, y, psi)."""
-        if self.count == 0:
-            z = np.zeros(0)
-            return z, z, z
-        x, y = self.track.to_cartesian(self.s, self.n)
-        return np.asarray(x, float), np.asarray(y, float), np.asarray(self.track.heading(self.s), float)
+        """Cartesian position and yaw of every opponent: (x, y, psi).
+
+        Cached for unchanged (s, n), since the world asks several times per step; the
+        returned arrays must not be modified.
+        """
+        key = self.s.tobytes() + self.n.tobytes()
+        if self._pose_cache is not None and self._pose_cache[0] == key:
+            return self._pose_cache[1]
+        m = self.count
+        x, y, psi = np.empty(m), np.empty(m), np.empty(m)
+        track = self.track
+        # a scalar loop: the field is small and the track's scalar paths are ~30x faster than its array paths
+        for i, (s, n) in enumerate(zip(self.s.tolist(), self.n.tolist())):
+            x[i], y[i] = track.to_cartesian(s, n)
+            psi[i] = track.heading(s)
+        for a in (x, y, psi):
+            a.setflags(write=False)
+        self._pose_cache = (key, (x, y, psi))
+        return x, y, psi

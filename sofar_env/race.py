@@ -24,16 +24,22 @@ speed (uniform in ``start_speed_fraction`` x the speed profile there).
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.ndimage import minimum_filter1d
 
 from .geometry import footprint_corners, rectangles_intersect
 from .opponents import OpponentConfig, Opponents
 from .vehicle import AV21, Plant, VehicleParams
 
 __all__ = ["RaceConfig", "CarEvents", "Race"]
+
+_EDGE_WINDOW = 15.0
+"""Half width of the arc-length window of the off-track prefilter [m]: a footprint corner
+(within ~2.6 m of the reference point) projects within it unless 1 - kappa n < 0.2."""
 
 
 @dataclass(frozen=True)
@@ -84,10 +90,6 @@ class CarEvents:
     """Arc length gained [m]."""
 
 
-def _wrap_angle(a):
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
-
-
 class Race:
     """Controlled cars and scripted opponents on one track."""
 
@@ -110,6 +112,16 @@ class Race:
         self.overtakes = np.zeros(self.n_cars, int)
         self._car_rel = np.zeros((self.n_cars, self.n_cars))
         self._car_ahead = np.zeros((self.n_cars, self.n_cars), bool)
+        # off-track prefilter: the smallest width within +-_EDGE_WINDOW of each raceline sample
+        # (the corners' own projections are only needed near an edge)
+        p = self.config.vehicle
+        self._corner_reach = math.hypot(max(p.cg_to_front, p.cg_to_rear), 0.5 * p.width)
+        samples = np.asarray(track.s, float)
+        spacing = track.length / len(samples)
+        half = int(math.ceil(_EDGE_WINDOW / spacing))
+        self._samples = samples.tolist()
+        self._wl_min = minimum_filter1d(np.asarray(track.width_left(samples), float), 2 * half + 1, mode="wrap").tolist()
+        self._wr_min = minimum_filter1d(np.asarray(track.width_right(samples), float), 2 * half + 1, mode="wrap").tolist()
 
     # ------------------------------------------------------------------ reset
     def reset(self, rng: np.random.Generator, *, start_s: float | None = None, start_speed: float | None = None,
@@ -158,18 +170,26 @@ class Race:
             rows.append(np.column_stack([f[:, 0], f[:, 1], s_dot]))
         return np.concatenate(rows) if rows else np.zeros((0, 3))
 
-    def obstacle_corners(self, car: int = 0) -> np.ndarray:
-        """Footprint corners (m, 4, 2) of everything car ``car`` can collide with."""
-        p = self.config.vehicle
-        parts = []
-        if self.opponents.count:
-            x, y, psi = self.opponents.poses()
-            parts.append(footprint_corners(x, y, psi, p))
+    def obstacle_poses(self, car: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Reference-point positions and yaws (x, y, psi) of everything car ``car`` can collide with."""
+        x, y, psi = self.opponents.poses()
         others = [j for j in range(self.n_cars) if j != car and self.active[j]]
         if others:
             st = self.states[others]
-            parts.append(footprint_corners(st[:, 0], st[:, 1], st[:, 2], p))
-        return np.concatenate(parts) if parts else np.zeros((0, 4, 2))
+            x, y, psi = np.concatenate([x, st[:, 0]]), np.concatenate([y, st[:, 1]]), np.concatenate([psi, st[:, 2]])
+        return x, y, psi
+
+    def obstacle_corners(self, car: int = 0) -> np.ndarray:
+        """Footprint corners (m, 4, 2) of everything car ``car`` can collide with."""
+        x, y, psi = self.obstacle_poses(car)
+        return footprint_corners(x, y, psi, self.config.vehicle)
+
+    def nearest_distance(self, car: int = 0) -> float:
+        """Distance between the reference points of car ``car`` and the nearest obstacle [m]; inf if none."""
+        x, y, _ = self.obstacle_poses(car)
+        if x.size == 0:
+            return math.inf
+        return float(np.min(np.hypot(x - self.states[car, 0], y - self.states[car, 1])))
 
     def laps(self, car: int = 0) -> float:
         """Completed laps of car ``car``: arc length driven / track length."""
@@ -196,15 +216,16 @@ class Race:
         self.time += dt
         self.steps += 1
         events = [CarEvents() for _ in range(self.n_cars)]
+        track = self.track
         for k in np.flatnonzero(self.active):
-            s_old = self.frenet[k, 0]
-            x, y, psi, v, delta = self.states[k]
-            s, n = self.track.to_frenet(x, y, s_hint=s_old)
+            s_old = float(self.frenet[k, 0])
+            x, y, psi, v, delta = self.states[k].tolist()
+            s, n = track.to_frenet(x, y, s_hint=s_old)
             s, n = float(s), float(n)
-            e = float(_wrap_angle(psi - float(self.track.heading(s))))
+            e = (psi - track.heading(s) + math.pi) % (2.0 * math.pi) - math.pi
             self.frenet[k] = (s, n, e, v, delta)
             ev = events[k]
-            ev.progress = float(self.track.gap(s, s_old))
+            ev.progress = float(track.gap(s, s_old))
             self.distance[k] += ev.progress
             ev.off_track = self._off_track(k)
             ev.collision = self._collides(k)
@@ -223,25 +244,37 @@ class Race:
 
     # ------------------------------------------------------------------ events
     def _off_track(self, k: int) -> bool:
+        s_c, n_c = float(self.frenet[k, 0]), float(self.frenet[k, 1])
+        i = bisect.bisect_right(self._samples, s_c) - 1
+        reach = self._corner_reach
+        # every corner lies within `reach` of the reference point, so its offset is within
+        # n +- reach and its projection within _EDGE_WINDOW of s: inside both minimum widths
+        # over the window, no corner can be beyond an edge
+        if n_c + reach < self._wl_min[i] and reach - n_c < self._wr_min[i]:
+            return False
         x, y, psi = self.states[k, :3]
-        corners = footprint_corners(x, y, psi, self.config.vehicle)
-        s, n = self.track.to_frenet(corners[:, 0], corners[:, 1], s_hint=np.full(4, self.frenet[k, 0]))
-        s = np.asarray(s, float)
-        n = np.asarray(n, float)
-        return bool(np.any(n > self.track.width_left(s)) or np.any(n < -np.asarray(self.track.width_right(s))))
+        corners = footprint_corners(x, y, psi, self.config.vehicle).tolist()
+        s_hint = float(self.frenet[k, 0])
+        track = self.track
+        # one scalar projection per corner, seeded at the car's own s (the track's scalar path is the fast one)
+        for cx, cy in corners:
+            s, n = track.to_frenet(cx, cy, s_hint=s_hint)
+            if n > track.width_left(s) or n < -track.width_right(s):
+                return True
+        return False
 
     def _collides(self, k: int) -> bool:
-        obstacles = self.obstacle_corners(k)
-        if obstacles.shape[0] == 0:
+        x, y, psi = self.obstacle_poses(k)
+        if x.size == 0:
             return False
-        # cheap distance prefilter: only cars within 10 m can touch
-        x, y = self.states[k, :2]
-        centres = obstacles.mean(axis=1)
-        near = np.hypot(centres[:, 0] - x, centres[:, 1] - y) < 10.0
+        # cheap distance prefilter: only cars whose reference points are within 10 m can touch
+        near = np.hypot(x - self.states[k, 0], y - self.states[k, 1]) < 10.0
         if not near.any():
             return False
-        ego = footprint_corners(x, y, self.states[k, 2], self.config.vehicle)
-        return bool(np.any(rectangles_intersect(ego[None], obstacles[near])))
+        p = self.config.vehicle
+        obstacles = footprint_corners(x[near], y[near], psi[near], p)
+        ego = footprint_corners(self.states[k, 0], self.states[k, 1], self.states[k, 2], p)
+        return bool(np.any(rectangles_intersect(ego[None], obstacles)))
 
     def _update_car_overtakes(self, events: list[CarEvents]) -> None:
         L = self.track.length

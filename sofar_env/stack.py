@@ -76,6 +76,10 @@ class StackOutput:
     """Wall time of the MPC solve [s]."""
     miqp_time: float
     """Wall time of the MIQP solve in this step (0 when it did not run) [s]."""
+    ego_s: float = 0.0
+    """Arc length of the ego at this step [m]: the s of ``mpc.x_pred`` is relative to it."""
+    plan_s: float = 0.0
+    """Arc length of the ego when ``plan`` was computed [m]: ``plan.s`` is relative to it."""
 
 
 class OvertakingStack:
@@ -117,14 +121,16 @@ class OvertakingStack:
         p = self.vehicle
         dt = cfg.miqp.node_dt
         v0 = max(ego_v, 0.0)
+        dv_min, dv_max = p.a_min * dt, p.a_max * dt
         s = v0 * self._node_t  # first guess: constant speed
         for _ in range(2):  # two fixed-point passes: speed reference at the guessed positions
             v_ref = cfg.speed_factor * np.asarray(self.track.speed(ego_s + s), float)
-            v = np.empty_like(v_ref)
+            speeds = []  # a Python list: element-wise numpy writes cost more than the loop itself
             vk = v0
-            for k, vr in enumerate(v_ref.tolist()):
-                v[k] = vk
-                vk = min(max(vr, vk + p.a_min * dt), vk + p.a_max * dt)
+            for vr in v_ref.tolist():
+                speeds.append(vk)
+                vk = min(max(vr, vk + dv_min), vk + dv_max)
+            v = np.array(speeds)
             s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
         return s
 
@@ -188,4 +194,5 @@ class OvertakingStack:
         return StackOutput(
             u=result.u, gamma=gamma, mpc=result, plan=self._plan if self.config.use_miqp else None,
             miqp_ran=miqp_ran, opponents_rel=opp_rel, mpc_time=result.solve_time, miqp_time=miqp_time,
+            ego_s=s, plan_s=self._plan_s,
         )

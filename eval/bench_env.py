@@ -1,0 +1,166 @@
+"""Environment throughput: steps per second of SOfAR-LagunaSeca-v0, one process, fixed gamma.
+
+Usage::
+
+    python eval/bench_env.py [--steps 1000] [--track LagunaSeca] [--rho 0.5] [--opponents 4]
+                             [--gamma 0.5] [--seed 0] [--json PATH]
+
+Two passes over the same seeded episodes:
+
+1. plain timing of ``env.step`` (resets excluded) -> steps/s and per-step percentiles;
+2. the same steps with timers wrapped around the components on the env's own
+   instances (nothing in the package is changed): MPC (``MPCDCBF.solve``), MIQP
+   (``PassingSidePlanner.plan``), track/Frenet (every public ``Track`` method, whoever
+   calls it), plant (``Plant.step``), world (``Race.step`` without the plant and track
+   calls inside it), observation (``observe``) and the rest (env + stack glue, reward
+   terms, info). Times are exclusive: a component's time excludes the timed
+   components it calls. The timers cost ~0.5 us per call.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import defaultdict
+
+import numpy as np
+
+import sofar_env  # noqa: F401  (registers the ids)
+import sofar_env.env as env_module
+from sofar_env.env import SOfARRaceEnv
+
+TRACK_METHODS = ("to_frenet", "to_cartesian", "heading", "curvature", "width_left", "width_right", "speed", "wrap",
+                 "gap", "normal")
+
+
+class ComponentTimer:
+    """Exclusive wall time per component, for wrapped callables that may nest."""
+
+    def __init__(self) -> None:
+        self.total = defaultdict(float)
+        self.calls = defaultdict(int)
+        self._stack: list[list] = []
+
+    def wrap(self, fn, component: str):
+        perf = time.perf_counter
+        stack = self._stack
+        total, calls = self.total, self.calls
+
+        def timed(*args, **kwargs):
+            frame = [perf(), 0.0]  # start, time spent in nested timed calls
+            stack.append(frame)
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                stack.pop()
+                elapsed = perf() - frame[0]
+                total[component] += elapsed - frame[1]
+                calls[component] += 1
+                if stack:
+                    stack[-1][1] += elapsed
+
+        return timed
+
+
+def instrument(env: SOfARRaceEnv, timer: ComponentTimer):
+    """Wrap the components of a built env (after its first reset) with ``timer``; returns an undo function.
+
+    Everything is wrapped on the env's own instances, except ``observe``, which the env module
+    looks up as a global: the undo function restores it.
+    """
+    env.stack.mpc.solve = timer.wrap(env.stack.mpc.solve, "mpc")
+    env.stack.planner.plan = timer.wrap(env.stack.planner.plan, "miqp")
+    env.race.plant.step = timer.wrap(env.race.plant.step, "plant")
+    env.race.step = timer.wrap(env.race.step, "world")
+    for name in TRACK_METHODS:
+        setattr(env.track, name, timer.wrap(getattr(env.track, name), "track/Frenet"))
+    original_observe = env_module.observe
+    env_module.observe = timer.wrap(original_observe, "observation")
+
+    def undo() -> None:
+        env_module.observe = original_observe
+
+    return undo
+
+
+def run(env: SOfARRaceEnv, steps: int, gamma: float, seed: int) -> tuple[np.ndarray, dict]:
+    """Step times [s] of ``steps`` env steps (resets excluded) and episode statistics."""
+    action = np.array([gamma], np.float32)
+    env.reset(seed=seed)
+    times = np.empty(steps)
+    mpc, miqp = [], []
+    episodes = 0
+    perf = time.perf_counter
+    for i in range(steps):
+        t0 = perf()
+        _, _, terminated, truncated, info = env.step(action)
+        times[i] = perf() - t0
+        mpc.append(info["mpc_time_ms"])
+        if info["miqp_time_ms"] > 0:
+            miqp.append(info["miqp_time_ms"])
+        if terminated or truncated:
+            episodes += 1
+            env.reset(seed=seed + episodes)
+    return times, {"episodes_ended": episodes, "mpc_median_ms": float(np.median(mpc)),
+                   "miqp_median_ms": float(np.median(miqp)) if miqp else float("nan")}
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=1000, help="timed env steps per pass (default 1000)")
+    parser.add_argument("--track", default="LagunaSeca")
+    parser.add_argument("--rho", type=float, default=0.5)
+    parser.add_argument("--opponents", type=int, default=4)
+    parser.add_argument("--gamma", type=float, default=0.5)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", default=None, help="also write the results to this JSON file")
+    args = parser.parse_args(argv)
+
+    def make() -> SOfARRaceEnv:
+        env = SOfARRaceEnv(track=args.track, rho=args.rho, n_opponents=args.opponents)
+        env.reset(seed=args.seed)  # builds the controllers (and compiles them on a first run)
+        for _ in range(20):  # warm-up
+            env.step(np.array([args.gamma], np.float32))
+        return env
+
+    env = make()
+    times, stats = run(env, args.steps, args.gamma, args.seed)
+    timer = ComponentTimer()
+    env2 = make()
+    undo = instrument(env2, timer)
+    try:
+        t0 = time.perf_counter()
+        run(env2, args.steps, args.gamma, args.seed)
+        wall = time.perf_counter() - t0
+    finally:
+        undo()
+    accounted = sum(timer.total.values())
+    breakdown = {k: 1e3 * v / args.steps for k, v in sorted(timer.total.items(), key=lambda kv: -kv[1])}
+    breakdown["other (env + stack glue, rewards, info)"] = 1e3 * max(wall - accounted, 0.0) / args.steps
+
+    result = {
+        "track": args.track, "rho": args.rho, "opponents": args.opponents, "gamma": args.gamma,
+        "steps": args.steps, "steps_per_s": float(args.steps / times.sum()),
+        "step_ms": {"median": 1e3 * float(np.median(times)), "p95": 1e3 * float(np.percentile(times, 95)),
+                    "mean": 1e3 * float(times.mean())},
+        **stats,
+        "breakdown_ms_per_step": breakdown,
+        "instrumented_ms_per_step": 1e3 * wall / args.steps,
+    }
+    print(f"{args.track}, {args.opponents} opponents at rho={args.rho}, gamma={args.gamma}, {args.steps} steps")
+    print(f"  {result['steps_per_s']:.0f} env steps/s  (step median {result['step_ms']['median']:.2f} ms, "
+          f"p95 {result['step_ms']['p95']:.2f} ms; MPC median {stats['mpc_median_ms']:.2f} ms, "
+          f"MIQP median {stats['miqp_median_ms']:.2f} ms per solve)")
+    print(f"  per-step breakdown (instrumented run, {result['instrumented_ms_per_step']:.2f} ms/step):")
+    for name, ms in breakdown.items():
+        print(f"    {name:40s} {ms:6.3f} ms  {100 * ms / result['instrumented_ms_per_step']:5.1f} %")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(result, fh, indent=2)
+    return result
+
+
+if __name__ == "__main__":
+    sys.exit(0 if main() else 1)

@@ -1,0 +1,215 @@
+"""Configuration of the SOfAR environments: frozen dataclasses and the one place that builds them.
+
+:class:`EnvConfig` gathers everything an environment needs: the circuit, the
+world (:class:`~sofar_env.race.RaceConfig`), the controller
+(:class:`~sofar_env.stack.StackConfig`), the decision interval and the reward
+settings. :func:`make_env_config` turns keyword arguments and/or a ``config=``
+mapping into one, validating as it goes:
+
+* top-level keys are the fields of :class:`EnvConfig` plus the shortcuts
+  ``n_opponents``, ``offsets``, ``rho`` (into ``race.opponents``) and
+  ``speed_factor``, ``use_miqp`` (into ``stack``);
+* a value for a sub-config (``race``, ``stack``, ``reward_weights``, and their
+  own nested dataclasses such as ``race.opponents`` or ``stack.mpc``) may be the
+  dataclass itself or a mapping of overrides applied to the current value;
+* an unknown key at any depth raises :class:`ConfigError` (a ``ValueError``)
+  naming the key, its path and the valid keys; lists are accepted for tuple
+  fields.
+
+Example::
+
+    cfg = make_env_config({"rho": 0.5, "race": {"duration": 60.0}}, decision_interval=2)
+    cfg.rho, cfg.race.duration, cfg.decision_interval     # 0.5, 60.0, 2
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .race import RaceConfig
+
+__all__ = [
+    "OBJECTIVE_NAMES",
+    "REWARD_MODES",
+    "ConfigError",
+    "RewardWeights",
+    "EnvConfig",
+    "make_env_config",
+    "apply_overrides",
+]
+
+OBJECTIVE_NAMES: tuple[str, ...] = ("safety", "overtakes", "progress", "barrier_margin", "gamma_smoothness")
+"""Names of the reward objectives, in the order of the reward vector."""
+
+REWARD_MODES = ("scalar", "vector")
+
+_SHORTCUTS = {
+    "n_opponents": ("race", "opponents"),
+    "offsets": ("race", "opponents"),
+    "rho": ("race", "opponents"),
+    "speed_factor": ("stack",),
+    "use_miqp": ("stack",),
+}
+"""Top-level keys that set a field of a nested sub-config: key -> path of that sub-config."""
+
+
+class ConfigError(ValueError):
+    """An invalid or unknown configuration key or value."""
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the scalar reward ``weights . reward_vector`` (one per objective)."""
+
+    safety: float = 10.0
+    """Weight of the safety term (-1 on collision or leaving the track)."""
+    overtakes: float = 1.0
+    """Weight of the overtake count (+1 per overtake)."""
+    progress: float = 0.05
+    """Weight of the normalised progress (about 1 per control step at the speed profile)."""
+    barrier_margin: float = 0.5
+    """Weight of the barrier-margin penalty (in [-1, 0] per control step)."""
+    gamma_smoothness: float = 0.1
+    """Weight of the gamma-smoothness penalty -|gamma_t - gamma_{t-1}|."""
+
+    def __post_init__(self) -> None:
+        for name in OBJECTIVE_NAMES:
+            value = getattr(self, name)
+            if not np.isfinite(value):
+                raise ConfigError(f"reward_weights.{name} must be finite, got {value!r}")
+
+    def as_array(self) -> np.ndarray:
+        """The weights as a float64 array in the order of :data:`OBJECTIVE_NAMES`."""
+        return np.array([getattr(self, name) for name in OBJECTIVE_NAMES], dtype=float)
+
+
+def _default_stack_config():
+    from .stack import StackConfig  # imports the controllers (CasADi): only when an env is configured
+
+    return StackConfig()
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Everything a SOfAR environment is built from."""
+
+    track: str = "LagunaSeca"
+    """Circuit name (``LagunaSeca``, ``Monza``, ``Indianapolis``, ``Kentucky``, or an alias / folder path)."""
+    decision_interval: int = 1
+    """The policy acts every this many control steps; gamma is held in between and the rewards are summed."""
+    reward_mode: str = "scalar"
+    """``"scalar"``: reward = weights . vector (a float); ``"vector"``: the float32 reward vector."""
+    reward_weights: RewardWeights = field(default_factory=RewardWeights)
+    """Weights of the scalar reward."""
+    initial_gamma: float = 0.5
+    """gamma_{t-1} assumed at the first step of an episode (for the smoothness term) [-]."""
+    timing_info: bool = True
+    """Report the wall-clock solve times ``mpc_time_ms`` / ``miqp_time_ms`` in ``info``. They are the only
+    info values that differ between two runs with the same seed; conformance checks that compare infos
+    exactly (Gymnasium's ``check_env``, PettingZoo's seed test) need False."""
+    race: RaceConfig = field(default_factory=RaceConfig)
+    """The world: time step, duration, start distribution, vehicle, opponents."""
+    stack: Any = field(default_factory=_default_stack_config)
+    """The controller (:class:`~sofar_env.stack.StackConfig`): speed factor, MIQP, MPC settings."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.decision_interval, (int, np.integer)) or self.decision_interval < 1:
+            raise ConfigError(f"decision_interval must be an integer >= 1, got {self.decision_interval!r}")
+        if self.reward_mode not in REWARD_MODES:
+            raise ConfigError(f"reward_mode must be one of {REWARD_MODES}, got {self.reward_mode!r}")
+        if not (0.0 < self.initial_gamma <= 1.0):
+            raise ConfigError(f"initial_gamma must lie in (0, 1], got {self.initial_gamma!r}")
+
+    # read-only views of the shortcut keys
+    @property
+    def n_opponents(self) -> int:
+        return self.race.opponents.n_opponents
+
+    @property
+    def offsets(self) -> tuple[float, ...]:
+        return self.race.opponents.offsets
+
+    @property
+    def rho(self) -> float:
+        return self.race.opponents.rho
+
+    @property
+    def speed_factor(self) -> float:
+        return self.stack.speed_factor
+
+    @property
+    def use_miqp(self) -> bool:
+        return self.stack.use_miqp
+
+    @property
+    def control_steps(self) -> int:
+        """Control steps in one episode (the race duration over dt)."""
+        return self.race.max_steps
+
+
+def apply_overrides(base: Any, overrides: Mapping[str, Any], path: str = "") -> Any:
+    """``base`` (a dataclass instance) with the fields in ``overrides`` replaced, recursively.
+
+    A field whose current value is a dataclass accepts a mapping (applied to that value)
+    or an instance of the same class. Lists become tuples for tuple fields. Unknown keys
+    raise :class:`ConfigError`.
+    """
+    if not isinstance(overrides, Mapping):
+        raise ConfigError(f"{path or 'config'} must be a mapping, got {type(overrides).__name__}")
+    names = {f.name for f in dataclasses.fields(base) if f.init}
+    changes = {}
+    for key, value in overrides.items():
+        where = f"{path}.{key}" if path else str(key)
+        if key not in names:
+            raise ConfigError(
+                f"unknown configuration key {where!r}; valid keys{' of ' + path if path else ''}: {', '.join(sorted(names))}"
+            )
+        current = getattr(base, key)
+        if dataclasses.is_dataclass(current) and not isinstance(current, type):
+            if isinstance(value, Mapping):
+                value = apply_overrides(current, value, where)
+            elif not isinstance(value, type(current)):
+                raise ConfigError(f"{where} must be a {type(current).__name__} or a mapping, got {type(value).__name__}")
+        elif isinstance(current, tuple) and isinstance(value, (list, np.ndarray)):
+            value = tuple(np.asarray(value).tolist())
+        changes[key] = value
+    try:
+        return dataclasses.replace(base, **changes)
+    except ConfigError:
+        raise
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"invalid value in {path or 'config'}: {exc}") from exc
+
+
+def make_env_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwargs: Any) -> EnvConfig:
+    """Build an :class:`EnvConfig` from a config object or mapping plus keyword overrides.
+
+    Keyword arguments win over the mapping. See the module docstring for the accepted keys.
+    """
+    if isinstance(config, EnvConfig):
+        base, items = config, {}
+    elif config is None:
+        base, items = EnvConfig(), {}
+    elif isinstance(config, Mapping):
+        base, items = EnvConfig(), dict(config)
+    else:
+        raise ConfigError(f"config must be an EnvConfig or a mapping, got {type(config).__name__}")
+    items.update(kwargs)
+    # route the shortcut keys into their sub-config, after any explicit sub-config value
+    nested: dict[str, Any] = {}
+    for key in list(items):
+        if key in _SHORTCUTS:
+            nested[key] = items.pop(key)
+    cfg = apply_overrides(base, items)
+    for key, value in nested.items():
+        sub_path = _SHORTCUTS[key]
+        tree: dict[str, Any] = {key: value}
+        for part in reversed(sub_path):
+            tree = {part: tree}
+        cfg = apply_overrides(cfg, tree)
+    return cfg

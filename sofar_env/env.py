@@ -1,0 +1,368 @@
+"""Gymnasium environment: the overtaking stack of the paper, with the barrier decay gamma as the action."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from types import SimpleNamespace
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from .config import OBJECTIVE_NAMES, EnvConfig, make_env_config
+from .control.barrier import barrier_expr
+from .observation import observe
+from .rewards import reward_vector, safety_cost, scalarize
+
+__all__ = ["SOfARRaceEnv", "GAMMA_MIN", "GAMMA_MAX", "RESET_OPTIONS"]
+
+GAMMA_MIN = 0.05
+"""Lower end of the action (barrier decay) [-]."""
+GAMMA_MAX = 1.0
+"""Upper end of the action [-]."""
+RESET_OPTIONS = ("rho", "n_opponents", "start_s", "start_speed")
+"""Keys accepted in ``reset(options=...)``."""
+
+
+def parse_gamma(action: Any) -> float:
+    """The scalar gamma of an action: ValueError if it is not one finite number, clipped to [0.05, 1]."""
+    a = np.asarray(action, dtype=float).reshape(-1)
+    if a.size != 1:
+        raise ValueError(f"the action must hold exactly one value (gamma), got shape {np.shape(action)}")
+    g = float(a[0])
+    if not math.isfinite(g):
+        raise ValueError(f"non-finite action {g!r}: gamma must be a finite number in [{GAMMA_MIN}, {GAMMA_MAX}]")
+    return min(max(g, GAMMA_MIN), GAMMA_MAX)
+
+
+_MATH_OPS = SimpleNamespace(abs=abs, exp=math.exp, log1p=math.log1p, tanh=math.tanh)
+
+
+def min_barrier(track, ego_frenet: np.ndarray, opponents: np.ndarray, params) -> float:
+    """Smallest barrier value h of the ego against the opponent rows (s, n, v) now; inf without opponents.
+
+    The barrier of :mod:`sofar_env.control.barrier` evaluated on Python floats (the field is
+    small; this is ~20x faster than the numpy path), with s taken relative to the ego.
+    """
+    s, n, v = float(ego_frenet[0]), float(ego_frenet[1]), float(ego_frenet[3])
+    h = math.inf
+    for s_o, n_o, v_o in opponents.tolist():
+        h = min(h, barrier_expr(0.0, n, v, track.gap(s_o, s), n_o, v_o, params, _MATH_OPS))
+    return h
+
+
+class DecisionTally:
+    """Sums the per-control-step terms of one car over one decision (``decision_interval`` steps)."""
+
+    def __init__(self) -> None:
+        self.vector = np.zeros(len(OBJECTIVE_NAMES))
+        self.cost = 0.0
+        self.barrier_slack = 0.0
+        self.mpc_time = 0.0
+        self.miqp_time = 0.0
+        self.collision = False
+        self.off_track = False
+        self.min_h = math.inf
+        self.nearest = math.inf
+        self.gamma = math.nan
+        self.last = None
+
+    def add(self, race, car: int, out, events, opponents_after: np.ndarray, profile_speed: float,
+            previous_gamma: float, barrier_params) -> None:
+        """Record one control step of car ``car``: ``out`` its stack output, ``events`` its CarEvents,
+        ``opponents_after`` its opponent rows after the step, ``profile_speed`` the speed profile at its
+        arc length before the step [m/s]."""
+        slack = float(out.mpc.slack.get("barrier", 0.0))
+        self.min_h = min_barrier(race.track, race.frenet[car], opponents_after, barrier_params)
+        self.nearest = race.nearest_distance(car)  # now: a crashed car may be removed from the race next
+        self.vector += reward_vector(
+            collision=events.collision, off_track=events.off_track, overtakes=events.overtakes,
+            progress=events.progress, profile_speed=profile_speed, dt=race.config.dt, barrier_slack=slack,
+            min_h=self.min_h, gamma=out.gamma, previous_gamma=previous_gamma,
+        )
+        self.cost += safety_cost(events.collision, events.off_track, slack)
+        self.barrier_slack = max(self.barrier_slack, slack)
+        self.mpc_time += out.mpc_time
+        self.miqp_time += out.miqp_time
+        self.collision |= events.collision
+        self.off_track |= events.off_track
+        self.gamma = out.gamma
+        self.last = out
+
+    @property
+    def terminated(self) -> bool:
+        return self.collision or self.off_track
+
+    def info(self, race, stack, car: int = 0, timings: bool = True) -> dict:
+        """The per-step info dictionary (see the environment docstring); ``timings`` adds the solve times."""
+        out = self.last
+        plan = out.plan if out is not None else None
+        info = {
+            "reward_vector": self.vector.astype(np.float32),
+            "cost": self.cost,
+            "overtakes": int(race.overtakes[car]),
+            "laps": race.laps(car),
+            "sim_time": race.time,
+            "gamma": self.gamma,
+            "collision": self.collision,
+            "off_track": self.off_track,
+            "nearest_opponent_m": self.nearest,
+            "min_barrier": self.min_h,
+            "barrier_slack": self.barrier_slack,
+            "mpc_status": out.mpc.status if out is not None else "",
+            "miqp_sides": tuple(int(b) for b in plan.sides) if plan is not None else (),
+            "mpc_failures": stack.counters["mpc_failures"],
+            "miqp_failures": stack.counters["miqp_failures"],
+        }
+        if timings:
+            info["mpc_time_ms"] = 1e3 * self.mpc_time
+            info["miqp_time_ms"] = 1e3 * self.miqp_time
+        return info
+
+
+class SOfARRaceEnv(gym.Env):
+    r"""Safe overtaking on a real circuit: learn the barrier decay gamma of an MPC-DCBF controller.
+
+    ## Description
+
+    The ego car (a Dallara AV-21, kinematic bicycle with slip) races a field of slower
+    opponents that follow the raceline at a pace ratio rho of the circuit's speed
+    profile. It is driven by the hierarchical controller of the paper
+    (:class:`~sofar_env.stack.OvertakingStack`, Algorithm 1): a passing-side MIQP
+    chooses a lateral reference, an MPC with discrete-time control barrier functions
+    tracks it while keeping ``h(x_{k+1}) >= (1 - gamma) h(x_k)`` for a velocity-aware
+    elliptic barrier h around every opponent. The agent chooses gamma: small values
+    keep the car far from the opponents (cautious), values near 1 let it close in
+    quickly (aggressive). An opponent that has been ahead and falls 2 m behind counts
+    as overtaken and reappears 400 m ahead. The world runs at dt = 0.1 s.
+
+    ## Action Space
+
+    ``Box(0.05, 1.0, (1,), float32)``: gamma, the decay of the barrier condition.
+    A non-finite action raises ``ValueError``; a finite value outside [0.05, 1] is
+    clipped into it (gamma = 0 would freeze the barrier, > 1 would be meaningless).
+    The policy acts every ``decision_interval`` control steps (default 1); gamma is
+    held in between.
+
+    ## Observation Space
+
+    ``Box(-1, 1, (12,), float32)``, the paper's 12 values in the global Frenet frame
+    of the raceline (s along it, n > 0 to the left). Each physical value is clipped to
+    its range [lo, hi] and mapped affinely onto [-1, 1]; an absent opponent reads as
+    far away (gap 200 m, n 0, dv 0), never as a sentinel.
+
+    | Num | Observation                                        | Unit | Range [lo, hi] | Scaled value |
+    |-----|----------------------------------------------------|------|----------------|--------------|
+    | 0   | ego lateral offset n from the raceline             | m    | [-15, 15]      | n / 15       |
+    | 1   | ego speed v                                        | m/s  | [0, 100]       | v / 50 - 1   |
+    | 2   | steering angle delta                               | rad  | [-0.25, 0.25]  | delta / 0.25 |
+    | 3   | gap s_opp - s_ego to opponent 1                    | m    | [-20, 200]     | (g + 20) / 110 - 1 |
+    | 4   | gap to opponent 2                                  | m    | [-20, 200]     | (g + 20) / 110 - 1 |
+    | 5   | lateral offset n of opponent 1                     | m    | [-15, 15]      | n / 15       |
+    | 6   | lateral offset n of opponent 2                     | m    | [-15, 15]      | n / 15       |
+    | 7   | closing speed v_ego - v_opp of opponent 1          | m/s  | [-50, 50]      | dv / 50      |
+    | 8   | closing speed of opponent 2                        | m/s  | [-50, 50]      | dv / 50      |
+    | 9   | mean raceline curvature over the next 1.5 s        | 1/m  | [-0.05, 0.05]  | kappa / 0.05 |
+    | 10  | raceline-to-left-edge distance at the ego          | m    | [0, 15]        | w / 7.5 - 1  |
+    | 11  | raceline-to-right-edge distance at the ego         | m    | [0, 15]        | w / 7.5 - 1  |
+
+    Opponents 1 and 2 are the two nearest with a gap in [-20, 200] m, in ascending order
+    of gap (a car alongside or just behind comes first). Opponent speeds are arc-length
+    speeds ds/dt. The curvature is averaged over 16 points from s to s + 1.5 s x max(v, 5 m/s).
+    See :mod:`sofar_env.observation`.
+
+    ## Rewards
+
+    A vector of five named objectives (``env.unwrapped.objective_names``), each summed
+    over the control steps of one decision:
+
+    | Objective          | Per control step                                                       | Range      |
+    |--------------------|------------------------------------------------------------------------|------------|
+    | `safety`           | -1 on a collision or when a corner of the car leaves the track, else 0 | {-1, 0}    |
+    | `overtakes`        | +1 per opponent overtaken                                              | {0, 1, ..} |
+    | `progress`         | arc length gained / (speed profile at the ego x dt): ~1 at the profile speed, ~0.8 at the default speed_factor | ~[0, 1.3] |
+    | `barrier_margin`   | -min(1, slack + max(0, -min h)): slack = largest DCBF slack of the MPC solution, min h = smallest barrier value over the opponents after the step | [-1, 0] |
+    | `gamma_smoothness` | -abs(gamma_t - gamma_{t-1}) (gamma_{-1} = ``initial_gamma``, 0.5)      | [-0.95, 0] |
+
+    ``reward_mode="scalar"`` (default) returns the Python float ``w . r`` with
+    ``reward_weights`` (default w = (10, 1, 0.05, 0.5, 0.1): a crash outweighs ten
+    overtakes; a 200 s race at the default speed factor is worth about 80 of progress;
+    a step that uses a full unit of barrier slack costs 0.5). ``reward_mode="vector"``
+    returns the float32 vector and declares it in ``env.unwrapped.reward_space``
+    (MO-Gymnasium convention; scalarise it outside the env). The vector is always in
+    ``info["reward_vector"]``.
+
+    ## Starting State
+
+    The ego starts on the raceline (n = 0, aligned with it, steering 0) at an arc
+    length drawn uniformly on the lap and a speed drawn uniformly in [0.5, 0.9] x the
+    speed profile there. The opponents start 120, 180, 250 and 400 m ahead at lateral
+    offsets 0, +1, -1, 0 m. ``reset(options=...)`` may set ``start_s`` [m],
+    ``start_speed`` [m/s], ``rho`` and ``n_opponents`` for that episode. All randomness
+    comes from ``self.np_random``: the same seed and actions give the same trajectory.
+
+    ## Episode End
+
+    * Termination: a collision (the 4.9 m x 1.9 m footprints intersect) or a corner of
+      the ego's footprint beyond a track edge.
+    * Truncation: the race duration (200 s = 2000 control steps; the registered ids use
+      ``max_episode_steps=2000`` and the environment also truncates itself at the
+      duration whatever the decision interval).
+
+    ``info["is_success"]`` is set at the end of an episode: True when the duration was
+    reached without a collision or leaving the track.
+
+    ## Info
+
+    ``reward_vector`` (float32, 5), ``cost`` (barrier slack + collisions + off-tracks, for
+    constrained RL), ``overtakes`` (episode total), ``laps`` (arc length driven / lap
+    length), ``sim_time`` [s], ``gamma``, ``collision``, ``off_track``,
+    ``nearest_opponent_m`` (distance between reference points [m], inf if none),
+    ``min_barrier`` (min h over the opponents now, inf if none), ``barrier_slack``,
+    ``mpc_status``, ``miqp_sides`` (1 = pass left, 0 = right, per opponent cluster),
+    ``mpc_failures``, ``miqp_failures`` (episode counters), ``is_success`` at the end, and
+    the wall-clock solve times ``mpc_time_ms``, ``miqp_time_ms`` of the step (unless
+    ``timing_info=False``: they are the only values that differ between two runs with the
+    same seed, so checks that compare infos exactly, such as Gymnasium's ``check_env``,
+    need them off).
+
+    ## Arguments
+
+    ```python
+    import gymnasium as gym
+    import sofar_env
+    env = gym.make("SOfAR-LagunaSeca-v0", rho=0.5, decision_interval=2, render_mode="rgb_array")
+    env = gym.make("SOfAR-Monza-v0", config={"reward_mode": "vector", "race": {"duration": 60.0}})
+    ```
+
+    Keyword arguments and the ``config`` mapping are validated into
+    :class:`~sofar_env.config.EnvConfig` (unknown keys raise ``ValueError``): ``track``,
+    ``n_opponents``, ``offsets``, ``rho``, ``speed_factor``, ``use_miqp``,
+    ``decision_interval``, ``reward_mode``, ``reward_weights``, ``initial_gamma``, ``timing_info``,
+    ``race`` (:class:`~sofar_env.race.RaceConfig`), ``stack``
+    (:class:`~sofar_env.stack.StackConfig`). The controllers are built on the first
+    ``reset()``, so constructing the environment is cheap.
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(self, config: EnvConfig | Mapping[str, Any] | None = None, render_mode: str | None = None,
+                 **kwargs: Any):
+        self.config = make_env_config(config, **kwargs)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        self.render_mode = render_mode
+        cfg = self.config
+        k = cfg.decision_interval
+        self.action_space = spaces.Box(GAMMA_MIN, GAMMA_MAX, (1,), np.float32)
+        self.observation_space = spaces.Box(-1.0, 1.0, (12,), np.float32)
+        self.objective_names = OBJECTIVE_NAMES
+        self.reward_space = spaces.Box(
+            low=np.array([-1.0, 0.0, -2.0 * k, -1.0 * k, -1.0], np.float32),
+            high=np.array([0.0, float(k * max(cfg.n_opponents, 1)), 2.0 * k, 0.0, 0.0], np.float32),
+            dtype=np.float32,
+        )
+        self._weights = cfg.reward_weights.as_array()
+        self.track = None
+        self.race = None
+        self.stack = None
+        self._renderer = None
+        self._opponents = np.zeros((0, 3))
+        self._previous_gamma = cfg.initial_gamma
+        self.last_output = None
+        """The controller output of the last control step (MPC prediction, MIQP plan), for rendering."""
+
+    # ------------------------------------------------------------------ building
+    def _build(self) -> None:
+        from .race import Race
+        from .stack import OvertakingStack
+        from .tracks import Track
+
+        cfg = self.config
+        self.track = Track.load(cfg.track)
+        self.race = Race(self.track, cfg.race)
+        self.stack = OvertakingStack(self.track, cfg.stack, vehicle=cfg.race.vehicle)
+
+    # ------------------------------------------------------------------ API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - set(RESET_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: {', '.join(RESET_OPTIONS)}")
+        if self.race is None:
+            self._build()
+        self.race.reset(self.np_random, **options)
+        self.stack.reset()
+        self._previous_gamma = self.config.initial_gamma
+        self.last_output = None
+        self._opponents = self.race.opponent_frenet(0)
+        tally = DecisionTally()
+        tally.min_h = min_barrier(self.track, self.race.frenet[0], self._opponents, self.config.stack.mpc.barrier)
+        tally.gamma = self._previous_gamma
+        tally.nearest = self.race.nearest_distance(0)
+        info = tally.info(self.race, self.stack, timings=self.config.timing_info)
+        if self.render_mode == "human":
+            self.render()
+        return observe(self.race, 0, self._opponents), info
+
+    def step(self, action):
+        if self.race is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        gamma = parse_gamma(action)
+        race, stack, track = self.race, self.stack, self.track
+        bp = self.config.stack.mpc.barrier
+        tally = DecisionTally()
+        for _ in range(self.config.decision_interval):
+            out = stack.step(race.frenet[0], self._opponents, gamma)
+            profile_speed = track.speed(race.frenet[0, 0])
+            events = race.step(out.u[None, :])[0]
+            self._opponents = race.opponent_frenet(0)
+            tally.add(race, 0, out, events, self._opponents, profile_speed, self._previous_gamma, bp)
+            self._previous_gamma = gamma
+            if tally.terminated or race.truncated:
+                break
+        self.last_output = tally.last
+        terminated = tally.terminated
+        truncated = race.truncated and not terminated
+        info = tally.info(race, stack, timings=self.config.timing_info)
+        if terminated or truncated:
+            info["is_success"] = not terminated
+        if self.config.reward_mode == "vector":
+            reward = tally.vector.astype(np.float32)
+        else:
+            reward = scalarize(tally.vector, self._weights)
+        if self.render_mode == "human":
+            self.render()
+        return observe(race, 0, self._opponents), reward, terminated, truncated, info
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' to the constructor"
+            )
+            return None
+        if self.race is None:
+            raise gym.error.ResetNeeded("call reset() before render()")
+        if self._renderer is None:
+            from .render import Renderer
+
+            self._renderer = Renderer(self.track, self.config.race.vehicle, self.config.stack.mpc.barrier,
+                                      fps=self.metadata["render_fps"])
+        frame = self._renderer.draw(self.race, self.last_output, gamma=self._previous_gamma)
+        if self.render_mode == "human":
+            self._renderer.show(frame)
+            return None
+        return frame
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        super().close()

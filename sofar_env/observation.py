@@ -1,0 +1,85 @@
+"""The 12-value observation of the paper, in the global Frenet frame of the raceline.
+
+Every value is a physical quantity clipped to a documented range ``[lo, hi]`` and
+mapped affinely onto ``[-1, 1]``: ``o = 2 (clip(x, lo, hi) - lo) / (hi - lo) - 1``
+(for a symmetric range this is ``x / hi``). There are no sentinels: an absent
+opponent reads as "far", i.e. gap = 200 m (o = +1), n = 0, closing speed = 0.
+
+======  =====================  ======  ==============  =================================================
+index   quantity               unit    range [lo, hi]  definition
+======  =====================  ======  ==============  =================================================
+0       ego n                  m       [-15, 15]       lateral offset from the raceline, + left
+1       ego v                  m/s     [0, 100]        plant speed
+2       steering delta         rad     [-0.25, 0.25]   steering angle of the plant
+3, 4    gap 1, gap 2           m       [-20, 200]      s_opp - s_ego of the two nearest opponents with a
+                                                       gap in [-20, 200] m, ascending (so a car alongside
+                                                       or just behind comes first); 200 if absent
+5, 6    n 1, n 2               m       [-15, 15]       their lateral offsets; 0 if absent
+7, 8    dv 1, dv 2             m/s     [-50, 50]       closing speeds v_ego - v_opp (arc-length speeds);
+                                                       0 if absent
+9       mean curvature         1/m     [-0.05, 0.05]   raceline curvature averaged over the next 1.5 s
+                                                       at the ego's speed (16 samples, at least 5 m/s)
+10, 11  width left / right     m       [0, 15]         raceline-to-edge distances at the ego's s
+======  =====================  ======  ==============  =================================================
+
+"Opponents" are whatever the car must avoid: the scripted opponents and, in the
+multi-agent environment, the other active cars (:meth:`Race.opponent_frenet`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["OBS_NAMES", "OBS_LOW", "OBS_HIGH", "GAP_RANGE", "LOOKAHEAD_TIME", "observe", "scale"]
+
+OBS_NAMES = (
+    "ego_n", "ego_v", "steering", "gap_1", "gap_2", "n_1", "n_2", "dv_1", "dv_2",
+    "mean_curvature", "width_left", "width_right",
+)
+GAP_RANGE = (-20.0, 200.0)
+"""Opponents with a gap in this window [m] are observed; an absent one reads as the upper end."""
+LOOKAHEAD_TIME = 1.5
+"""Horizon of the mean curvature [s] (that of the MPC: 20 x 0.075 s)."""
+_CURV_SAMPLES = 16
+_MIN_LOOKAHEAD_SPEED = 5.0  # [m/s]
+
+OBS_LOW = np.array([-15.0, 0.0, -0.25, GAP_RANGE[0], GAP_RANGE[0], -15.0, -15.0, -50.0, -50.0, -0.05, 0.0, 0.0])
+"""Physical lower ends of the clip ranges, per index."""
+OBS_HIGH = np.array([15.0, 100.0, 0.25, GAP_RANGE[1], GAP_RANGE[1], 15.0, 15.0, 50.0, 50.0, 0.05, 15.0, 15.0])
+"""Physical upper ends of the clip ranges, per index."""
+_SPAN = OBS_HIGH - OBS_LOW
+_TAU = np.linspace(0.0, LOOKAHEAD_TIME, _CURV_SAMPLES)
+
+
+def scale(raw) -> np.ndarray:
+    """Physical values (..., 12) -> observation in [-1, 1] (float32)."""
+    raw = np.minimum(np.maximum(np.asarray(raw, float), OBS_LOW), OBS_HIGH)
+    return (2.0 * (raw - OBS_LOW) / _SPAN - 1.0).astype(np.float32)
+
+
+def raw_observation(track, ego_frenet, opponents) -> np.ndarray:
+    """The 12 physical values (float64) for an ego Frenet state (s, n, e, v, delta) and opponent rows (s, n, v)."""
+    s, n, _, v, delta = (float(x) for x in ego_frenet)
+    lo, hi = GAP_RANGE
+    # a scalar loop over the (few) opponents: the track's scalar gap is the fast path
+    seen = []
+    for s_o, n_o, v_o in np.asarray(opponents, float).reshape(-1, 3).tolist():
+        g = track.gap(s_o, s)
+        if lo <= g <= hi:
+            seen.append((g, n_o, v - v_o))
+    seen.sort(key=lambda row: row[0])
+    seen += [(hi, 0.0, 0.0)] * (2 - len(seen))
+    (g1, n1, dv1), (g2, n2, dv2) = seen[:2]
+    ahead = s + max(v, _MIN_LOOKAHEAD_SPEED) * _TAU
+    kappa = float(np.asarray(track.curvature(ahead), float).sum()) / _CURV_SAMPLES
+    return np.array([n, v, delta, g1, g2, n1, n2, dv1, dv2, kappa, track.width_left(s), track.width_right(s)])
+
+
+def observe(race, car: int = 0, opponents: np.ndarray | None = None) -> np.ndarray:
+    """Observation (12,) float32 of controlled car ``car`` of ``race``.
+
+    ``opponents`` may pass ``race.opponent_frenet(car)`` when the caller has it already.
+    """
+    if opponents is None:
+        opponents = race.opponent_frenet(car)
+    return scale(raw_observation(race.track, race.frenet[car], opponents))

@@ -1,0 +1,34 @@
+"""Registration of the SOfAR environments with Gymnasium.
+
+``import sofar_env`` registers one id per shipped circuit, e.g.
+``gymnasium.make("SOfAR-LagunaSeca-v0")``; ``gymnasium.make("sofar_env:SOfAR-Monza-v0")``
+works without a prior import. The entry point is a ``"module:Class"`` string, so the
+specs pickle (vector environments) and nothing heavy is imported at registration.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+__all__ = ["TRACKS", "ENV_IDS", "MAX_EPISODE_STEPS", "register_envs"]
+
+TRACKS = ("LagunaSeca", "Monza", "Indianapolis", "Kentucky")
+"""Circuits with a registered environment."""
+ENV_IDS = tuple(f"SOfAR-{name}-v0" for name in TRACKS)
+"""The registered ids, in the order of :data:`TRACKS`."""
+MAX_EPISODE_STEPS = 2000
+"""200 s at dt = 0.1 s."""
+ENTRY_POINT = "sofar_env.env:SOfARRaceEnv"
+
+
+def register_envs() -> None:
+    """Register every id of :data:`ENV_IDS` (idempotent)."""
+    for name, env_id in zip(TRACKS, ENV_IDS):
+        if env_id in gym.registry:
+            continue
+        gym.register(
+            id=env_id,
+            entry_point=ENTRY_POINT,
+            max_episode_steps=MAX_EPISODE_STEPS,
+            kwargs={"track": name},
+        )
