@@ -1,0 +1,569 @@
+"""The :class:`Track` class and the on-disk circuit format.
+
+A circuit folder holds four files (see ``tracks/README.md`` for the details)::
+
+    raceline.csv     s_m, x_m, y_m, psi_rad, kappa_radpm, w_left_m, w_right_m, v_mps
+    left_edge.csv    x_m, y_m   (closed polyline, first point not repeated)
+    right_edge.csv   x_m, y_m
+    meta.json        {"format_version": 1, "name": ..., "length_m": ..., ...}
+
+Conventions: the Frenet frame follows the raceline, s is the arc length in
+[0, L) and periodic, n > 0 to the left of the driving direction, curvature
+kappa > 0 in left turns, heading psi measured from the x axis.  Positions along
+the raceline are interpolated by a periodic C2 cubic spline in s; curvature,
+widths and speed are interpolated linearly (periodically) between samples.
+"""
+
+from __future__ import annotations
+
+import bisect
+import json
+import math
+import os
+from importlib import resources
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.spatial import cKDTree
+
+__all__ = [
+    "FORMAT_VERSION",
+    "RACELINE_COLUMNS",
+    "EDGE_COLUMNS",
+    "TRACK_NAMES",
+    "Track",
+    "TrackFormatError",
+    "resolve_track_name",
+]
+
+FORMAT_VERSION = 1
+"""Version of the on-disk circuit format written by the builder."""
+
+RACELINE_FILE = "raceline.csv"
+LEFT_EDGE_FILE = "left_edge.csv"
+RIGHT_EDGE_FILE = "right_edge.csv"
+META_FILE = "meta.json"
+
+RACELINE_COLUMNS = ("s_m", "x_m", "y_m", "psi_rad", "kappa_radpm", "w_left_m", "w_right_m", "v_mps")
+EDGE_COLUMNS = ("x_m", "y_m")
+
+TRACK_NAMES = ("LagunaSeca", "Monza", "Indianapolis", "Kentucky")
+"""Circuits shipped with the package (folders of ``sofar_env.track_data``)."""
+
+_ALIASES = {"ls": "LagunaSeca", "ims": "Indianapolis", "ks": "Kentucky"}
+_ALIASES.update({name.lower(): name for name in TRACK_NAMES})
+
+_MIN_RACELINE_ROWS = 16
+_MIN_EDGE_ROWS = 8
+_NEWTON_MAX_ITER = 25
+_NEWTON_TOL = 1e-10  # [m] step size at which the projection is converged
+_HINT_WINDOW = 40.0  # [m] half width of the local search window around s_hint
+
+
+class TrackFormatError(ValueError):
+    """A circuit file is missing or malformed; the message names the file."""
+
+
+def resolve_track_name(name: str) -> str:
+    """Canonical circuit name for a (case-insensitive) name or alias.
+
+    Raises ValueError listing the valid names when ``name`` is unknown.
+    """
+    key = str(name).strip().lower()
+    if key in _ALIASES:
+        return _ALIASES[key]
+    raise _unknown_name(name)
+
+
+def _unknown_name(name: Any) -> ValueError:
+    valid = ", ".join(TRACK_NAMES) + " (aliases: LS, IMS, KS)"
+    return ValueError(f"unknown track {name!r}; valid names: {valid}")
+
+
+# --------------------------------------------------------------------------- I/O
+
+
+def parse_csv_table(text: str, filename: str, columns: Sequence[str], min_rows: int) -> np.ndarray:
+    """Parse a comma-separated table with one header line naming ``columns``.
+
+    Returns a float array of shape (rows, len(columns)).  Raises TrackFormatError
+    naming ``filename`` on a wrong header, a wrong number of fields, a
+    non-numeric or non-finite value, or fewer than ``min_rows`` rows.
+    """
+    lines = [ln.strip() for ln in text.splitlines()]
+    lines = [ln for ln in lines if ln]
+    if not lines:
+        raise TrackFormatError(f"{filename}: file is empty")
+    header = [h.strip() for h in lines[0].lstrip("#").split(",")]
+    if tuple(header) != tuple(columns):
+        raise TrackFormatError(
+            f"{filename}: wrong columns {header}; expected header line {','.join(columns)}"
+        )
+    data = lines[1:]
+    ncol = len(columns)
+    if len(data) < min_rows:
+        raise TrackFormatError(f"{filename}: {len(data)} data rows, at least {min_rows} required")
+    counts = {ln.count(",") for ln in data}
+    if counts != {ncol - 1}:
+        for k, ln in enumerate(data):
+            if ln.count(",") != ncol - 1:
+                raise TrackFormatError(
+                    f"{filename}: line {k + 2} has {ln.count(',') + 1} fields, expected {ncol}"
+                )
+    try:
+        values = np.array(",".join(data).split(","), dtype=float)
+    except ValueError:
+        for k, ln in enumerate(data):
+            for field in ln.split(","):
+                try:
+                    float(field)
+                except ValueError:
+                    raise TrackFormatError(
+                        f"{filename}: line {k + 2}: non-numeric value {field.strip()!r}"
+                    ) from None
+        raise TrackFormatError(f"{filename}: non-numeric value") from None
+    values = values.reshape(len(data), ncol)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise TrackFormatError(
+            f"{filename}: line {row + 2}: non-finite value in column {columns[col]}"
+        )
+    return values
+
+
+def _read_text(folder: Any, filename: str) -> str:
+    """Read ``folder/filename`` (a Path or an importlib Traversable)."""
+    entry = folder / filename
+    try:
+        return entry.read_text(encoding="utf-8")
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
+        raise TrackFormatError(f"{_describe(folder, filename)}: file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TrackFormatError(f"{_describe(folder, filename)}: cannot read ({exc})") from None
+
+
+def _describe(folder: Any, filename: str) -> str:
+    return os.fspath(folder / filename) if isinstance(folder, os.PathLike) else str(folder / filename)
+
+
+def _parse_meta(text: str, where: str) -> dict:
+    try:
+        meta = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise TrackFormatError(f"{where}: invalid JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise TrackFormatError(f"{where}: expected a JSON object")
+    version = meta.get("format_version")
+    if version != FORMAT_VERSION:
+        raise TrackFormatError(
+            f"{where}: unsupported format_version {version!r}, expected {FORMAT_VERSION}"
+        )
+    length = meta.get("length_m")
+    if not isinstance(length, (int, float)) or not math.isfinite(length) or length <= 0:
+        raise TrackFormatError(f"{where}: length_m must be a positive number, got {length!r}")
+    if not isinstance(meta.get("name"), str):
+        raise TrackFormatError(f"{where}: missing string field 'name'")
+    return meta
+
+
+# ------------------------------------------------------------------ spline core
+
+
+class PeriodicCurve:
+    """Closed planar curve: periodic C2 cubic spline through (s_k, x_k, y_k).
+
+    ``s`` must start at 0, increase strictly and stay below ``length``; the
+    curve closes from the last sample back to the first at s = length.
+    """
+
+    def __init__(self, s: np.ndarray, xy: np.ndarray, length: float):
+        s = np.asarray(s, dtype=float)
+        xy = np.asarray(xy, dtype=float)
+        self.length = float(length)
+        self.knots = np.append(s, self.length)
+        sx = CubicSpline(self.knots, np.append(xy[:, 0], xy[0, 0]), bc_type="periodic")
+        sy = CubicSpline(self.knots, np.append(xy[:, 1], xy[0, 1]), bc_type="periodic")
+        self.cx = np.ascontiguousarray(sx.c)  # (4, K): c0 t^3 + c1 t^2 + c2 t + c3
+        self.cy = np.ascontiguousarray(sy.c)
+        self._knots_list = self.knots.tolist()
+        self._coef_list = np.vstack([self.cx, self.cy]).T.tolist()  # K rows of 8 floats
+        self._last = len(s) - 1
+
+    # vectorised -------------------------------------------------------------
+    def wrap(self, s: np.ndarray) -> np.ndarray:
+        r = np.mod(s, self.length)
+        return np.where(r >= self.length, 0.0, r)
+
+    def locate(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Segment index and local parameter for wrapped ``s``."""
+        i = np.searchsorted(self.knots, s, side="right") - 1
+        i = np.clip(i, 0, self._last)
+        return i, s - self.knots[i]
+
+    def eval(self, s: np.ndarray, order: int = 1) -> list[np.ndarray]:
+        """[x, y, x', y'(, x'', y'')] at wrapped ``s`` (order 0, 1 or 2)."""
+        i, t = self.locate(s)
+        out = []
+        for c in (self.cx, self.cy):
+            a, b, cc, d = c[0, i], c[1, i], c[2, i], c[3, i]
+            out.append(((a * t + b) * t + cc) * t + d)
+        if order >= 1:
+            for c in (self.cx, self.cy):
+                a, b, cc = c[0, i], c[1, i], c[2, i]
+                out.append((3.0 * a * t + 2.0 * b) * t + cc)
+        if order >= 2:
+            for c in (self.cx, self.cy):
+                out.append(6.0 * c[0, i] * t + 2.0 * c[1, i])
+        return out
+
+    def curvature(self, s: np.ndarray) -> np.ndarray:
+        _, _, dx, dy, ddx, ddy = self.eval(s, order=2)
+        return (dx * ddy - dy * ddx) / np.power(dx * dx + dy * dy, 1.5)
+
+    # scalar -----------------------------------------------------------------
+    def wrap_scalar(self, s: float) -> float:
+        r = s % self.length
+        return 0.0 if r >= self.length else r
+
+    def eval_scalar(self, s: float) -> tuple[float, float, float, float, float, float]:
+        """(x, y, x', y', x'', y'') at a wrapped scalar ``s``."""
+        i = bisect.bisect_right(self._knots_list, s) - 1
+        if i > self._last:
+            i = self._last
+        elif i < 0:
+            i = 0
+        t = s - self._knots_list[i]
+        a, b, c, d, e, f, g, h = self._coef_list[i]
+        return (
+            ((a * t + b) * t + c) * t + d,
+            ((e * t + f) * t + g) * t + h,
+            (3.0 * a * t + 2.0 * b) * t + c,
+            (3.0 * e * t + 2.0 * f) * t + g,
+            6.0 * a * t + 2.0 * b,
+            6.0 * e * t + 2.0 * f,
+        )
+
+
+def _as_scalar(value: Any) -> float | None:
+    """Python float when ``value`` is a scalar, else None."""
+    if isinstance(value, (float, int)):
+        return float(value)
+    if np.ndim(value) == 0:
+        return float(value)
+    return None
+
+
+# ------------------------------------------------------------------------ Track
+
+
+class Track:
+    """A closed circuit with a Frenet frame along its raceline.
+
+    Attributes:
+        name: circuit name.
+        length: closed raceline length L [m].
+        s: arc length of the raceline samples, shape (K,), s[0] = 0, s[-1] < L [m].
+        xy: raceline samples, shape (K, 2) [m].
+        psi, kappa: heading [rad] and signed curvature [1/m] at the samples.
+        w_left, w_right: distance from the raceline to the left / right edge
+            along the normal at the samples [m] (both positive on track).
+        v: speed profile at the samples [m/s].
+        left_edge, right_edge: closed edge polylines, shapes (M, 2) [m].
+        max_speed: highest speed of the speed profile [m/s].
+        meta: the parsed ``meta.json`` (builder parameters, provenance, ...).
+    """
+
+    def __init__(
+        self,
+        name: str,
+        length: float,
+        raceline: np.ndarray,
+        left_edge: np.ndarray,
+        right_edge: np.ndarray,
+        meta: dict | None = None,
+        source: str = "<memory>",
+    ):
+        raceline = np.asarray(raceline, dtype=float)
+        where = f"{source}/{RACELINE_FILE}" if source != "<memory>" else "raceline"
+        if raceline.ndim != 2 or raceline.shape[1] != len(RACELINE_COLUMNS):
+            raise TrackFormatError(f"{where}: expected {len(RACELINE_COLUMNS)} columns")
+        if len(raceline) < _MIN_RACELINE_ROWS:
+            raise TrackFormatError(f"{where}: at least {_MIN_RACELINE_ROWS} rows required")
+        length = float(length)
+        s = raceline[:, 0]
+        if abs(s[0]) > 1e-9:
+            raise TrackFormatError(f"{where}: s must start at 0, got {s[0]}")
+        ds = np.diff(s)
+        if np.any(ds <= 0.0):
+            k = int(np.argmax(ds <= 0.0))
+            raise TrackFormatError(f"{where}: s is not strictly increasing at line {k + 3}")
+        if not s[-1] < length:
+            raise TrackFormatError(
+                f"{where}: last s {s[-1]} is not below the lap length {length} from {META_FILE}"
+            )
+        for edge, label in ((left_edge, LEFT_EDGE_FILE), (right_edge, RIGHT_EDGE_FILE)):
+            edge = np.asarray(edge)
+            if edge.ndim != 2 or edge.shape[1] != 2 or len(edge) < _MIN_EDGE_ROWS:
+                raise TrackFormatError(f"{source}/{label}: expected at least {_MIN_EDGE_ROWS} rows of x, y")
+
+        self.name = str(name)
+        self.length = length
+        self.meta = dict(meta or {})
+        self.s = np.ascontiguousarray(s)
+        self.xy = np.ascontiguousarray(raceline[:, 1:3])
+        self.psi = raceline[:, 3].copy()
+        self.kappa = raceline[:, 4].copy()
+        self.w_left = raceline[:, 5].copy()
+        self.w_right = raceline[:, 6].copy()
+        self.v = raceline[:, 7].copy()
+        self.left_edge = np.ascontiguousarray(left_edge, dtype=float)
+        self.right_edge = np.ascontiguousarray(right_edge, dtype=float)
+        self.max_speed = float(self.v.max())
+        for arr in (self.s, self.xy, self.psi, self.kappa, self.w_left, self.w_right, self.v):
+            arr.setflags(write=False)
+
+        self._curve = PeriodicCurve(self.s, self.xy, length)
+        self._tree = cKDTree(self.xy)
+        self._K = len(self.s)
+        self._spacing = length / self._K
+        self._max_step = 2.0 * float(max(ds.max(), length - s[-1]))
+        self._hint_half = max(2, int(math.ceil(_HINT_WINDOW / self._spacing)))
+        self._hint_offsets = np.arange(-self._hint_half, self._hint_half + 1)
+        # periodic linear interpolation tables (closed with the first sample)
+        self._knots = self._curve.knots
+        self._knots_list = self._curve._knots_list
+        self._tables = {}
+        for key, col in (("kappa", self.kappa), ("wl", self.w_left), ("wr", self.w_right), ("v", self.v)):
+            closed = np.append(col, col[0])
+            self._tables[key] = (closed, closed.tolist())
+
+    # ---------------------------------------------------------------- loading
+    @classmethod
+    def load(cls, name_or_path: str | os.PathLike) -> "Track":
+        """Load a shipped circuit by name/alias, or a circuit folder by path."""
+        if not isinstance(name_or_path, os.PathLike):
+            key = str(name_or_path).strip().lower()
+            if key in _ALIASES:
+                canonical = _ALIASES[key]
+                folder = resources.files("sofar_env.track_data").joinpath(canonical)
+                return cls._load_folder(folder, str(folder))
+        text = os.fspath(name_or_path)
+        path = Path(text).expanduser()
+        looks_like_path = isinstance(name_or_path, os.PathLike) or os.sep in text or (
+            os.altsep is not None and os.altsep in text
+        )
+        if path.is_dir():
+            return cls._load_folder(path, str(path))
+        if looks_like_path or path.exists():
+            raise TrackFormatError(f"{path}: no such circuit folder")
+        raise _unknown_name(text)
+
+    @classmethod
+    def _load_folder(cls, folder: Any, label: str) -> "Track":
+        meta = _parse_meta(_read_text(folder, META_FILE), _describe(folder, META_FILE))
+        raceline = parse_csv_table(
+            _read_text(folder, RACELINE_FILE), _describe(folder, RACELINE_FILE), RACELINE_COLUMNS, _MIN_RACELINE_ROWS
+        )
+        left = parse_csv_table(
+            _read_text(folder, LEFT_EDGE_FILE), _describe(folder, LEFT_EDGE_FILE), EDGE_COLUMNS, _MIN_EDGE_ROWS
+        )
+        right = parse_csv_table(
+            _read_text(folder, RIGHT_EDGE_FILE), _describe(folder, RIGHT_EDGE_FILE), EDGE_COLUMNS, _MIN_EDGE_ROWS
+        )
+        return cls(meta["name"], meta["length_m"], raceline, left, right, meta, source=label)
+
+    def __repr__(self) -> str:
+        return f"Track(name={self.name!r}, length={self.length:.2f} m, samples={self._K})"
+
+    # ------------------------------------------------------------- s algebra
+    def wrap(self, s):
+        """Arc length wrapped into [0, L)."""
+        sc = _as_scalar(s)
+        if sc is not None:
+            return self._curve.wrap_scalar(sc)
+        return self._curve.wrap(np.asarray(s, dtype=float))
+
+    def gap(self, s_a, s_b):
+        """Signed periodic difference s_a - s_b in [-L/2, L/2)."""
+        half = 0.5 * self.length
+        a, b = _as_scalar(s_a), _as_scalar(s_b)
+        if a is not None and b is not None:
+            return self._curve.wrap_scalar(a - b + half) - half
+        return self._curve.wrap(np.asarray(s_a, dtype=float) - np.asarray(s_b, dtype=float) + half) - half
+
+    # ---------------------------------------------------- sampled quantities
+    def _interp(self, key: str, s):
+        closed, closed_list = self._tables[key]
+        sc = _as_scalar(s)
+        if sc is not None:
+            sc = self._curve.wrap_scalar(sc)
+            kl = self._knots_list
+            i = bisect.bisect_right(kl, sc) - 1
+            if i >= self._K:
+                i = self._K - 1
+            elif i < 0:
+                i = 0
+            k0 = kl[i]
+            w = (sc - k0) / (kl[i + 1] - k0)
+            return closed_list[i] + w * (closed_list[i + 1] - closed_list[i])
+        return np.interp(self._curve.wrap(np.asarray(s, dtype=float)), self._knots, closed)
+
+    def curvature(self, s):
+        """Signed curvature of the raceline [1/m] (> 0 in left turns)."""
+        return self._interp("kappa", s)
+
+    def width_left(self, s):
+        """Distance from the raceline to the left edge along the normal [m]."""
+        return self._interp("wl", s)
+
+    def width_right(self, s):
+        """Distance from the raceline to the right edge along the normal [m]."""
+        return self._interp("wr", s)
+
+    def speed(self, s):
+        """Speed profile [m/s]."""
+        return self._interp("v", s)
+
+    # ------------------------------------------------------- spline geometry
+    def heading(self, s):
+        """Heading of the raceline tangent [rad], measured from the x axis."""
+        sc = _as_scalar(s)
+        if sc is not None:
+            _, _, dx, dy, _, _ = self._curve.eval_scalar(self._curve.wrap_scalar(sc))
+            return math.atan2(dy, dx)
+        _, _, dx, dy = self._curve.eval(self._curve.wrap(np.asarray(s, dtype=float)))
+        return np.arctan2(dy, dx)
+
+    def normal(self, s):
+        """Unit left normal of the raceline, shape (..., 2)."""
+        sc = _as_scalar(s)
+        if sc is not None:
+            _, _, dx, dy, _, _ = self._curve.eval_scalar(self._curve.wrap_scalar(sc))
+            r = math.hypot(dx, dy)
+            return np.array([-dy / r, dx / r])
+        _, _, dx, dy = self._curve.eval(self._curve.wrap(np.asarray(s, dtype=float)))
+        r = np.hypot(dx, dy)
+        return np.stack([-dy / r, dx / r], axis=-1)
+
+    def to_cartesian(self, s, n):
+        """Frenet (s, n) -> Cartesian (x, y) [m]."""
+        sc, nc = _as_scalar(s), _as_scalar(n)
+        if sc is not None and nc is not None:
+            x, y, dx, dy, _, _ = self._curve.eval_scalar(self._curve.wrap_scalar(sc))
+            r = math.hypot(dx, dy)
+            return x - nc * dy / r, y + nc * dx / r
+        s_arr, n_arr = np.broadcast_arrays(np.asarray(s, dtype=float), np.asarray(n, dtype=float))
+        x, y, dx, dy = self._curve.eval(self._curve.wrap(s_arr))
+        r = np.hypot(dx, dy)
+        return x - n_arr * dy / r, y + n_arr * dx / r
+
+    def to_frenet(self, x, y, s_hint=None):
+        """Cartesian (x, y) -> Frenet (s, n): exact projection onto the raceline spline.
+
+        Without ``s_hint`` the nearest raceline sample (KD-tree) seeds a Newton
+        refinement; with ``s_hint`` (a previous s) only a local window around it
+        is searched, so the result stays on the same stretch of track.
+        """
+        xs, ys = _as_scalar(x), _as_scalar(y)
+        hs = None if s_hint is None else _as_scalar(s_hint)
+        if xs is not None and ys is not None and (s_hint is None or hs is not None):
+            return self._to_frenet_scalar(xs, ys, hs)
+        if s_hint is None:
+            xa, ya = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+        else:
+            xa, ya, ha = np.broadcast_arrays(
+                np.asarray(x, dtype=float), np.asarray(y, dtype=float), np.asarray(s_hint, dtype=float)
+            )
+        shape = xa.shape
+        px, py = xa.ravel(), ya.ravel()
+        if s_hint is None:
+            _, idx = self._tree.query(np.column_stack([px, py]))
+        else:
+            idx = self._window_search(px, py, self._curve.wrap(ha.ravel()))
+        s, n = self._newton(px, py, self.s[idx])
+        return s.reshape(shape), n.reshape(shape)
+
+    def _window_search(self, px: np.ndarray, py: np.ndarray, hint: np.ndarray) -> np.ndarray:
+        i0 = np.clip(np.searchsorted(self._knots, hint, side="right") - 1, 0, self._K - 1)
+        cand = (i0[:, None] + self._hint_offsets[None, :]) % self._K
+        d2 = (self.xy[cand, 0] - px[:, None]) ** 2 + (self.xy[cand, 1] - py[:, None]) ** 2
+        return cand[np.arange(len(px)), np.argmin(d2, axis=1)]
+
+    def _newton(self, px: np.ndarray, py: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        curve = self._curve
+        s = s.astype(float).copy()
+        active = np.ones(len(s), dtype=bool)
+        for _ in range(_NEWTON_MAX_ITER):
+            if not active.any():
+                break
+            sa = s[active]
+            x, y, dx, dy, ddx, ddy = curve.eval(sa, order=2)
+            ex, ey = x - px[active], y - py[active]
+            g = ex * dx + ey * dy
+            dd = dx * dx + dy * dy
+            h = dd + ex * ddx + ey * ddy
+            h = np.where(h < 0.2 * dd, dd, h)
+            step = np.clip(-g / h, -self._max_step, self._max_step)
+            s[active] = curve.wrap(sa + step)
+            done = np.abs(step) < _NEWTON_TOL
+            idx = np.flatnonzero(active)
+            active[idx[done]] = False
+        x, y, dx, dy = curve.eval(s)
+        r = np.hypot(dx, dy)
+        n = (dx * (py - y) - dy * (px - x)) / r
+        return s, n
+
+    def _to_frenet_scalar(self, x: float, y: float, hint: float | None) -> tuple[float, float]:
+        curve = self._curve
+        if hint is None:
+            _, i = self._tree.query((x, y))
+            s = self._knots_list[int(i)]
+        else:
+            s = curve.wrap_scalar(hint)
+        result = self._newton_scalar(x, y, s)
+        if result is None or (hint is not None and abs(self.gap(result[0], s)) > _HINT_WINDOW):
+            # Newton from the hint failed or ran away: seed from the window search.
+            if hint is None:
+                seed = s
+            else:
+                seed = float(self.s[self._window_search(np.array([x]), np.array([y]), np.array([s]))[0]])
+            result = self._newton_scalar(x, y, seed, robust=True)
+        return result
+
+    def _newton_scalar(self, x: float, y: float, s: float, robust: bool = False):
+        curve = self._curve
+        max_step = self._max_step
+        eval_scalar = curve.eval_scalar
+        length = curve.length
+        for _ in range(_NEWTON_MAX_ITER):
+            px, py, dx, dy, ddx, ddy = eval_scalar(s)
+            ex = px - x
+            ey = py - y
+            dd = dx * dx + dy * dy
+            h = dd + ex * ddx + ey * ddy
+            if h < 0.2 * dd:
+                h = dd
+            step = -(ex * dx + ey * dy) / h
+            if step > max_step:
+                step = max_step
+            elif step < -max_step:
+                step = -max_step
+            s = (s + step) % length
+            if s >= length:
+                s = 0.0
+            if -_NEWTON_TOL < step < _NEWTON_TOL:
+                break
+        else:
+            if not robust:
+                return None
+        px, py, dx, dy, _, _ = eval_scalar(s)
+        return s, (dx * (y - py) - dy * (x - px)) / math.hypot(dx, dy)
+
+    # ---------------------------------------------------------------- misc
+    def spline_curvature(self, s):
+        """Curvature of the position spline itself [1/m] (for diagnostics)."""
+        return self._curve.curvature(self._curve.wrap(np.asarray(s, dtype=float)))
+
