@@ -1,6 +1,5 @@
 """Rendering: rgb_array frames, animation files, RecordVideo when moviepy is available."""
 
-import importlib.util
 
 import gymnasium as gym
 import numpy as np
@@ -51,7 +50,6 @@ def test_frames_written_to_an_animation(tmp_path):
     env.close()
 
 
-@pytest.mark.skipif(importlib.util.find_spec("moviepy") is None, reason="RecordVideo needs moviepy")
 def test_record_video(tmp_path):
     env = gym.wrappers.RecordVideo(
         gym.make("SOfAR-LagunaSeca-v0", render_mode="rgb_array", config={"race": {"duration": 0.5}}),
