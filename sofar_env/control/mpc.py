@@ -44,15 +44,30 @@ an opponent is close (DESIGN.md sec. 6). A cold start (first solve, after
 :meth:`MPCDCBF.reset` or a brake fallback) runs ``cold_start_iterations`` iterations.
 
 Linearisation: one CasADi stage function (RK4 step and its Jacobians, lateral
-acceleration and gradient, barrier values and gradients for every opponent slot)
-is compiled to C once (:mod:`sofar_env.control.codegen`, cached on disk), mapped over
-the ``N + 1`` stages and evaluated with one ``Function.buffer()`` call per iteration
+acceleration and gradient, barrier values and gradients for every opponent slot),
+mapped over the ``N + 1`` stages, is compiled to C once (:mod:`sofar_env.control.codegen`,
+cached on disk) and evaluated with one ``Function.buffer()`` call per iteration
 into pre-allocated numpy arrays (no per-call conversion); the sparse QP matrices are
-then filled by one gather each. The QP has a fixed pattern per number of opponents
-with rows (0..``max_opponents``; unused slots have no rows at all), is set up once
-and refreshed with ``update()``. Slack variables enter the QP scaled by
-``sqrt(Z)`` (Hessian entry 1 instead of 9e4 next to R = 0.01), which made the first
-control 100x more accurate at equal solver tolerance.
+then filled by one gather each into the data arrays of CSC matrices with a fixed
+pattern. Slack variables enter the QP scaled by ``sqrt(Z)`` (Hessian entry 1 instead
+of 9e4 next to R = 0.01), which made the first control 100x more accurate at equal
+solver tolerance.
+
+QP size (PIQP backend). Constraints far from the linearisation point are left out of
+the QP and checked afterwards: the lateral-acceleration rows when ``|a_lat|`` stays 3 m/s^2
+below its bound at every stage, the track rows when ``n`` stays 0.5 m inside the
+margined edges, and each box bound (on ``a``, ``delta_dot``, ``v >= 0``, ``delta``)
+farther than a fixed distance from the linearisation point. When the solution
+violates a left-out constraint (by more than 1e-6), the QP is solved again with it.
+A constraint that holds at the optimum of the smaller QP leaves that optimum
+unchanged (it is also the optimum of the QP with the constraint, whose slack is
+then zero), so the answer is that of the full QP. The gain is mostly in
+interior-point iterations: far-away bounds (above all ``v >= 0`` at racing speed) cost
+PIQP about 4 of its 10 iterations. The QP has a fixed pattern per number of
+opponents with rows (0..``max_opponents``; unused slots have no rows at all) and
+per presence of the lateral-acceleration and track rows; each pattern gets its own
+PIQP instance, set up once and refreshed with ``update()`` (a left-out bound is an
+infinite entry of the bound vectors, not a change of pattern).
 
 Opponents: of the given rows, those inside the gap window
 ``[-opponent_range_behind, opponent_range_ahead]`` are candidates; if there are more
@@ -64,8 +79,11 @@ the next solve); this keeps the QP small when opponents are far.
 
 QP backends:
 
-* ``"piqp"`` (default): proximal interior point, eps_abs 1e-7; on a 300-step closed
-  loop its first control differs from a 1e-10-tolerance solve by 1e-5 m/s^2 (p95);
+* ``"piqp"`` (default): proximal interior point, eps_abs 1e-7; on the 600-step closed
+  loop of ``eval/bench_mpc.py`` its first control differs from a 1e-11-tolerance solve
+  from the same warm start by 1e-5 m/s^2 (p95), at most 1.2e-3 m/s^2; with
+  ``qp_eps_rel = 1e-9`` by 4e-7 (p95), at most 3.4e-5 m/s^2, for about 0.5 more
+  interior-point iterations per solve (5-6 median);
 * ``"osqp"``: ADMM (eps 1e-4, warm-started, at most 4000 iterations). With the slack
   scaling its first control errs by 4e-4 m/s^2 (p95) but up to 0.07 m/s^2, its solve
   time is heavy-tailed (p95 about 10x the median), and with an active barrier from a
@@ -107,6 +125,17 @@ STATUS_FALLBACK_SHIFT = "fallback_shift"
 STATUS_FALLBACK_BRAKE = "fallback_brake"
 
 _N_FIXED = 7  # per-stage variables besides the slacks: u (2) + x (5)
+_DUMMY_OPPONENT = (50.0, 0.0, 0.0)  # (s, n, v) in unused opponent slots of the linearisation
+# The lateral-acceleration (track) rows are left out of a QP whose linearisation point keeps
+# |a_lat| below lat_acc_max by this margin [m/s^2] (n inside the margined edges by this margin [m])
+# at every stage; the solution is then checked against them (tolerance below) and the QP re-solved
+# with the rows when one is violated (MPCDCBF._rows_needed).
+_LAT_ROWS_MARGIN = 3.0
+_TRK_ROWS_MARGIN = 0.5
+# Likewise each bound of the box (a, delta_dot, -, -, -, v >= 0, delta) on (u_k, x_{k+1}) whose
+# linearisation point is farther from it than this distance.
+_BOX_DROP_DISTANCE = np.array([2.0, 0.15, np.inf, np.inf, np.inf, 5.0, 0.08])
+_ROWS_CHECK_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -166,7 +195,7 @@ class MPCConfig:
     """RK4 sub-steps per shooting interval [-]."""
     qp_eps_abs: float = 1e-7
     """Absolute tolerance of the QP solver [-]."""
-    qp_eps_rel: float = 1e-8
+    qp_eps_rel: float = 1e-9
     """Relative tolerance of the QP solver [-]."""
     qp_max_iter: int = 100
     """Iteration limit of the QP solver [-]."""
@@ -345,16 +374,33 @@ class _QPStructure:
     """Fixed sparsity of the RTI QP with ``m`` active opponent slots, and its backend.
 
     Variables, stage-major: block k (k = 0..N-1) = [du_k (2), dx_{k+1} (5),
-    sigma_lat_{k+1}, sigma_trk_{k+1}, sigma_cbf_{k,0..m-1}].
+    sigma_lat_{k+1} (if ``lat``), sigma_trk_{k+1} (if ``trk``), sigma_cbf_{k,0..m-1}].
+    Rows of G, stage-major: [lat up, lat low] (if ``lat``), [trk up, trk low] (if ``trk``),
+    cbf_0..m-1. A structure without the lateral-acceleration (or track) rows is used only
+    when its solution is verified to satisfy them (see :meth:`MPCDCBF._rows_needed`).
     """
 
-    def __init__(self, cfg: MPCConfig, vehicle: VehicleParams, m: int, a_sp: tuple, b_sp: tuple,
-                 layout: "_Layout"):
+    def __init__(self, cfg: MPCConfig, vehicle: VehicleParams, m: int, lat: bool, trk: bool, a_sp: tuple,
+                 b_sp: tuple, layout: "_Layout"):
         n_h = cfg.horizon
         self.m = m
-        self.nb = nb = _N_FIXED + 2 + m
+        self.lat = lat
+        self.trk = trk
+        col = _N_FIXED
+        self.col_lat = col
+        col += int(lat)
+        self.col_trk = col
+        col += int(trk)
+        self.col_cbf = col
+        self.nb = nb = col + m
         self.nz = n_h * nb
-        self.nr = nr = 4 + m
+        row = 0
+        self.row_lat = row
+        row += 2 * int(lat)
+        self.row_trk = row
+        row += 2 * int(trk)
+        self.row_cbf = row
+        self.nr = nr = row + m
         iu = np.arange(n_h) * nb  # column of du_k
         ix = iu + 2  # column of dx_{k+1}
 
@@ -374,64 +420,50 @@ class _QPStructure:
         self.eq_cols = np.concatenate([c.ravel() for c in cols])
         self.n_eq = 5 * n_h
 
-        # ---- inequalities, rows stage-major: [lat up, lat low, trk up, trk low, cbf_0..m-1]
-        rows, cols = [], []
-        base = np.arange(n_h) * nr
-        sig_lat = iu + 7
-        sig_trk = iu + 8
-        # lateral acceleration (v, delta of x_{k+1}) and its slack
-        for r_off in (0, 1):
-            rows.append(np.repeat(base + r_off, 2))
-            cols.append((ix[:, None] + np.array([3, 4])[None, :]).ravel())
-        for r_off in (0, 1):
-            rows.append(base + r_off)
-            cols.append(sig_lat)
-        # track: n of x_{k+1} and slack
-        for r_off in (2, 3):
-            rows.append(base + r_off)
-            cols.append(ix + 1)
-            rows.append(base + r_off)
-            cols.append(sig_trk)
-        if m > 0:
-            sn_v = np.array([0, 1, 3])
-            kk = np.arange(1, n_h)  # x_k part for k >= 1 (x_0 is fixed)
-            r = (base[kk][:, None, None] + 4 + np.arange(m)[None, :, None]) + 0 * sn_v[None, None, :]
-            c = ix[kk - 1][:, None, None] + 0 * np.arange(m)[None, :, None] + sn_v[None, None, :]
-            rows.append(r.ravel())
-            cols.append(c.ravel())
-            kk = np.arange(n_h)  # x_{k+1} part
-            r = (base[kk][:, None, None] + 4 + np.arange(m)[None, :, None]) + 0 * sn_v[None, None, :]
-            c = ix[kk][:, None, None] + 0 * np.arange(m)[None, :, None] + sn_v[None, None, :]
-            rows.append(r.ravel())
-            cols.append(c.ravel())
-            rows.append((base[:, None] + 4 + np.arange(m)[None, :]).ravel())
-            cols.append((iu[:, None] + 9 + np.arange(m)[None, :]).ravel())
-        self.g_rows = np.concatenate(rows)
-        self.g_cols = np.concatenate(cols)
-        self.n_in = n_h * nr
-
-        # ---- where each matrix entry comes from: an index into the flat linearisation buffer
-        # (see _Layout), a constant factor, and for DCBF entries the slot and a (1 - gamma) flag.
+        # ---- inequalities and where each entry comes from: an index into the flat linearisation
+        # buffer (see _Layout), a constant factor, and for DCBF entries the slot and a (1 - gamma) flag.
         # Slack scaling: the QP variable is sigma~ = sigma * sqrt(Z), so that its Hessian entry is 1
         # instead of 9e4 next to R = 0.01 (measured: 100x smaller first-control error at equal tolerance).
-        self.slack_scale = 1.0 / np.sqrt(np.concatenate([[cfg.lat_acc_slack[1], cfg.track_slack[1]],
-                                                         np.full(m, cfg.barrier_slack[1])]))
         lay = layout
-        na, nbb = len(a_rows), len(b_rows)
         kk1 = np.arange(1, n_h)
         kk = np.arange(n_h)
-        eq_src = np.concatenate([np.full(5 * n_h, lay.one),
-                                 (lay.off_a + kk1[:, None] * na + np.arange(na)[None, :]).ravel(),
-                                 (lay.off_b + kk[:, None] * nbb + np.arange(nbb)[None, :]).ravel()])
-        eq_fac = np.concatenate([np.ones(5 * n_h), -np.ones((n_h - 1) * na + n_h * nbb)])
-        dal = (lay.off_dal + (kk + 1)[:, None] * 2 + np.arange(2)[None, :]).ravel()
-        src = [dal, dal, np.full(n_h, lay.lat_neg), np.full(n_h, lay.lat_pos), np.full(n_h, lay.one),
-               np.full(n_h, lay.trk_neg), np.full(n_h, lay.one), np.full(n_h, lay.trk_pos)]
-        n_fixed = 10 * n_h
+        base = np.arange(n_h) * nr
+        rows, cols, src = [], [], []
+        if lat:  # lateral acceleration (v, delta of x_{k+1}) and its slack
+            dal = (lay.off_dal + (kk + 1)[:, None] * 2 + np.arange(2)[None, :]).ravel()
+            for r_off, sgn in ((0, lay.lat_neg), (1, lay.lat_pos)):
+                rows.append(np.repeat(base + self.row_lat + r_off, 2))
+                cols.append((ix[:, None] + np.array([3, 4])[None, :]).ravel())
+                src.append(dal)
+                rows.append(base + self.row_lat + r_off)
+                cols.append(iu + self.col_lat)
+                src.append(np.full(n_h, sgn))
+        if trk:  # track: n of x_{k+1} and its slack
+            for r_off, sgn in ((0, lay.trk_neg), (1, lay.trk_pos)):
+                rows.append(base + self.row_trk + r_off)
+                cols.append(ix + 1)
+                src.append(np.full(n_h, lay.one))
+                rows.append(base + self.row_trk + r_off)
+                cols.append(iu + self.col_trk)
+                src.append(np.full(n_h, sgn))
+        n_fixed = sum(len(r) for r in rows)
         slot = [np.full(n_fixed, m)]
         gam = [np.zeros(n_fixed)]
         fac = [np.ones(n_fixed)]
         if m > 0:
+            sn_v = np.array([0, 1, 3])
+            # x_k part for k >= 1 (x_0 is fixed)
+            r = (base[kk1][:, None, None] + self.row_cbf + np.arange(m)[None, :, None]) + 0 * sn_v[None, None, :]
+            c = ix[kk1 - 1][:, None, None] + 0 * np.arange(m)[None, :, None] + sn_v[None, None, :]
+            rows.append(r.ravel())
+            cols.append(c.ravel())
+            # x_{k+1} part
+            r = (base[kk][:, None, None] + self.row_cbf + np.arange(m)[None, :, None]) + 0 * sn_v[None, None, :]
+            c = ix[kk][:, None, None] + 0 * np.arange(m)[None, :, None] + sn_v[None, None, :]
+            rows.append(r.ravel())
+            cols.append(c.ravel())
+            rows.append((base[:, None] + self.row_cbf + np.arange(m)[None, :]).ravel())
+            cols.append((iu[:, None] + self.col_cbf + np.arange(m)[None, :]).ravel())
             comp = np.arange(3)[None, None, :]
             slots = np.arange(m)[None, :, None]
             base0 = lay.off_dh + kk1[:, None, None] * (lay.slots * 3) + comp + 0 * slots
@@ -441,27 +473,43 @@ class _QPStructure:
                      (slots + 0 * kk[:, None, None] + 0 * comp).ravel(), np.full(n_h * m, m)]
             gam += [np.ones(base0.size), np.zeros(base1.size + n_h * m)]
             fac += [np.zeros(base0.size), -np.ones(base1.size), np.ones(n_h * m)]
-        g_src = np.concatenate(src)
+        empty = np.zeros(0, dtype=np.int64)
+        self.g_rows = np.concatenate(rows) if rows else empty
+        self.g_cols = np.concatenate(cols) if cols else empty
+        self.n_in = n_h * nr
+        g_src = np.concatenate(src).astype(np.int64) if src else empty
         g_slot = np.concatenate(slot)
         g_gam = np.concatenate(gam)
         g_fac = np.concatenate(fac)
 
+        z2 = [cfg.lat_acc_slack[1]] * int(lat) + [cfg.track_slack[1]] * int(trk) + [cfg.barrier_slack[1]] * m
+        z1 = [cfg.lat_acc_slack[0]] * int(lat) + [cfg.track_slack[0]] * int(trk) + [cfg.barrier_slack[0]] * m
+        self.slack_scale = 1.0 / np.sqrt(np.asarray(z2, dtype=float))
+        na, nbb = len(a_rows), len(b_rows)
+        eq_src = np.concatenate([np.full(5 * n_h, lay.one),
+                                 (lay.off_a + kk1[:, None] * na + np.arange(na)[None, :]).ravel(),
+                                 (lay.off_b + kk[:, None] * nbb + np.arange(nbb)[None, :]).ravel()])
+        eq_fac = np.concatenate([np.ones(5 * n_h), -np.ones((n_h - 1) * na + n_h * nbb)])
+
         # ---- cost: P constant diagonal; c buffer with the constant slack weights
         self.q2 = 2.0 * np.asarray(cfg.q, float)
         self.r2 = 2.0 * np.asarray(cfg.r, float)
-        pdiag = np.concatenate([self.r2, self.q2, np.ones(2 + m)])
+        pdiag = np.concatenate([self.r2, self.q2, np.ones(nb - _N_FIXED)])
         self.P = sp.diags(np.tile(pdiag, n_h)).tocsc()
         self.c_buf = np.zeros((n_h, nb))
-        self.c_buf[:, 7:] = self.slack_scale * np.concatenate([[cfg.lat_acc_slack[0], cfg.track_slack[0]],
-                                                               np.full(m, cfg.barrier_slack[0])])
+        self.c_buf[:, _N_FIXED:] = self.slack_scale * np.asarray(z1, dtype=float)
+        self.c_flat = self.c_buf.reshape(-1)
         # ---- bound buffers; entries that are never written keep their infinite / zero values
         self.hl_buf = np.full((n_h, nr), -np.inf)
         self.hu_buf = np.full((n_h, nr), np.inf)
         self.xl_buf = np.full((n_h, nb), -np.inf)
         self.xu_buf = np.full((n_h, nb), np.inf)
-        self.xl_buf[:, 7:] = 0.0
+        self.xl_buf[:, _N_FIXED:] = 0.0
+        self.b_buf = np.zeros((n_h, 5))
         self.u_lo = np.array([vehicle.a_min, -vehicle.steer_rate_max])
         self.u_hi = np.array([vehicle.a_max, vehicle.steer_rate_max])
+        self.data = (self.c_flat, self.b_buf.reshape(-1), self.hl_buf.reshape(-1), self.hu_buf.reshape(-1),
+                     self.xl_buf.reshape(-1), self.xu_buf.reshape(-1))
 
         # ---- CSC patterns; entry sources permuted to CSC data order
         self.A, perm = self._csc(self.eq_rows, self.eq_cols, self.n_eq)
@@ -469,10 +517,14 @@ class _QPStructure:
         self.G, perm = self._csc(self.g_rows, self.g_cols, self.n_in)
         self.g_src, self.g_slot, self.g_gam, self.g_fac = g_src[perm], g_slot[perm], g_gam[perm], g_fac[perm]
         self.g_is_cbf = self.g_slot < m
+        self._g_src_cbf = self.g_src[self.g_is_cbf]
+        self._g_slot_cbf = self.g_slot[self.g_is_cbf]
+        self._g_src_work = self.g_src.copy()
+        self._act: bytes | None = None  # slots whose DCBF entries are in _g_src_work
         self._gamma: float | None = None
         self._g_mult = self.g_fac.copy()
         # rows of the DCBF constraints (for the near-activity test)
-        self.cbf_rows = (np.arange(n_h)[:, None] * nr + 4 + np.arange(m)[None, :]).ravel()
+        self.cbf_rows = (np.arange(n_h)[:, None] * nr + self.row_cbf + np.arange(m)[None, :]).ravel()
         self.solver: Any = None
         self.backend = cfg.qp_solver
         self.osqp_mat: Any = None
@@ -481,11 +533,12 @@ class _QPStructure:
         """Write the values of A and G (CSC data, fixed pattern) from the flat linearisation buffer."""
         np.take(flat, self.a_src, out=self.A.data)
         self.A.data *= self.a_fac
+        src = self._g_src_work
         if self.m:
-            src = self.g_src.copy()
-            src[self.g_is_cbf] += 3 * act[self.g_slot[self.g_is_cbf]]
-        else:
-            src = self.g_src
+            key = act.tobytes()
+            if key != self._act:
+                src[self.g_is_cbf] = self._g_src_cbf + 3 * act[self._g_slot_cbf]
+                self._act = key
         np.take(flat, src, out=self.G.data)
         if gamma != self._gamma:
             self._g_mult = self.g_fac + (1.0 - gamma) * self.g_gam
@@ -536,7 +589,11 @@ class MPCDCBF:
         name = "sofar_mpc_stage_" + _definition_hash(
             vehicle, cfg.barrier, self._m_slots, cfg.integrator_substeps, ca.__version__)
         stage_fn = _stage_function(vehicle, cfg.barrier, self._m_max, cfg.integrator_substeps, name)
-        fn, info = compile_function(stage_fn, cfg.cache_dir, cfg.compile)
+        # batched evaluation over the N+1 stages: the map itself is compiled (one C call per
+        # linearisation, no per-stage dispatch through CasADi: 20 instead of 30 us)
+        k1 = n_h + 1
+        mapped, info = compile_function(stage_fn.map(f"{name}_x{k1}", "serial", k1, [], []), cfg.cache_dir,
+                                        cfg.compile)
         self.codegen_info: CodegenInfo = info
         """How the linearisation is evaluated (compiled C or CasADi), and whether it was built now."""
         a_sp = stage_fn.sparsity_out(1).get_triplet()
@@ -546,9 +603,7 @@ class MPCDCBF:
         self._nnz_a = len(a_sp[0])
         self._nnz_b = len(b_sp[0])
 
-        # batched evaluation over the N+1 stages into pre-allocated arrays
-        k1 = n_h + 1
-        mapped = fn.map(k1, "serial")
+        # evaluation into pre-allocated arrays
         self._mapped = mapped
         ms = self._m_slots
         self._in_x = np.zeros((k1, 5))
@@ -556,6 +611,8 @@ class MPCDCBF:
         self._in_kappa = np.zeros(k1)
         self._in_dt = np.concatenate([self._dts, [cfg.ts]])
         self._in_o = np.zeros((k1, ms, 3))
+        self._in_o[:] = _DUMMY_OPPONENT  # unused slots: finite dummies, their outputs are discarded
+        self._n_opp_filled = 0  # slots holding real opponents (the others hold the dummy)
         self._out_f = np.zeros((k1, 5))
         lay = _Layout(slots=ms, nnz_a=self._nnz_a, nnz_b=self._nnz_b, stages=k1,
                       lat_scale=1.0 / math.sqrt(cfg.lat_acc_slack[1]), trk_scale=1.0 / math.sqrt(cfg.track_slack[1]),
@@ -577,7 +634,16 @@ class MPCDCBF:
             buf.set_res(i, memoryview(arr))
         self._buf = buf  # keeps the buffer (and its pointers into the arrays above) alive
 
-        self._qp: dict[int, _QPStructure] = {}
+        self._qp: dict[tuple, _QPStructure] = {}
+        self._d_buf = np.zeros((n_h, 5))
+        self._box_lo = np.full((n_h, _N_FIXED), -np.inf)  # box on (du_k, dx_{k+1}) at the current iterate
+        self._box_hi = np.full((n_h, _N_FIXED), np.inf)
+        self._trk_lo = np.zeros(n_h)  # bounds on dn_{k+1} of the track rows (without slack)
+        self._trk_hi = np.zeros(n_h)
+        self._w_lat = np.zeros((n_h, 2))  # work arrays of _rows_violated
+        self._w_n = np.zeros((2, n_h))
+        self._w_box = np.zeros((2, n_h, _N_FIXED))
+        self.n_row_resolves = 0  # QPs re-solved because a left-out row was violated (diagnostics)
         self._act = np.zeros(0, dtype=np.intp)  # slots with QP rows in the current solve
         self._nlp: dict[int, Any] = {}
         # shift of the warm start: precomputed interpolation weights
@@ -658,7 +724,7 @@ class MPCDCBF:
         ug = us[self._shift_ju]
         p = self.vehicle
         xg[:, 0] -= xg[0, 0]
-        np.clip(xg[:, 4], -p.steer_max, p.steer_max, out=xg[:, 4])
+        np.minimum(np.maximum(xg[:, 4], -p.steer_max, out=xg[:, 4]), p.steer_max, out=xg[:, 4])
         np.maximum(xg[:, 3], 0.0, out=xg[:, 3])
         return xg, ug
 
@@ -715,11 +781,13 @@ class MPCDCBF:
         o = self._in_o
         if m:
             t = self._t[:, None]
-            o[:, :m, 0] = sel[None, :, 0] + sel[None, :, 2] * t
-            o[:, :m, 1] = sel[None, :, 1]
-            o[:, :m, 2] = sel[None, :, 2]
-        if m < self._m_slots:
-            o[:, m:, :] = (50.0, 0.0, 0.0)  # unused slots: finite dummies, their outputs are discarded
+            np.multiply(sel[:, 2], t, out=o[:, :m, 0])
+            o[:, :m, 0] += sel[:, 0]
+            o[:, :m, 1] = sel[:, 1]
+            o[:, :m, 2] = sel[:, 2]
+        if m < self._n_opp_filled:
+            o[:, m:self._n_opp_filled, :] = _DUMMY_OPPONENT
+        self._n_opp_filled = m
 
     def _relevant_slots(self, n_cand: int, gamma: float) -> np.ndarray:
         """Slots (of the filled candidates) that get DCBF rows in the QP.
@@ -740,12 +808,68 @@ class MPCDCBF:
 
     # ---------------------------------------------------------------- QP
 
-    def _structure(self, m: int) -> _QPStructure:
-        qs = self._qp.get(m)
+    def _structure(self, m: int, lat: bool = True, trk: bool = True) -> _QPStructure:
+        key = (m, lat, trk)
+        qs = self._qp.get(key)
         if qs is None:
-            qs = _QPStructure(self.config, self.vehicle, m, self._a_sp, self._b_sp, self._layout)
-            self._qp[m] = qs
+            qs = _QPStructure(self.config, self.vehicle, m, lat, trk, self._a_sp, self._b_sp, self._layout)
+            self._qp[key] = qs
         return qs
+
+    def _rows_needed(self, xbar: np.ndarray, arrays: np.ndarray) -> list[bool]:
+        """Which of [lateral-acceleration rows, track rows, all box bounds] the QP at this
+        linearisation starts with.
+
+        The rows are left out when the linearisation point keeps away from them at every
+        stage (by ``_LAT_ROWS_MARGIN``, ``_TRK_ROWS_MARGIN``), and each box bound when the
+        linearisation point is farther from it than ``_BOX_DROP_DISTANCE`` (see
+        :meth:`_assemble`); the QP solution is then checked against what was left out
+        (:meth:`_rows_violated`) and the QP re-solved with it when violated (for the box:
+        with every bound of each violated column). A constraint that holds (with zero
+        slack) at the optimum of the smaller QP leaves that optimum unchanged, so the
+        answer is the same either way; the smaller QP needs fewer interior-point
+        iterations, each cheaper.
+        """
+        if self.config.qp_solver != "piqp":
+            # OSQP's solutions (eps 1e-4) miss the 1e-6 check often: re-solves cost more than they save
+            return [True, True, True]
+        lat = np.abs(self._out_alat[1:]).max() > self.vehicle.lat_acc_max - _LAT_ROWS_MARGIN
+        trk = self._trk_hi.min() < _TRK_ROWS_MARGIN or self._trk_lo.max() > -_TRK_ROWS_MARGIN
+        return [bool(lat), bool(trk), False]
+
+    def _track_bounds(self, xbar: np.ndarray, arrays: np.ndarray) -> None:
+        """Bounds on dn_{k+1} of the track rows without slack, at this linearisation."""
+        cfg = self.config
+        nbar = xbar[1:, 1]
+        np.subtract(arrays[4, 1:] - cfg.track_margin, nbar, out=self._trk_hi)
+        np.subtract(arrays[3, 1:] + cfg.track_margin, nbar, out=self._trk_lo)
+
+    def _rows_violated(self, qs: _QPStructure, box_dist: np.ndarray | None, zz: np.ndarray, xbar: np.ndarray,
+                       arrays: np.ndarray) -> tuple[bool, bool, np.ndarray | None]:
+        """Left-out constraints that the QP solution ``zz`` violates: (lateral-acceleration rows,
+        track rows, None or the columns of the box (as in ``_BOX_DROP_DISTANCE``) with a violated bound)."""
+        lat = trk = False
+        box = None
+        if not qs.lat:
+            w = self._w_lat
+            np.multiply(self._out_dalat[1:], zz[:, 5:7], out=w)
+            alat = w.sum(axis=1)
+            alat += self._out_alat[1:]
+            np.abs(alat, out=alat)
+            lat = alat.max() > self.vehicle.lat_acc_max + _ROWS_CHECK_TOL
+        if not qs.trk:  # the track rows' bounds on dn were written by _assemble
+            w = self._w_n
+            np.subtract(zz[:, 3], self._trk_hi, out=w[0])
+            np.subtract(self._trk_lo, zz[:, 3], out=w[1])
+            trk = w.max() > _ROWS_CHECK_TOL
+        if box_dist is not None:
+            w = self._w_box
+            np.subtract(self._box_lo, zz[:, :_N_FIXED], out=w[0])
+            np.subtract(zz[:, :_N_FIXED], self._box_hi, out=w[1])
+            worst = w.max(axis=(0, 1))
+            if worst.max() > _ROWS_CHECK_TOL:
+                box = worst > _ROWS_CHECK_TOL
+        return bool(lat), bool(trk), box
 
     def _linearise(self, xbar: np.ndarray, ubar: np.ndarray, kappa: np.ndarray) -> None:
         self._in_x[:] = xbar
@@ -754,39 +878,49 @@ class MPCDCBF:
         self._in_kappa[:] = kappa
         self._eval()
 
-    def _assemble(self, qs: _QPStructure, xbar, ubar, arrays, gamma):
-        """QP vectors (c, b, h_l, h_u, x_l, x_u) in the buffers of ``qs``; A and G are written in place."""
+    def _assemble(self, qs: _QPStructure, xbar, ubar, arrays, gamma, box_dist: np.ndarray | None = None):
+        """QP vectors (c, b, h_l, h_u, x_l, x_u) in the buffers of ``qs``; A and G are written in place.
+        ``box_dist``: None (every box bound), or per column of (du_k, dx_{k+1}) the distance from
+        the linearisation point beyond which a bound is left out (see :meth:`_rows_needed`)."""
         cfg = self.config
         p = self.vehicle
-        n_h, m = self._n, qs.m
+        m = qs.m
         # cost: c = 2 R ubar, 2 Q (xbar - xref), slack L1 weights (constant)
         c = qs.c_buf
         np.multiply(qs.r2, ubar, out=c[:, 0:2])
-        d = xbar[1:] - 0.0
+        d = self._d_buf
+        d[:] = xbar[1:]
         d[:, 1] -= arrays[1, 1:]
         d[:, 3] -= arrays[2, 1:]
         np.multiply(qs.q2, d, out=c[:, 2:7])
         # matrices: one gather each from the flat linearisation buffer
         qs.fill_matrices(self._flat, self._act, gamma)
-        b_eq = (self._out_f[:n_h] - xbar[1:]).ravel()
+        np.subtract(self._out_f[:-1], xbar[1:], out=qs.b_buf)
         hl, hu = qs.hl_buf, qs.hu_buf
-        alat = self._out_alat[1:]
-        np.subtract(p.lat_acc_max, alat, out=hu[:, 0])
-        np.subtract(-p.lat_acc_max, alat, out=hl[:, 1])
-        nbar = xbar[1:, 1]
-        np.subtract(arrays[4, 1:] - cfg.track_margin, nbar, out=hu[:, 2])
-        np.subtract(arrays[3, 1:] + cfg.track_margin, nbar, out=hl[:, 3])
+        if qs.lat:
+            alat = self._out_alat[1:]
+            np.subtract(p.lat_acc_max, alat, out=hu[:, qs.row_lat])
+            np.subtract(-p.lat_acc_max, alat, out=hl[:, qs.row_lat + 1])
+        if qs.trk:  # bounds computed by _track_bounds at this linearisation
+            hu[:, qs.row_trk] = self._trk_hi
+            hl[:, qs.row_trk + 1] = self._trk_lo
         if m:
             h = self._out_h[:, self._act]
-            np.subtract(h[1:], (1.0 - gamma) * h[:-1], out=hu[:, 4:])
-        # variable bounds
-        xl, xu = qs.xl_buf, qs.xu_buf
-        np.subtract(qs.u_lo, ubar, out=xl[:, 0:2])
-        np.subtract(qs.u_hi, ubar, out=xu[:, 0:2])
-        np.negative(xbar[1:, 3], out=xl[:, 5])
-        np.subtract(-p.steer_max, xbar[1:, 4], out=xl[:, 6])
-        np.subtract(p.steer_max, xbar[1:, 4], out=xu[:, 6])
-        return c.reshape(-1), b_eq, hl.reshape(-1), hu.reshape(-1), xl.reshape(-1), xu.reshape(-1)
+            np.subtract(h[1:], (1.0 - gamma) * h[:-1], out=hu[:, qs.row_cbf:])
+        # variable bounds (du_k, dx_{k+1}) in the full box, then in the QP's buffers
+        lo, hi = self._box_lo, self._box_hi
+        np.subtract(qs.u_lo, ubar, out=lo[:, 0:2])
+        np.subtract(qs.u_hi, ubar, out=hi[:, 0:2])
+        np.negative(xbar[1:, 3], out=lo[:, 5])
+        np.subtract(-p.steer_max, xbar[1:, 4], out=lo[:, 6])
+        np.subtract(p.steer_max, xbar[1:, 4], out=hi[:, 6])
+        xl, xu = qs.xl_buf[:, :_N_FIXED], qs.xu_buf[:, :_N_FIXED]
+        xl[:] = lo
+        xu[:] = hi
+        if box_dist is not None:
+            np.copyto(xl, -np.inf, where=lo < -box_dist)
+            np.copyto(xu, np.inf, where=hi > box_dist)
+        return qs.data
 
     def _qp_solve(self, qs: _QPStructure, data) -> tuple[np.ndarray | None, int, str]:
         """(z or None, iterations, message); the matrices are already in qs.A / qs.G."""
@@ -797,7 +931,7 @@ class MPCDCBF:
             total += self._out_h[:, self._act].sum()
         if not math.isfinite(float(total)):
             return None, 0, "non-finite QP data"
-        if np.any(xl > xu):
+        if (xl > xu).any():
             return None, 0, "inconsistent hard bounds"
         try:
             if qs.backend == "piqp":
@@ -901,9 +1035,9 @@ class MPCDCBF:
         act = self._relevant_slots(n_cand, gamma)
         m = len(act)
         self._act = act
-        qs = self._structure(m)
-        if cold:
-            qs.solver = None  # new situation: set the QP solver up afresh (its scaling is reused until then)
+        if cold:  # new situation: set the QP solvers up afresh (their scaling is reused until then)
+            for qs in self._qp.values():
+                qs.solver = None
 
         n_iter = cfg.cold_start_iterations if cold else 1
         qp_iters = 0
@@ -914,15 +1048,30 @@ class MPCDCBF:
         while True:
             if sqp_iters > 0:
                 self._linearise(xbar, ubar, kappa)
-            data = self._assemble(qs, xbar, ubar, arrays, gamma)
-            t_qp = time.perf_counter()
-            z, it, message = self._qp_solve(qs, data)
-            qp_time += time.perf_counter() - t_qp
-            qp_iters += it
+            self._track_bounds(xbar, arrays)
+            lat, trk, all_boxes = self._rows_needed(xbar, arrays)
+            box_dist = None if all_boxes else _BOX_DROP_DISTANCE
+            while True:
+                qs = self._structure(m, lat, trk)
+                data = self._assemble(qs, xbar, ubar, arrays, gamma, box_dist)
+                t_qp = time.perf_counter()
+                z, it, message = self._qp_solve(qs, data)
+                qp_time += time.perf_counter() - t_qp
+                qp_iters += it
+                if z is None:
+                    break
+                zz = z.reshape(n_h, qs.nb)
+                add_lat, add_trk, add_box = self._rows_violated(qs, box_dist, zz, xbar, arrays)
+                if not (add_lat or add_trk or add_box is not None):
+                    break
+                # solve again with the violated kind of constraint (for the box: its violated columns)
+                lat, trk = lat or add_lat, trk or add_trk
+                if add_box is not None:
+                    box_dist = np.where(add_box, np.inf, box_dist)
+                self.n_row_resolves += 1
             sqp_iters += 1
             if z is None:
                 break
-            zz = z.reshape(n_h, qs.nb)
             xbar[1:] += zz[:, 2:7]
             ubar += zz[:, 0:2]
             if sqp_iters < n_iter:
@@ -938,13 +1087,17 @@ class MPCDCBF:
             return self._fallback(x0, message or "non-finite iterate", t_start, qp_iters, sqp_iters,
                                   barrier_min, m)
 
-        sig = z.reshape(n_h, qs.nb)[:, 7:] * qs.slack_scale  # slacks in their physical units
+        zz = z.reshape(n_h, qs.nb)
         slack = {
-            "lat_acc": float(max(sig[:, 0].max(), 0.0)),
-            "track": float(max(sig[:, 1].max(), 0.0)),
-            "barrier": float(max(sig[:, 2:].max(), 0.0)) if m else 0.0,
+            "lat_acc": float(max(zz[:, qs.col_lat].max() * qs.slack_scale[0], 0.0)) if qs.lat else 0.0,
+            "track": float(max(zz[:, qs.col_trk].max() * qs.slack_scale[int(qs.lat)], 0.0)) if qs.trk else 0.0,
+            "barrier": 0.0,
         }
-        first = float(max(sig[0, 2:].max(), 0.0)) if m else 0.0
+        first = 0.0
+        if m:  # slacks in their physical units
+            sig = zz[:, qs.col_cbf:] * qs.slack_scale[-1]
+            slack["barrier"] = float(max(sig.max(), 0.0))
+            first = float(max(sig[0].max(), 0.0))
         p = self.vehicle
         u = np.array([min(max(ubar[0, 0], p.a_min), p.a_max),
                       min(max(ubar[0, 1], -p.steer_rate_max), p.steer_rate_max)])
