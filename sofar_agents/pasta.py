@@ -185,6 +185,10 @@ class PASTAConfig:
     """Hidden width of each per-objective value head (0 = a single linear layer)."""
     log_std_init: float = -0.5
     """Initial log standard deviation of the pre-squash Gaussian (state independent)."""
+    initial_action: float | None = None
+    """If set, the actor's output bias is initialised so that the deterministic action of
+    the untrained policy is this value (in action units, strictly inside the bounds), e.g. a
+    known-good fixed gamma; ``None`` starts at the middle of the action range."""
     preference_sampling: str = "dirichlet"
     """``"dirichlet"``: draw a preference w per episode from a Dirichlet whose mean is
     the agent's preference; ``"fixed"``: always use the agent's preference."""
@@ -655,6 +659,12 @@ class PASTA:
         cfg = self.config
         in_dim = self.obs_dim + self.n_objectives
         self.actor = Actor(in_dim, self.act_dim, cfg.hidden_sizes, cfg.log_std_init, self.torch_gen)
+        if cfg.initial_action is not None:
+            frac = (cfg.initial_action - self.action_low) / (self.action_high - self.action_low)
+            if not np.all((frac > 0.0) & (frac < 1.0)):
+                raise ValueError(f"initial_action {cfg.initial_action} must lie strictly inside the action bounds")
+            with torch.no_grad():
+                self.actor.mean_net[-1].bias.copy_(torch.as_tensor(np.log(frac / (1.0 - frac)), dtype=torch.float32))
         self.critic = BranchedCritic(in_dim, self.n_objectives, cfg.hidden_sizes, cfg.critic_head_hidden,
                                      self.torch_gen)
         self.optimizer = torch.optim.Adam(

@@ -11,18 +11,48 @@ Per control step:
 4. take the barrier decay ``gamma`` from the caller (a policy, or fixed);
 5. solve the MPC-DCBF with ``d*`` as the lateral reference and ``gamma``.
 
+Additions to the paper's algorithm, each closing a failure mode seen in closed loop:
+
+* **Pass or follow.** The MIQP plans lateral offsets only, with the ego's progress
+  taken from its speed reference. When no passing side of an opponent ahead is
+  clear (the plan violates that opponent's clearance by more than
+  ``follow_slack``, e.g. the raceline runs to the edge on the passing side at the
+  next corner, or the track is too narrow), attempting the pass ends alongside the
+  opponent with the corridor closing. The stack then *follows* instead: it re-plans
+  with the ego's node positions held ``follow_gap`` behind the blocking opponent(s)
+  (no slower than braking at ``follow_decel`` allows) and caps the MPC speed
+  reference at ``sqrt(v_o^2 + 2 follow_decel (gap - follow_gap))``, the speed from
+  which braking at ``follow_decel`` ends at the opponent's speed ``follow_gap``
+  behind it. An opponent behind which the ego can no longer stay (braking at
+  ``follow_reach_decel``) is not followed. The pass is re-examined at every MIQP
+  call.
+* **Footprint-aware track edges.** Leaving the track is judged on the footprint's
+  corners, the MPC keeps its reference point ``track_margin`` from the edge. The
+  edges given to the planners are the narrowest within the car's length around
+  each predicted position (edges converge on the raceline by up to 0.5 m per metre
+  in chicanes), and the MPC's are further tightened by ``max(l_f, l_r) |sin e|``
+  with the heading error ``e`` of the previous prediction (how far a corner swings
+  out when the car is not aligned with the track).
+* **Consistent clearances.** The MIQP's side-constraint window is extended by the
+  braking distance of the closing speed (``MIQPConfig.closing_decel`` = the
+  barrier's ``a_brake``), the shape of the MPC's barrier ellipse; a plan that
+  crosses an opponent's lane inside its braking distance, which the barrier then
+  forbids, is no longer produced.
+
 The stack never raises on numerical trouble: the planners return fallbacks,
 which are counted (:attr:`OvertakingStack.counters`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from .control.barrier import BarrierParams
 from .control.mpc import MPCConfig, MPCDCBF, MPCResult, MPCStageData
 from .planning.miqp import MIQPConfig, PassingSidePlanner, PlanResult
 from .vehicle import AV21, VehicleParams
@@ -44,16 +74,47 @@ class StackConfig:
     """Opponents up to this far behind the ego are passed to the planners [m]."""
     look_ahead: float = 400.0
     """Opponents up to this far ahead of the ego are passed to the planners [m]."""
+    follow: bool = True
+    """Follow an opponent that cannot be passed instead of forcing the pass (module docstring)."""
+    follow_slack: float = 0.5
+    """A passing plan that violates the clearance of an opponent ahead by more than this is
+    not attempted: the ego follows that opponent [m]. With 0.5 m a pass is planned with at
+    least 3.25 m lateral clearance (safe_lat 3.75 m), 0.55 m more than the barrier's lateral
+    semi-axis b = 2.7 m: a pass planned at about b stalls alongside the opponent (the barrier
+    is near 0 there and, for small gamma, may only decay slowly), and a looser 0.8 m led to
+    exactly that, and a collision, on Kentucky at rho = 0.1, gamma = 0.05."""
+    follow_gap: float = 12.0
+    """Arc-length distance kept behind a followed opponent [m] (the barrier's a0 = 7 m plus 5 m)."""
+    follow_decel: float = 5.0
+    """Deceleration planned when following [m/s^2]: the speed reference is capped at
+    sqrt(v_o^2 + 2 follow_decel (gap - follow_gap)), the speed from which the ego reaches the
+    opponent's speed ``follow_gap`` behind it, and the MIQP node positions brake at this rate."""
+    follow_reach_decel: float = 8.0
+    """Deceleration [m/s^2] that decides whether the ego can still stay behind an opponent (at
+    least the barrier's a0 behind it); if not, the pass is not abandoned."""
+    pace_prediction: bool = True
+    """Predict the opponents along the speed profile at their current pace ratio
+    (:meth:`OvertakingStack.predict_opponents`) instead of at constant speed: the MIQP gets
+    the predicted positions, the MPC (constant-speed opponents) the mean speed over its horizon."""
+    footprint_edges: bool = True
+    """Give the planners the narrowest edge within the car's length, and tighten the MPC's by
+    the heading error (module docstring)."""
     mpc: MPCConfig = field(default_factory=MPCConfig)
     """The low-level MPC-DCBF."""
-    miqp: MIQPConfig = field(default_factory=MIQPConfig)
-    """The passing-side planner."""
+    miqp: MIQPConfig = field(default_factory=lambda: MIQPConfig(closing_decel=BarrierParams().a_brake))
+    """The passing-side planner (its closing-speed window sized by the barrier's a_brake)."""
 
     def __post_init__(self) -> None:
         if not (0.0 < self.speed_factor <= 1.5):
             raise ValueError(f"speed_factor must lie in (0, 1.5], got {self.speed_factor}")
         if self.miqp_interval < 1:
             raise ValueError("miqp_interval must be >= 1")
+        for name in ("follow_slack", "follow_gap"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name} must be >= 0")
+        for name in ("follow_decel", "follow_reach_decel"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0")
 
 
 @dataclass(frozen=True)
@@ -80,6 +141,8 @@ class StackOutput:
     """Arc length of the ego at this step [m]: the s of ``mpc.x_pred`` is relative to it."""
     plan_s: float = 0.0
     """Arc length of the ego when ``plan`` was computed [m]: ``plan.s`` is relative to it."""
+    following: bool = False
+    """Whether the plan in force follows an opponent that cannot be passed."""
 
 
 class OvertakingStack:
@@ -92,6 +155,18 @@ class OvertakingStack:
         self.mpc = MPCDCBF(self.config.mpc, vehicle)
         self.planner = PassingSidePlanner(self.config.miqp)
         self._node_t = np.arange(self.config.miqp.nodes) * self.config.miqp.node_dt
+        self._mpc_t = self.config.mpc.time_grid()
+        p = vehicle
+        self._reach = max(p.cg_to_front, p.cg_to_rear)
+        # footprint samples along the track: rear end, middle, front end
+        self._edge_offsets = np.linspace(-p.cg_to_rear, p.cg_to_front, 5)
+        # time along two laps at the speed profile, for the pace-ratio prediction of the opponents
+        samples = np.asarray(track.s, float)
+        L = float(track.length)
+        grid = np.concatenate([samples, samples + L, [2.0 * L]])
+        v_prof = np.maximum(np.asarray(track.speed(grid), float), 0.1)
+        self._pace_s = grid
+        self._pace_t = np.concatenate([[0.0], np.cumsum(2.0 * np.diff(grid) / (v_prof[1:] + v_prof[:-1]))])
         self.reset()
 
     def reset(self) -> None:
@@ -102,7 +177,10 @@ class OvertakingStack:
         self._plan_s: float = 0.0
         self._last_plan_call_s: float | None = None
         self._step = 0
-        self.counters = {"steps": 0, "mpc_failures": 0, "miqp_failures": 0, "miqp_solves": 0}
+        self._follow: tuple | None = None  # (rows (gap, n, v) at plan time, plan step) of followed opponents
+        self._last_pred: np.ndarray | None = None  # previous MPC prediction (for the heading error)
+        self.counters = {"steps": 0, "mpc_failures": 0, "miqp_failures": 0, "miqp_solves": 0,
+                         "follow_steps": 0}
 
     # ------------------------------------------------------------------ helpers
     def relative_opponents(self, ego_s: float, opponents: np.ndarray) -> np.ndarray:
@@ -114,6 +192,26 @@ class OvertakingStack:
         keep = (gap >= -self.config.look_behind) & (gap <= self.config.look_ahead)
         rel = np.column_stack([gap, opp[:, 1], opp[:, 2]])[keep]
         return rel[np.argsort(np.abs(rel[:, 0]))]
+
+    def predict_opponents(self, ego_s: float, opp_rel: np.ndarray, times: np.ndarray) -> np.ndarray:
+        """(M, len(times)) arc lengths of the opponents relative to the ego now [m], at ``times`` [s].
+
+        Each opponent keeps its current pace ratio to the circuit's speed profile,
+        ``ds/dt = rho_i v_profile(s)`` with ``rho_i = v_i / v_profile(s_i)``: cars slow down for
+        corners, which a constant-speed prediction misses by several metres over a second
+        at a corner entry.
+        """
+        opp_rel = np.asarray(opp_rel, float).reshape(-1, 3)
+        times = np.asarray(times, float)
+        if opp_rel.shape[0] == 0:
+            return np.zeros((0, times.size))
+        if not self.config.pace_prediction:
+            return opp_rel[:, :1] + opp_rel[:, 2:3] * times[None, :]
+        s_abs = np.asarray(self.track.wrap(ego_s + opp_rel[:, 0]), float)
+        rho = np.maximum(opp_rel[:, 2], 0.0) / np.maximum(np.asarray(self.track.speed(s_abs), float), 0.1)
+        t0 = np.interp(s_abs, self._pace_s, self._pace_t)
+        s_pred = np.interp(t0[:, None] + rho[:, None] * times[None, :], self._pace_t, self._pace_s)
+        return opp_rel[:, :1] + (s_pred - s_abs[:, None])
 
     def _node_positions(self, ego_s: float, ego_v: float) -> np.ndarray:
         """Ego arc length (relative) at the MIQP node times, from the speed reference and the acceleration limits."""
@@ -134,14 +232,68 @@ class OvertakingStack:
             s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
         return s
 
+    def edges(self, s_abs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n_min, n_max) at arc lengths ``s_abs`` [m]: with ``footprint_edges`` the narrowest
+        within the car's length around each point, else the edges there."""
+        s_abs = np.asarray(s_abs, float)
+        if not self.config.footprint_edges:
+            return (-np.asarray(self.track.width_right(s_abs), float),
+                    np.asarray(self.track.width_left(s_abs), float))
+        pts = s_abs[:, None] + self._edge_offsets[None, :]
+        wr = np.asarray(self.track.width_right(pts.ravel()), float).reshape(pts.shape).min(axis=1)
+        wl = np.asarray(self.track.width_left(pts.ravel()), float).reshape(pts.shape).min(axis=1)
+        return -wr, wl
+
+    def _braking_positions(self, ego_v: float, decel: float) -> np.ndarray:
+        """Ego node positions when braking at ``decel`` [m/s^2] from ``ego_v`` until standstill [m]."""
+        v0 = max(ego_v, 0.0)
+        tt = np.minimum(self._node_t, v0 / decel)
+        return v0 * tt - 0.5 * decel * tt * tt
+
+    def _follow_positions(self, s_nodes: np.ndarray, s_brake: np.ndarray, blocker_s: np.ndarray) -> np.ndarray:
+        """Ego node positions that stay ``follow_gap`` behind the blockers (predicted arc lengths
+        ``blocker_s`` at the node times), no slower than braking allows."""
+        cap = (blocker_s - self.config.follow_gap).min(axis=0)
+        return np.maximum.accumulate(np.maximum(s_brake, np.minimum(s_nodes, cap)))
+
     def _plan_lateral(self, ego_s: float, ego_n: float, ego_v: float, opp_rel: np.ndarray) -> float:
+        cfg = self.config
         s_nodes = self._node_positions(ego_s, ego_v)
-        s_abs = ego_s + s_nodes
-        n_min = -np.asarray(self.track.width_right(s_abs), float)
-        n_max = np.asarray(self.track.width_left(s_abs), float)
+        n_min, n_max = self.edges(ego_s + s_nodes)
+        n_ref = np.zeros_like(s_nodes)
+        opp_s = self.predict_opponents(ego_s, opp_rel, self._node_t)
         progress = 0.0 if self._last_plan_call_s is None else float(self.track.gap(ego_s, self._last_plan_call_s))
         t0 = time.perf_counter()
-        plan = self.planner.plan(s_nodes, np.zeros_like(s_nodes), n_min, n_max, ego_n, opp_rel, progress=progress)
+        memory = self.planner.memory()
+        plan = self.planner.plan(s_nodes, n_ref, n_min, n_max, ego_n, opp_rel, progress=progress, opponent_s=opp_s)
+        self._follow = None
+        if cfg.follow and plan.success and plan.opponent_slack is not None and len(opp_rel):
+            # an opponent ahead whose clearance the best passing plan violates, and behind which the
+            # ego can still stay (braking keeps it at least the barrier's a0 behind): follow it
+            s_hard = self._braking_positions(ego_v, cfg.follow_reach_decel)
+            room = (opp_s - s_hard[None, :]).min(axis=1)
+            blocked = ((plan.opponent_slack > cfg.follow_slack) & (opp_rel[:, 0] > 0.0)
+                       & (room >= cfg.mpc.barrier.a0))
+            if blocked.any():
+                # followed opponents are kept behind longitudinally (speed cap, barrier), not
+                # passed: the lateral plan only deals with the others
+                s_follow = self._follow_positions(s_nodes, self._braking_positions(ego_v, cfg.follow_decel),
+                                                  opp_s[blocked])
+                n_min_f, n_max_f = self.edges(ego_s + s_follow)
+                free = ~blocked
+                passing_memory = self.planner.memory()
+                self.planner.restore_memory(memory)
+                follow_plan = self.planner.plan(s_follow, n_ref, n_min_f, n_max_f, ego_n, opp_rel[free],
+                                                progress=progress, opponent_s=opp_s[free])
+                if follow_plan.success and follow_plan.max_slack < plan.max_slack:
+                    sides = np.zeros(len(opp_rel), dtype=int)
+                    sides[free] = follow_plan.sides
+                    slack = np.zeros(len(opp_rel))
+                    slack[free] = follow_plan.opponent_slack
+                    plan = dataclasses.replace(follow_plan, sides=sides, opponent_slack=slack)
+                    self._follow = (opp_rel[blocked].copy(), self._step)
+                else:
+                    self.planner.restore_memory(passing_memory)
         elapsed = time.perf_counter() - t0
         self._last_plan_call_s = ego_s
         self.counters["miqp_solves"] += 1
@@ -151,21 +303,46 @@ class OvertakingStack:
         self._plan_s = ego_s
         return elapsed
 
+    def _heading_error_guess(self) -> np.ndarray | None:
+        """|e| along the next MPC horizon from the previous prediction shifted by one period."""
+        if self._last_pred is None:
+            return None
+        t = self._mpc_t
+        return np.abs(np.interp(t + self.config.mpc.control_dt, t, self._last_pred[:, 2]))
+
     def stage_data(self, ego_s: float) -> MPCStageData:
         """Per-stage data of the MPC at the s of its warm start."""
+        cfg = self.config
         s_rel = np.asarray(self.mpc.predicted_s(), float)
         s_abs = ego_s + s_rel
-        if self._plan is not None and self.config.use_miqp:
+        if self._plan is not None and cfg.use_miqp:
             shift = float(self.track.gap(ego_s, self._plan_s))
             n_ref = np.asarray(self._plan.lateral_at(s_rel + shift), float)
         else:
             n_ref = np.zeros_like(s_rel)
+        v_ref = cfg.speed_factor * np.asarray(self.track.speed(s_abs), float)
+        if self._follow is not None and cfg.use_miqp:
+            rows, step0 = self._follow
+            elapsed = (self._step - step0) * cfg.mpc.control_dt
+            t = self._mpc_t
+            pred = self.predict_opponents(self._plan_s, rows, elapsed + t)  # relative to the ego at plan time
+            gap = pred.T - float(self.track.gap(ego_s, self._plan_s)) - s_rel[:, None]
+            v_o = np.gradient(pred, t, axis=1).T if len(t) > 1 else rows[None, :, 2]
+            v_cap2 = v_o ** 2 + 2.0 * cfg.follow_decel * (gap - cfg.follow_gap)
+            v_ref = np.minimum(v_ref, np.sqrt(np.maximum(v_cap2.min(axis=1), 0.0)))
+        n_min, n_max = self.edges(s_abs)
+        if cfg.footprint_edges:
+            e_abs = self._heading_error_guess()
+            if e_abs is not None:
+                swing = self._reach * np.sin(np.minimum(e_abs, 0.5 * math.pi))
+                n_min = n_min + swing
+                n_max = n_max - swing
         return MPCStageData(
             kappa=np.asarray(self.track.curvature(s_abs), float),
             n_ref=n_ref,
-            v_ref=self.config.speed_factor * np.asarray(self.track.speed(s_abs), float),
-            n_min=-np.asarray(self.track.width_right(s_abs), float),
-            n_max=np.asarray(self.track.width_left(s_abs), float),
+            v_ref=v_ref,
+            n_min=n_min,
+            n_max=n_max,
         )
 
     # ------------------------------------------------------------------ step
@@ -186,13 +363,23 @@ class OvertakingStack:
             miqp_time = self._plan_lateral(s, n, v, opp_rel)
             miqp_ran = True
         stage = self.stage_data(s)
-        result = self.mpc.solve(np.array([0.0, n, e, v, delta]), stage, opp_rel, gamma)
+        opp_mpc = opp_rel
+        if self.config.pace_prediction and len(opp_rel):
+            # the MPC predicts opponents at constant speed: give it their mean speed over its horizon
+            t_end = float(self._mpc_t[-1])
+            s_end = self.predict_opponents(s, opp_rel, np.array([t_end]))[:, 0]
+            opp_mpc = opp_rel.copy()
+            opp_mpc[:, 2] = (s_end - opp_rel[:, 0]) / t_end
+        result = self.mpc.solve(np.array([0.0, n, e, v, delta]), stage, opp_mpc, gamma)
         if not result.success:
             self.counters["mpc_failures"] += 1
+        self._last_pred = result.x_pred if result.status == "solved" else None
+        following = self._follow is not None and self.config.use_miqp
+        self.counters["follow_steps"] += int(following)
         self._step += 1
         self.counters["steps"] += 1
         return StackOutput(
             u=result.u, gamma=gamma, mpc=result, plan=self._plan if self.config.use_miqp else None,
             miqp_ran=miqp_ran, opponents_rel=opp_rel, mpc_time=result.solve_time, miqp_time=miqp_time,
-            ego_s=s, plan_s=self._plan_s,
+            ego_s=s, plan_s=self._plan_s, following=following,
         )

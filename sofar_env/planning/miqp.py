@@ -58,6 +58,21 @@ them. Without any
 relevant opponent the plan is ``n_ref`` clipped into the corridor (status
 ``"no_opponents"``, no continuity or smoothing applied).
 
+Braking-distance window (``closing_decel > 0``; the stack sets it). The MPC's
+barrier ellipse around an opponent is ``a0 + v_close^2 / (2 a_brake)`` long, so a
+plan that crosses an opponent's lane inside that distance (typically: swinging
+across right in front of a much slower car after passing another one) is one the
+MPC can only follow by braking hard or using barrier slack. The window then
+extends by ``L_ik = v_close,ik^2 / (2 closing_decel)`` on the side where the cars
+close in, with a clearance tapering like the ellipse, ``safe_lat sqrt(1 - ((|g| -
+safe_lon) / L)^2)``; node intervals are covered as above (each end node keeps the
+largest clearance required on the interval). Beyond the box only every
+``closing_stride``-th node is kept (solve time). The side constraints then use the
+per-pair clearance ``w_ik`` in place of ``safe_lat``. The opponents' positions can
+be given as a prediction (``opponent_s``, e.g. along the speed profile) instead of
+constant speed. :attr:`PlanResult.opponent_slack` reports the violation per
+opponent (the stack's pass-or-follow decision uses it).
+
 Solvers. ``"daqp"`` uses DAQP's built-in branch-and-bound: binaries are simple
 bounds ``0 <= b <= 1`` flagged binary (``sense`` 16). If it fails, the
 enumeration below is tried before giving up. ``"enumerate"`` solves one QP per
@@ -131,6 +146,23 @@ class MIQPConfig:
     touches the window are constrained, see the module docstring), so this is the
     car length plus a margin, not a node-spacing allowance; the effective window is
     at most one relative step (relative speed * node_dt) wider on each side."""
+    closing_decel: float = 0.0
+    """Deceleration [m/s^2] that sizes the braking-distance extension of the side-constraint
+    window; 0 disables it (plain box window ``|gap| < safe_lon``). With a value ``a_b > 0``
+    the window grows on the side the cars close in, by ``L = v_close^2 / (2 a_b)`` (the
+    closing speed ``v_close`` from the ego's node speed and the opponent's speed), and the
+    clearance there tapers elliptically: ``safe_lat * sqrt(1 - ((|gap| - safe_lon) / L)^2)``.
+    This is the shape of the MPC's velocity-aware barrier (``a = a0 + v_close^2 / (2
+    a_brake)``), so a plan that keeps it does not cross an opponent's lane inside its
+    braking distance, which the barrier would forbid; the stack sets it to the barrier's
+    ``a_brake``."""
+    closing_stride: int = 3
+    """In the braking-distance extension of the window (beyond ``safe_lon``), the
+    clearance is imposed at every this-many-th node only, counted from the box window
+    (the clearance decreases away from the box, so a kept node requires at least what
+    the dropped nodes beyond it would): the extension spans up to ~20 nodes at high
+    closing speed, and every pair adds two rows to the MIQP (solve time grows with
+    them). The box window keeps every node; 1 keeps every node of the extension too."""
     track_margin: float = 1.2
     """Distance kept from each track edge [m]."""
     continuity: float = 0.3
@@ -151,9 +183,11 @@ class MIQPConfig:
         if not self.w_dev > 0.0:
             raise ValueError("w_dev must be > 0 (it makes the Hessian positive definite)")
         for name in ("w_smooth", "w_prev", "w_switch", "w_slack", "safe_lat",
-                     "safe_lon", "track_margin", "continuity", "cluster_gap"):
+                     "safe_lon", "closing_decel", "track_margin", "continuity", "cluster_gap"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0")
+        if int(self.closing_stride) != self.closing_stride or self.closing_stride < 1:
+            raise ValueError("closing_stride must be an integer >= 1")
         if self.solver not in ("daqp", "enumerate"):
             raise ValueError(f"unknown solver {self.solver!r} (use 'daqp' or 'enumerate')")
 
@@ -182,6 +216,9 @@ class PlanResult:
     """Largest side-constraint violation of the plan [m] (0: every clearance met)."""
     slack_sum: float = 0.0
     """Sum of the side-constraint violations over active pairs [m]."""
+    opponent_slack: np.ndarray | None = None
+    """(M,) largest side-constraint violation per input opponent [m] (0 for irrelevant ones;
+    None on fallback)."""
 
     def lateral_at(self, s_query) -> np.ndarray:
         """Plan interpolated at relative arc lengths ``s_query`` [m], constant beyond the ends."""
@@ -200,6 +237,8 @@ class _Problem:
     pair_k: np.ndarray       # (P,) node of each active pair
     pair_c: np.ndarray       # (P,) cluster of each active pair
     pair_n: np.ndarray       # (P,) opponent offset of each active pair
+    pair_w: np.ndarray       # (P,) lateral clearance required by each active pair [m]
+    pair_r: np.ndarray       # (P,) relevant-opponent index of each active pair
     n_clusters: int
     f_b: np.ndarray          # (C,) linear hysteresis cost per cluster
     n_ref: np.ndarray
@@ -246,9 +285,17 @@ class PassingSidePlanner:
         self._prev_sides = None
         self.n_failures = 0
 
+    def memory(self) -> tuple:
+        """The previous plan and decisions (an opaque value for :meth:`restore_memory`)."""
+        return (self._prev_s, self._prev_d, self._prev_opp, self._prev_sides)
+
+    def restore_memory(self, memory: tuple) -> None:
+        """Go back to the state returned by :meth:`memory` (e.g. to discard a trial plan)."""
+        self._prev_s, self._prev_d, self._prev_opp, self._prev_sides = memory
+
     # ------------------------------------------------------------------- main
     def plan(self, s_nodes, n_ref, n_min, n_max, ego_n: float, opponents,
-             progress: float = 0.0) -> PlanResult:
+             progress: float = 0.0, opponent_s=None) -> PlanResult:
         """Plan the lateral offsets and passing sides.
 
         Args:
@@ -264,6 +311,10 @@ class PassingSidePlanner:
                 (motion-propagated) opponent of the previous call.
             progress: metres the ego advanced since the previous call, used to
                 re-express the previous plan at the new nodes [m].
+            opponent_s: optional (M, nodes) predicted arc length of each opponent at the
+                node times, relative to the ego now [m] (e.g. a prediction along the
+                circuit's speed profile); None: constant speed, ``s_rel + v t``. The
+                opponents' speeds for the closing-speed window are taken from it.
 
         Raises:
             ValueError: only for arrays of the wrong shape (a programming error).
@@ -284,17 +335,26 @@ class PassingSidePlanner:
         if opp.ndim != 2 or opp.shape[1] != 3:
             raise ValueError(f"opponents must have shape (M, 3), got {opp.shape}")
         M = opp.shape[0]
+        if opponent_s is None:
+            opp_s = opp[:, :1] + opp[:, 2:3] * self._t[None, :]
+        else:
+            opp_s = np.asarray(opponent_s, dtype=float)
+            if opp_s.size == 0 and M == 0:
+                opp_s = np.zeros((0, N))
+            if opp_s.shape != (M, N):
+                raise ValueError(f"opponent_s must have shape ({M}, {N}), got {opp_s.shape}")
 
         lo, hi = self._corridor(n_min, n_max)
         # A sum is finite iff every term is (the magnitudes here cannot overflow).
-        total = (s_nodes.sum() + n_ref.sum() + lo.sum() + hi.sum() + opp.sum()
+        total = (s_nodes.sum() + n_ref.sum() + lo.sum() + hi.sum() + opp.sum() + opp_s.sum()
                  + float(ego_n) + float(progress))
         if not np.isfinite(total):
             return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None,
                                   "non-finite input")
 
         try:
-            active = self._activation(s_nodes, opp)
+            clear = self._clearance(s_nodes, opp_s)
+            active = clear > 0.0
             relevant = np.flatnonzero(active.any(axis=1))
             if relevant.size == 0:
                 d = np.clip(n_ref, lo, hi)
@@ -302,9 +362,10 @@ class PassingSidePlanner:
                 return PlanResult(d=d, s=s_nodes.copy(), sides=np.zeros(M, dtype=int),
                                   objective=self._cost(d, n_ref, None, 0.0, 0.0),
                                   status="no_opponents", success=True,
-                                  solve_time=time.perf_counter() - t0, n_binaries=0)
+                                  solve_time=time.perf_counter() - t0, n_binaries=0,
+                                  opponent_slack=np.zeros(M))
             prob = self._build(s_nodes, n_ref, lo, hi, float(ego_n), float(progress), opp,
-                               active, relevant)
+                               active, relevant, clear, opp_s)
         except Exception as exc:  # numerical trouble while building: never raise
             return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None,
                                   f"build failed: {exc!r}")
@@ -332,11 +393,14 @@ class PassingSidePlanner:
                                   "non-finite objective")
         sides = np.zeros(M, dtype=int)
         sides[relevant] = np.where(b[prob.rel_cluster] > 0.5, 1, -1)
+        opp_slack = np.zeros(M)
+        np.maximum.at(opp_slack, relevant[prob.pair_r], xi)
         self._remember(s_nodes, d, opp, sides)
         return PlanResult(d=d, s=s_nodes.copy(), sides=sides, objective=obj,
                           status="optimal", success=True,
                           solve_time=time.perf_counter() - t0, n_binaries=prob.n_clusters,
-                          max_slack=float(xi.max(initial=0.0)), slack_sum=float(xi.sum()))
+                          max_slack=float(xi.max(initial=0.0)), slack_sum=float(xi.sum()),
+                          opponent_slack=opp_slack)
 
     # ------------------------------------------------------------ components
     def _corridor(self, n_min: np.ndarray, n_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -350,21 +414,70 @@ class PassingSidePlanner:
             hi = np.where(narrow, mid, hi)
         return lo, hi
 
-    def _activation(self, s_nodes: np.ndarray, opp: np.ndarray) -> np.ndarray:
-        """(M, N) bool: node k carries opponent i's side constraint."""
-        N = self.config.nodes
-        L = self.config.safe_lon
-        if opp.shape[0] == 0:
-            return np.zeros((0, N), dtype=bool)
-        gap = opp[:, :1] + opp[:, 2:3] * self._t[None, :] - s_nodes[None, :]
-        a, b = gap[:, :-1], gap[:, 1:]
-        seg = (np.minimum(a, b) < L) & (np.maximum(a, b) > -L)
-        active = np.abs(gap) < L
-        active[:, :-1] |= seg
-        active[:, 1:] |= seg
-        return active
+    def _clearance(self, s_nodes: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
+        """(M, N) lateral clearance [m] that node k must keep from opponent i; 0: no constraint.
 
-    def _clusters(self, opp_rel: np.ndarray, act_rel: np.ndarray) -> tuple[int, np.ndarray]:
+        ``opp_s`` (M, N): the opponents' predicted arc lengths at the node times.
+
+        A node gets the largest clearance required anywhere on its two adjacent node
+        intervals: the plan and the gap are linear between nodes, so keeping that clearance
+        at both end nodes keeps it on the whole interval.
+        """
+        cfg = self.config
+        N = cfg.nodes
+        M = opp_s.shape[0]
+        if M == 0:
+            return np.zeros((0, N))
+        L = cfg.safe_lon
+        gap = opp_s - s_nodes[None, :]
+        if cfg.closing_decel > 0.0:
+            dv = -np.gradient(gap, self._t, axis=1)        # closing speed when the opponent is ahead
+            ext_ahead = np.maximum(dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
+            ext_behind = np.maximum(-dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
+        else:
+            ext_ahead = ext_behind = np.zeros_like(gap)
+
+        def required(g, e_ahead, e_behind):
+            ext = np.where(g > 0.0, e_ahead, e_behind)
+            a = np.abs(g)
+            out = np.where(a < L, cfg.safe_lat, 0.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = (a - L) / ext
+                cap = cfg.safe_lat * np.sqrt(np.clip(1.0 - r * r, 0.0, 1.0))
+            return np.where((a >= L) & (ext > 0.0) & (a - L < ext), cap, out)
+
+        w = required(gap, ext_ahead, ext_behind)
+        a, b = gap[:, :-1], gap[:, 1:]
+        # the point of each interval nearest to a zero gap, and the larger extension of its ends
+        g_near = np.where((a > 0.0) & (b > 0.0), np.minimum(a, b),
+                          np.where((a < 0.0) & (b < 0.0), np.maximum(a, b), 0.0))
+        seg = required(g_near, np.maximum(ext_ahead[:, :-1], ext_ahead[:, 1:]),
+                       np.maximum(ext_behind[:, :-1], ext_behind[:, 1:]))
+        w[:, :-1] = np.maximum(w[:, :-1], seg)
+        w[:, 1:] = np.maximum(w[:, 1:], seg)
+        stride = int(cfg.closing_stride)
+        if stride > 1 and cfg.closing_decel > 0.0:
+            w = self._thin_extension(w, np.abs(gap) < L, stride)
+        return w
+
+    @staticmethod
+    def _thin_extension(w: np.ndarray, box: np.ndarray, stride: int) -> np.ndarray:
+        """Keep every ``stride``-th constrained node outside the box window, counted outwards from
+        it (the node next to the box is always kept). The clearance decreases away from the box,
+        so each kept node requires at least what the dropped nodes beyond it would have."""
+        out = w.copy()
+        N = w.shape[1]
+        k = np.arange(N)
+        for i in range(w.shape[0]):
+            bk = np.flatnonzero(box[i])
+            if bk.size == 0:
+                bk = np.array([int(np.argmax(w[i]))])  # window crossed between nodes
+            dist = np.abs(k[:, None] - bk[None, :]).min(axis=1)
+            drop = (w[i] > 0.0) & ~box[i] & (dist > 1) & ((dist - 1) % stride != 0)
+            out[i, drop] = 0.0
+        return out
+
+    def _clusters(self, pos: np.ndarray, act_rel: np.ndarray) -> tuple[int, np.ndarray]:
         """Connected components of the relation "must be passed on the same side".
 
         Two relevant opponents are linked when, at some node where the ego overlaps
@@ -372,10 +485,9 @@ class PassingSidePlanner:
         other along the track: the ego cannot thread between them there. (Opponents
         that only converge after the ego has passed them stay independent.)
         """
-        R = opp_rel.shape[0]
+        R = pos.shape[0]
         if R == 1:
             return 1, np.zeros(1, dtype=int)
-        pos = opp_rel[:, :1] + opp_rel[:, 2:3] * self._t[None, :]          # (R, N)
         close = np.abs(pos[:, None, :] - pos[None, :, :]) < self.config.cluster_gap
         either = act_rel[:, None, :] | act_rel[None, :, :]
         linked = (close & either).any(axis=2).tolist()
@@ -431,10 +543,10 @@ class PassingSidePlanner:
         out[found] = np.where(prev_side[best[found]] > 0, 1, 0)
         return out
 
-    def _build(self, s_nodes, n_ref, lo, hi, ego_n, progress, opp, active, relevant) -> _Problem:
+    def _build(self, s_nodes, n_ref, lo, hi, ego_n, progress, opp, active, relevant, clear, opp_s) -> _Problem:
         cfg = self.config
         opp_rel = opp[relevant]
-        n_clusters, labels = self._clusters(opp_rel, active[relevant])
+        n_clusters, labels = self._clusters(opp_s[relevant], active[relevant])
 
         lo = lo.copy()
         hi = hi.copy()
@@ -457,7 +569,8 @@ class PassingSidePlanner:
 
         rows, ks = np.nonzero(active[relevant])
         return _Problem(lo=lo, hi=hi, f_d=f_d, Rinv=Rinv, RinvT=RinvT, pair_k=ks,
-                        pair_c=labels[rows], pair_n=opp_rel[rows, 1], n_clusters=n_clusters,
+                        pair_c=labels[rows], pair_n=opp_rel[rows, 1],
+                        pair_w=clear[relevant][rows, ks], pair_r=rows, n_clusters=n_clusters,
                         f_b=f_b, n_ref=n_ref, d_prev=d_prev, b_prev=b_prev, rel_cluster=labels)
 
     # ------------------------------------------------------------- solvers
@@ -472,7 +585,7 @@ class PassingSidePlanner:
         cfg = self.config
         C, N, P = prob.n_clusters, prob.lo.size, prob.pair_k.size
         nv = C + P + N
-        sl = cfg.safe_lat
+        sl = prob.pair_w
         lo_k, hi_k = prob.lo[prob.pair_k], prob.hi[prob.pair_k]
         Ma = np.maximum(0.0, hi_k - prob.pair_n + sl)
         Mb = np.maximum(0.0, prob.pair_n + sl - lo_k)
@@ -516,7 +629,7 @@ class PassingSidePlanner:
         cfg = self.config
         C, N, P = prob.n_clusters, prob.lo.size, prob.pair_k.size
         nv = P + N
-        sl = cfg.safe_lat
+        sl = prob.pair_w
         H = np.diag(np.concatenate([np.full(P, _Q_SLACK), np.ones(N)]))
         f = np.concatenate([np.full(P, cfg.w_slack), prob.RinvT @ prob.f_d])
         r = np.arange(P)
@@ -560,7 +673,7 @@ class PassingSidePlanner:
         cfg = self.config
         left = b[prob.pair_c] > 0.5
         dk = d[prob.pair_k]
-        xi = np.where(left, prob.pair_n + cfg.safe_lat - dk, dk - (prob.pair_n - cfg.safe_lat))
+        xi = np.where(left, prob.pair_n + prob.pair_w - dk, dk - (prob.pair_n - prob.pair_w))
         xi = np.where(xi > _SLACK_TOL, xi, 0.0)
         known = prob.b_prev >= 0
         bi = b[prob.rel_cluster][known]

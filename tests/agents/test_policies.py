@@ -214,3 +214,12 @@ def test_collect_requires_same_step_autoreset() -> None:
     with pytest.raises(ValueError, match="SAME_STEP"):
         agent.collect(venv, 4)
     venv.close()
+
+
+def test_initial_action_sets_the_untrained_deterministic_action():
+    from sofar_agents.pasta import PASTA, PASTAConfig
+
+    agent = PASTA(12, 5, [0.05], [1.0], PASTAConfig(initial_action=0.15, hidden_sizes=(16, 16)), seed=0)
+    np.testing.assert_allclose(agent.predict(np.zeros((2, 12), np.float32), deterministic=True), 0.15, atol=2e-3)
+    with pytest.raises(ValueError, match="inside the action bounds"):
+        PASTA(12, 5, [0.05], [1.0], PASTAConfig(initial_action=1.0, hidden_sizes=(16, 16)), seed=0)
