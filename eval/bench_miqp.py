@@ -9,11 +9,13 @@ loop. Both solvers must choose the same sides and reach the same objective.
     python eval/bench_miqp.py                 # 300 instances
     python eval/bench_miqp.py -n 100 --json out.json
     python eval/bench_miqp.py --mode snapshot     # independent states, opponents alongside
+    python eval/bench_miqp.py --closing-decel 10  # braking-distance window as in the stack
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 
@@ -102,12 +104,12 @@ def collect(args, cfg: MIQPConfig, solvers: tuple) -> dict:
     if args.mode == "snapshot":
         instances = [make_instance(rng, cfg, min_gap=5.0) for _ in range(args.instances)]
         for solver in solvers:
-            planner = PassingSidePlanner(MIQPConfig(solver=solver))
+            planner = PassingSidePlanner(dataclasses.replace(cfg, solver=solver))
             for inst in instances[:10]:  # warm caches
                 run_instance(planner, inst)
             results[solver] = [run_instance(planner, inst) for inst in instances]
     else:
-        planners = [PassingSidePlanner(MIQPConfig(solver=solver)) for solver in solvers]
+        planners = [PassingSidePlanner(dataclasses.replace(cfg, solver=solver)) for solver in solvers]
         run_rollout(planners, make_instance(rng, cfg, min_gap=20.0), 5)  # warm caches
         while len(results[solvers[0]]) < args.instances:
             inst = make_instance(rng, cfg, min_gap=20.0)
@@ -129,10 +131,13 @@ def main(argv=None) -> int:
     parser.add_argument("--calls", type=int, default=20, help="calls per rollout")
     parser.add_argument("--repeat", type=int, default=3,
                         help="repeat the whole (deterministic) run, keep each call's minimum time")
+    parser.add_argument("--closing-decel", type=float, default=0.0,
+                        help="MIQPConfig.closing_decel [m/s^2] (the stack uses the barrier's a_brake; "
+                             "default 0: plain box window)")
     parser.add_argument("--json", metavar="PATH", help="also write the numbers as JSON")
     args = parser.parse_args(argv)
 
-    cfg = MIQPConfig()
+    cfg = MIQPConfig(closing_decel=args.closing_decel)
     solvers = ("daqp", "enumerate")
     runs = [collect(args, cfg, solvers) for _ in range(max(1, args.repeat))]
     results = runs[0]
@@ -141,7 +146,7 @@ def main(argv=None) -> int:
              for solver in solvers}
 
     report = {"instances": args.instances, "seed": args.seed, "mode": args.mode,
-              "repeat": args.repeat}
+              "repeat": args.repeat, "closing_decel": args.closing_decel}
     print(f"MIQP latency over {args.instances} plan() calls, {args.mode} mode (ms)")
     print(f"{'solver':<10} {'median':>8} {'p95':>8} {'mean':>8} {'std':>8} {'max':>8}")
     for solver, res in results.items():

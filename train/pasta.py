@@ -96,6 +96,21 @@ class Args:
 # ---------------------------------------------------------------------------- arguments
 
 
+
+def _code_commit() -> str | None:
+    """The git commit of the source tree this script runs from (``+dirty`` if modified), if known."""
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    try:
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                timeout=5, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=5, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return commit + ("+dirty" if dirty else "")
+
 def _unwrap_optional(tp: Any) -> Any:
     if typing.get_origin(tp) in (typing.Union, types.UnionType):
         args = [a for a in typing.get_args(tp) if a is not type(None)]
@@ -286,7 +301,8 @@ def main(argv: list[str] | None = None) -> Path:
         prev_wall = 0.0
 
     run_meta = {
-        "command": shlex.join([sys.executable, *sys.argv]) if argv is None else shlex.join(["train/pasta.py", *argv]),
+        "command": shlex.join(["python", "train/pasta.py", *(sys.argv[1:] if argv is None else argv)]),
+        "code_commit": _code_commit(),
         "seed": args.seed,
         "env_id": args.env_id,
         "env_kwargs": json.loads(args.env_kwargs),
@@ -295,7 +311,10 @@ def main(argv: list[str] | None = None) -> Path:
         "rho": args.rho_values if args.rho_values is not None else [args.rho_min, args.rho_max],
         "resumed_from": args.resume,
     }
+    history = list(agent.metadata.get("history", []))
+    history.append(run_meta)
     agent.metadata.update(run_meta)
+    agent.metadata["history"] = history  # every training stage (first run and resumes), oldest first
 
     if args.track:
         try:

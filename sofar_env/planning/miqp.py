@@ -90,6 +90,13 @@ valid lower bound) and slacks a small curvature ``_Q_SLACK`` (a perturbation of
 order 1e-7 of the objective when slack is used, none otherwise). Slacks start in
 DAQP's working set at their bound (warm start), which saves one active-set
 iteration per pair.
+
+Per-call cost. The diagonal Hessian, the constraint types and the index arrays of
+the branch-and-bound depend only on ``(C, P)`` and are cached per planner (as are the
+Cholesky factors and the coefficients of the closing-speed derivative). The clearance
+window is evaluated for nodes and node intervals in one pass, only for opponents that
+can reach the (extended) window at all; the others cost nothing more, and a call
+without any such opponent returns before any problem is built.
 """
 
 from __future__ import annotations
@@ -270,6 +277,16 @@ class PassingSidePlanner:
             Rinv = np.linalg.solve(R, np.eye(N))          # d = Rinv u
             self._fact[key] = (H_d, np.ascontiguousarray(Rinv), np.ascontiguousarray(Rinv.T))
         self._t = np.arange(N) * config.node_dt
+        # np.gradient(., self._t, axis=1), precomputed: the same formulas and operation order
+        # (scalar spacing when the node times are evenly spaced in floating point).
+        dt = np.diff(self._t)
+        self._grad_dx = dt[0] if N > 1 and bool((dt == dt[0]).all()) else dt
+        if np.ndim(self._grad_dx) == 1:
+            dx1, dx2 = dt[:-1], dt[1:]
+            self._grad_abc = (-(dx2) / (dx1 * (dx1 + dx2)), (dx2 - dx1) / (dx1 * dx2),
+                              dx1 / (dx2 * (dx1 + dx2)))
+        self._node_idx = np.arange(N)
+        self._bnb_cache: dict = {}  # (C, P) -> Hessian, sense and index arrays of _solve_bnb
         self.n_failures = 0
         self._prev_s: np.ndarray | None = None
         self._prev_d: np.ndarray | None = None
@@ -414,6 +431,21 @@ class PassingSidePlanner:
             hi = np.where(narrow, mid, hi)
         return lo, hi
 
+    def _time_gradient(self, f: np.ndarray) -> np.ndarray:
+        """``np.gradient(f, self._t, axis=1)`` (first-order edges), same arithmetic."""
+        out = np.empty_like(f)
+        dx = self._grad_dx
+        if np.ndim(dx) == 0:
+            out[:, 1:-1] = (f[:, 2:] - f[:, :-2]) / (2. * dx)
+            dx_0 = dx_n = dx
+        else:
+            a, b, c = self._grad_abc
+            out[:, 1:-1] = a * f[:, :-2] + b * f[:, 1:-1] + c * f[:, 2:]
+            dx_0, dx_n = dx[0], dx[-1]
+        out[:, 0] = (f[:, 1] - f[:, 0]) / dx_0
+        out[:, -1] = (f[:, -1] - f[:, -2]) / dx_n
+        return out
+
     def _clearance(self, s_nodes: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
         """(M, N) lateral clearance [m] that node k must keep from opponent i; 0: no constraint.
 
@@ -422,59 +454,88 @@ class PassingSidePlanner:
         A node gets the largest clearance required anywhere on its two adjacent node
         intervals: the plan and the gap are linear between nodes, so keeping that clearance
         at both end nodes keeps it on the whole interval.
+
+        Rows are independent; opponents that cannot come within the (extended) window of
+        the ego at any node or node interval are skipped (their rows stay zero).
         """
         cfg = self.config
         N = cfg.nodes
         M = opp_s.shape[0]
+        w_all = np.zeros((M, N))
         if M == 0:
-            return np.zeros((0, N))
+            return w_all
         L = cfg.safe_lon
         gap = opp_s - s_nodes[None, :]
-        if cfg.closing_decel > 0.0:
-            dv = -np.gradient(gap, self._t, axis=1)        # closing speed when the opponent is ahead
-            ext_ahead = np.maximum(dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
-            ext_behind = np.maximum(-dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
+        closing = cfg.closing_decel > 0.0
+        if closing:
+            dv = -self._time_gradient(gap)                 # closing speed when the opponent is ahead
+            # every window extension of row i is at most dv_max^2 / (2 closing_decel)
+            ext_max = np.abs(dv).max(axis=1) ** 2 / (2.0 * cfg.closing_decel)
         else:
-            ext_ahead = ext_behind = np.zeros_like(gap)
-
-        def required(g, e_ahead, e_behind):
-            ext = np.where(g > 0.0, e_ahead, e_behind)
-            a = np.abs(g)
-            out = np.where(a < L, cfg.safe_lat, 0.0)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                r = (a - L) / ext
-                cap = cfg.safe_lat * np.sqrt(np.clip(1.0 - r * r, 0.0, 1.0))
-            return np.where((a >= L) & (ext > 0.0) & (a - L < ext), cap, out)
-
-        w = required(gap, ext_ahead, ext_behind)
+            ext_max = np.zeros(M)
+        # exact pre-selection: a clearance needs |gap| < L + extension at a node, or a node
+        # interval that reaches a zero gap (sign change or a zero end)
+        gmin = gap.min(axis=1)
+        gmax = gap.max(axis=1)
+        cand = (np.abs(gap).min(axis=1) < L + ext_max + 1e-6) | ((gmin <= 0.0) & (gmax >= 0.0))
+        if not cand.any():
+            return w_all
+        rows = np.flatnonzero(cand)
+        if rows.size < M:
+            gap = gap[rows]
+            if closing:
+                dv = dv[rows]
         a, b = gap[:, :-1], gap[:, 1:]
-        # the point of each interval nearest to a zero gap, and the larger extension of its ends
+        # the point of each interval nearest to a zero gap, and the larger extension of its ends;
+        # nodes (first N columns) and intervals (last N - 1) are evaluated together
         g_near = np.where((a > 0.0) & (b > 0.0), np.minimum(a, b),
                           np.where((a < 0.0) & (b < 0.0), np.maximum(a, b), 0.0))
-        seg = required(g_near, np.maximum(ext_ahead[:, :-1], ext_ahead[:, 1:]),
-                       np.maximum(ext_behind[:, :-1], ext_behind[:, 1:]))
+        g = np.concatenate([gap, g_near], axis=1)
+        safe_lat = cfg.safe_lat
+        ag = np.abs(g)
+        out = np.where(ag < L, safe_lat, 0.0)
+        if closing:
+            ext_a = np.maximum(dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
+            ext_b = np.maximum(-dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
+            ext = np.empty_like(g)
+            pos = g > 0.0
+            ext[:, :N] = np.where(pos[:, :N], ext_a, ext_b)
+            ext[:, N:] = np.where(pos[:, N:], np.maximum(ext_a[:, :-1], ext_a[:, 1:]),
+                                  np.maximum(ext_b[:, :-1], ext_b[:, 1:]))
+            over = ag - L
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                r = over / ext
+                cap = safe_lat * np.sqrt(np.clip(1.0 - r * r, 0.0, 1.0))
+            out = np.where((ag >= L) & (ext > 0.0) & (over < ext), cap, out)
+        w = out[:, :N]
+        seg = out[:, N:]
         w[:, :-1] = np.maximum(w[:, :-1], seg)
         w[:, 1:] = np.maximum(w[:, 1:], seg)
         stride = int(cfg.closing_stride)
-        if stride > 1 and cfg.closing_decel > 0.0:
+        if stride > 1 and closing:
             w = self._thin_extension(w, np.abs(gap) < L, stride)
-        return w
+        w_all[rows] = w
+        return w_all
 
-    @staticmethod
-    def _thin_extension(w: np.ndarray, box: np.ndarray, stride: int) -> np.ndarray:
+    def _thin_extension(self, w: np.ndarray, box: np.ndarray, stride: int) -> np.ndarray:
         """Keep every ``stride``-th constrained node outside the box window, counted outwards from
         it (the node next to the box is always kept). The clearance decreases away from the box,
         so each kept node requires at least what the dropped nodes beyond it would have."""
-        out = w.copy()
         N = w.shape[1]
-        k = np.arange(N)
-        for i in range(w.shape[0]):
-            bk = np.flatnonzero(box[i])
-            if bk.size == 0:
-                bk = np.array([int(np.argmax(w[i]))])  # window crossed between nodes
-            dist = np.abs(k[:, None] - bk[None, :]).min(axis=1)
-            drop = (w[i] > 0.0) & ~box[i] & (dist > 1) & ((dist - 1) % stride != 0)
-            out[i, drop] = 0.0
+        k = self._node_idx
+        big = 4 * N
+        # distance (in nodes) to the nearest box node, from both sides
+        last = np.maximum.accumulate(np.where(box, k, -big), axis=1)
+        nxt = np.minimum.accumulate(np.where(box, k, 2 * big)[:, ::-1], axis=1)[:, ::-1]
+        dist = np.minimum(k - last, nxt - k)
+        empty = ~box.any(axis=1)
+        if empty.any():  # window crossed between nodes: count from the largest clearance
+            dist[empty] = np.abs(k[None, :] - np.argmax(w[empty], axis=1)[:, None])
+        drop = (w > 0.0) & ~box & (dist > 1) & ((dist - 1) % stride != 0)
+        if not drop.any():
+            return w
+        out = w.copy()
+        out[drop] = 0.0
         return out
 
     def _clusters(self, pos: np.ndarray, act_rel: np.ndarray) -> tuple[int, np.ndarray]:
@@ -530,17 +591,26 @@ class PassingSidePlanner:
         had_side = self._prev_sides != 0
         if not had_side.any():
             return out
-        prev_opp = self._prev_opp[had_side]
-        prev_side = self._prev_sides[had_side]
-        v_ego = (s_nodes[1] - s_nodes[0]) / cfg.node_dt
+        prev = self._prev_opp[had_side].tolist()
+        prev_side = self._prev_sides[had_side].tolist()
+        v_ego = float(s_nodes[1] - s_nodes[0]) / cfg.node_dt
+        progress = float(progress)
         dt = progress / v_ego if v_ego > 0.1 and progress > 0.0 else 0.0
-        s_pred = prev_opp[:, 0] + prev_opp[:, 2] * dt - progress
-        ds = np.abs(opp_rel[:, :1] - s_pred[None, :]) / cfg.cluster_gap     # (R, Mp)
-        dn = np.abs(opp_rel[:, 1:2] - prev_opp[None, :, 1]) / max(cfg.safe_lat, 1e-9)
-        score = np.where((ds < 1.0) & (dn < 1.0), ds + dn, np.inf)
-        best = np.argmin(score, axis=1)
-        found = np.isfinite(score[np.arange(relevant.size), best])
-        out[found] = np.where(prev_side[best[found]] > 0, 1, 0)
+        s_pred = [row[0] + row[2] * dt - progress for row in prev]
+        gap_scale = cfg.cluster_gap
+        if not gap_scale > 0.0:  # no longitudinal match possible (x / 0 is inf or nan)
+            return out
+        lat_scale = max(cfg.safe_lat, 1e-9)
+        # the same arithmetic as the array form, element by element (R, Mp <= a few)
+        for r, (s_r, n_r) in enumerate(opp_rel[:, :2].tolist()):
+            best, best_j = np.inf, -1
+            for j, row in enumerate(prev):
+                ds = abs(s_r - s_pred[j]) / gap_scale
+                dn = abs(n_r - row[1]) / lat_scale
+                if ds < 1.0 and dn < 1.0 and ds + dn < best:
+                    best, best_j = ds + dn, j
+            if best_j >= 0:
+                out[r] = 1 if prev_side[best_j] > 0 else 0
         return out
 
     def _build(self, s_nodes, n_ref, lo, hi, ego_n, progress, opp, active, relevant, clear, opp_s) -> _Problem:
@@ -590,32 +660,48 @@ class PassingSidePlanner:
         Ma = np.maximum(0.0, hi_k - prob.pair_n + sl)
         Mb = np.maximum(0.0, prob.pair_n + sl - lo_k)
 
-        H = np.empty(nv)
-        H[:C] = _Q_BIN
-        H[C:C + P] = _Q_SLACK
-        H[C + P:] = 1.0
-        f = np.concatenate([prob.f_b - 0.5 * _Q_BIN, np.full(P, cfg.w_slack),
-                            prob.RinvT @ prob.f_d])
+        key = (C, P)
+        cached = self._bnb_cache.get(key)
+        if cached is None:
+            Hv = np.empty(nv)
+            Hv[:C] = _Q_BIN
+            Hv[C:C + P] = _Q_SLACK
+            Hv[C + P:] = 1.0
+            sense = np.zeros(C + P + N + 2 * P, dtype=np.int32)
+            sense[:C] = _SENSE_BINARY
+            # Slacks start at their bound xi = 0: without this warm start the active set
+            # needs one iteration per pair just to add the xi >= 0 bounds.
+            sense[C:C + P] = _SENSE_ACTIVE_LOWER
+            r2 = np.arange(2 * P)
+            slack_col = C + np.concatenate([np.arange(P), np.arange(P)])
+            slack_val = np.concatenate([-np.ones(P), np.ones(P)])
+            cached = (np.diag(Hv), sense, N + r2, slack_col, slack_val)
+            if len(self._bnb_cache) > 64:
+                self._bnb_cache.clear()
+            self._bnb_cache[key] = cached
+        H, sense, rows2, slack_col, slack_val = cached
+        f = np.empty(nv)
+        f[:C] = prob.f_b - 0.5 * _Q_BIN
+        f[C:C + P] = cfg.w_slack
+        f[C + P:] = prob.RinvT @ prob.f_d
         A = np.zeros((N + 2 * P, nv))
         A[:N, C + P:] = prob.Rinv
-        rows_d = prob.Rinv[prob.pair_k]
-        r = np.arange(P)
-        A[N:N + P, C + P:] = rows_d
-        A[N + r, prob.pair_c] = -Ma
-        A[N + r, C + r] = -1.0
-        A[N + P:, C + P:] = rows_d
-        A[N + P + r, prob.pair_c] = -Mb
-        A[N + P + r, C + r] = 1.0
-        bupper = np.concatenate([np.ones(C), np.full(P, _INF), prob.hi,
-                                 prob.pair_n - sl, np.full(P, _INF)])
-        blower = np.concatenate([np.zeros(C), np.zeros(P), prob.lo,
-                                 np.full(P, -_INF), prob.pair_n + sl - Mb])
-        sense = np.zeros(C + P + N + 2 * P, dtype=np.int32)
-        sense[:C] = _SENSE_BINARY
-        # Slacks start at their bound xi = 0: without this warm start the active set
-        # needs one iteration per pair just to add the xi >= 0 bounds.
-        sense[C:C + P] = _SENSE_ACTIVE_LOWER
-        x, _, flag, _ = daqp.solve(np.diag(H), f, A, bupper, blower, sense, presolve=0)
+        pk2 = np.concatenate([prob.pair_k, prob.pair_k])
+        A[N:, C + P:] = prob.Rinv[pk2]
+        A[rows2, np.concatenate([prob.pair_c, prob.pair_c])] = -np.concatenate([Ma, Mb])
+        A[rows2, slack_col] = slack_val
+        bupper = np.empty(C + P + N + 2 * P)
+        bupper[:C] = 1.0
+        bupper[C:C + P] = _INF
+        bupper[C + P:C + P + N] = prob.hi
+        bupper[C + P + N:C + 2 * P + N] = prob.pair_n - sl
+        bupper[C + 2 * P + N:] = _INF
+        blower = np.empty(C + P + N + 2 * P)
+        blower[:C + P] = 0.0
+        blower[C + P:C + P + N] = prob.lo
+        blower[C + P + N:C + 2 * P + N] = -_INF
+        blower[C + 2 * P + N:] = prob.pair_n + sl - Mb
+        x, _, flag, _ = daqp.solve(H, f, A, bupper, blower, sense.copy(), presolve=0)
         if flag not in _DAQP_OK:
             logger.debug("DAQP branch-and-bound exit flag %d", flag)
             return None

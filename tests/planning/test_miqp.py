@@ -361,3 +361,91 @@ def test_invalid_configuration_and_shapes_raise():
         PassingSidePlanner().plan(s[:-1], n_ref, n_min, n_max, 0.0, np.zeros((0, 3)))
     with pytest.raises(ValueError):
         PassingSidePlanner().plan(s, n_ref, n_min, n_max, 0.0, np.zeros((2, 2)))
+
+
+# --------------------------------------------------------------------------
+# The vectorised clearance window against a direct (per-row, per-node) form.
+# --------------------------------------------------------------------------
+def reference_clearance(cfg: MIQPConfig, t: np.ndarray, s_nodes: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
+    """The clearance window of the module docstring, written out row by row."""
+    L = cfg.safe_lon
+    gap = opp_s - s_nodes[None, :]
+    if cfg.closing_decel > 0.0:
+        dv = -np.gradient(gap, t, axis=1)
+        ext_ahead = np.maximum(dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
+        ext_behind = np.maximum(-dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
+    else:
+        ext_ahead = ext_behind = np.zeros_like(gap)
+
+    def required(g, e_ahead, e_behind):
+        ext = np.where(g > 0.0, e_ahead, e_behind)
+        a = np.abs(g)
+        out = np.where(a < L, cfg.safe_lat, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            r = (a - L) / ext
+            cap = cfg.safe_lat * np.sqrt(np.clip(1.0 - r * r, 0.0, 1.0))
+        return np.where((a >= L) & (ext > 0.0) & (a - L < ext), cap, out)
+
+    w = required(gap, ext_ahead, ext_behind)
+    a, b = gap[:, :-1], gap[:, 1:]
+    g_near = np.where((a > 0.0) & (b > 0.0), np.minimum(a, b),
+                      np.where((a < 0.0) & (b < 0.0), np.maximum(a, b), 0.0))
+    seg = required(g_near, np.maximum(ext_ahead[:, :-1], ext_ahead[:, 1:]),
+                   np.maximum(ext_behind[:, :-1], ext_behind[:, 1:]))
+    w[:, :-1] = np.maximum(w[:, :-1], seg)
+    w[:, 1:] = np.maximum(w[:, 1:], seg)
+    stride = int(cfg.closing_stride)
+    if stride > 1 and cfg.closing_decel > 0.0:
+        box = np.abs(gap) < L
+        out = w.copy()
+        k = np.arange(w.shape[1])
+        for i in range(w.shape[0]):
+            bk = np.flatnonzero(box[i])
+            if bk.size == 0:
+                bk = np.array([int(np.argmax(w[i]))])
+            dist = np.abs(k[:, None] - bk[None, :]).min(axis=1)
+            drop = (w[i] > 0.0) & ~box[i] & (dist > 1) & ((dist - 1) % stride != 0)
+            out[i, drop] = 0.0
+        w = out
+    return w
+
+
+@pytest.mark.parametrize("closing_decel, stride", [(0.0, 3), (10.0, 1), (10.0, 3), (4.0, 2)])
+def test_clearance_matches_the_direct_form_exactly(closing_decel, stride):
+    cfg = MIQPConfig(closing_decel=closing_decel, closing_stride=stride)
+    planner = PassingSidePlanner(cfg)
+    rng = np.random.default_rng(3)
+    t = CFG.node_dt * np.arange(N)
+    for _ in range(200):
+        v = rng.uniform(20.0, 70.0)
+        s_nodes = v * t + 0.5 * rng.uniform(-4.0, 2.0) * t ** 2
+        s_nodes = np.maximum.accumulate(np.maximum(s_nodes, 0.0))
+        M = int(rng.integers(0, 6))
+        s0 = rng.uniform(-40.0, 400.0, M)  # includes far opponents (skipped rows)
+        vo = v * rng.uniform(0.3, 1.3, M)
+        acc = rng.uniform(-5.0, 5.0, M)
+        opp_s = s0[:, None] + vo[:, None] * t[None, :] + 0.5 * acc[:, None] * t[None, :] ** 2
+        got = planner._clearance(s_nodes, opp_s)
+        np.testing.assert_array_equal(got, reference_clearance(cfg, t, s_nodes, opp_s))
+
+
+def test_time_gradient_matches_numpy():
+    planner = PassingSidePlanner(MIQPConfig(closing_decel=10.0))
+    f = np.random.default_rng(0).normal(size=(4, N)) * 50.0
+    np.testing.assert_array_equal(planner._time_gradient(f), np.gradient(f, planner._t, axis=1))
+
+
+def test_solver_inputs_are_not_shared_between_calls():
+    """The cached Hessian and constraint types of the branch-and-bound are reused unchanged."""
+    s, n_ref, n_min, n_max = straight()
+    planner = PassingSidePlanner()
+    opp = np.array([[30.0, 0.5, 40.0], [45.0, -2.0, 42.0]])
+    first = planner.plan(s, n_ref, n_min, n_max, 0.0, opp)
+    cached = {k: tuple(np.copy(a) for a in v) for k, v in planner._bnb_cache.items()}
+    planner.reset()
+    again = planner.plan(s, n_ref, n_min, n_max, 0.0, opp)
+    for k, v in planner._bnb_cache.items():
+        for a, b in zip(v, cached[k]):
+            np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(first.sides, again.sides)
+    np.testing.assert_allclose(first.d, again.d, atol=1e-9)
