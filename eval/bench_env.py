@@ -31,8 +31,8 @@ import sofar_env  # noqa: F401  (registers the ids)
 import sofar_env.env as env_module
 from sofar_env.env import SOfARRaceEnv
 
-TRACK_METHODS = ("to_frenet", "to_cartesian", "heading", "curvature", "width_left", "width_right", "speed", "wrap",
-                 "gap", "normal")
+TRACK_METHODS = ("to_frenet", "to_cartesian", "pose", "heading", "curvature", "width_left", "width_right", "speed",
+                 "wrap", "gap", "normal")
 
 
 class ComponentTimer:

@@ -112,7 +112,7 @@ class DecisionTally:
             "min_barrier": self.min_h,
             "barrier_slack": self.barrier_slack,
             "mpc_status": out.mpc.status if out is not None else "",
-            "miqp_sides": tuple(int(b) for b in plan.sides) if plan is not None else (),
+            "miqp_sides": tuple(map(int, np.asarray(plan.sides).tolist())) if plan is not None else (),
             "mpc_failures": stack.counters["mpc_failures"],
             "miqp_failures": stack.counters["miqp_failures"],
         }
@@ -321,7 +321,7 @@ class SOfARRaceEnv(gym.Env):
         tally = DecisionTally()
         for _ in range(self.config.decision_interval):
             out = stack.step(race.frenet[0], self._opponents, gamma)
-            profile_speed = track.speed(race.frenet[0, 0])
+            profile_speed = track.speed(float(race.frenet[0, 0]))
             events = race.step(out.u[None, :])[0]
             self._opponents = race.opponent_frenet(0)
             tally.add(race, 0, out, events, self._opponents, profile_speed, self._previous_gamma, bp)

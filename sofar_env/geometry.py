@@ -8,11 +8,13 @@ touching counts as a collision).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .vehicle import VehicleParams
 
-__all__ = ["footprint_corners", "rectangles_intersect"]
+__all__ = ["footprint_corners", "footprint_corner_list", "footprint_radius", "rectangles_intersect"]
 
 
 def footprint_corners(x, y, psi, p: VehicleParams) -> np.ndarray:
@@ -28,6 +30,23 @@ def footprint_corners(x, y, psi, p: VehicleParams) -> np.ndarray:
     cx = x[..., None] + lon * c - lat * s
     cy = y[..., None] + lon * s + lat * c
     return np.stack([cx, cy], axis=-1)
+
+
+def footprint_corner_list(x: float, y: float, psi: float, p: VehicleParams) -> list[tuple[float, float]]:
+    """:func:`footprint_corners` of one car as a list of four (x, y) tuples of Python floats.
+
+    The same arithmetic on floats, about 10x faster for a single footprint than the array
+    version (``math.cos``/``sin`` give numpy's values on common builds, else differ by an ulp).
+    """
+    c, s = math.cos(psi), math.sin(psi)
+    front, rear, half_w = p.cg_to_front, -p.cg_to_rear, 0.5 * p.width
+    return [(x + lon * c - lat * s, y + lon * s + lat * c)
+            for lon, lat in ((front, half_w), (rear, half_w), (rear, -half_w), (front, -half_w))]
+
+
+def footprint_radius(p: VehicleParams) -> float:
+    """Radius of the circle around the reference point that contains the footprint [m]."""
+    return math.hypot(max(p.cg_to_front, p.cg_to_rear), 0.5 * p.width)
 
 
 def rectangles_intersect(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -53,8 +53,14 @@ _TAU = np.linspace(0.0, LOOKAHEAD_TIME, _CURV_SAMPLES)
 
 def scale(raw) -> np.ndarray:
     """Physical values (..., 12) -> observation in [-1, 1] (float32)."""
-    raw = np.minimum(np.maximum(np.asarray(raw, float), OBS_LOW), OBS_HIGH)
-    return (2.0 * (raw - OBS_LOW) / _SPAN - 1.0).astype(np.float32)
+    out = np.maximum(np.asarray(raw, float), OBS_LOW)
+    # 2 (clip(raw) - lo) / span - 1, in place
+    np.minimum(out, OBS_HIGH, out=out)
+    out -= OBS_LOW
+    out *= 2.0
+    out /= _SPAN
+    out -= 1.0
+    return out.astype(np.float32)
 
 
 def raw_observation(track, ego_frenet, opponents) -> np.ndarray:

@@ -128,7 +128,7 @@ class Opponents:
         delta = (gap - self.rel + 0.5 * L) % L - 0.5 * L
         self.rel = self.rel + delta
         self.was_ahead |= self.rel > 0.0
-        passed = np.flatnonzero(self.was_ahead & (self.rel <= -self.config.overtake_threshold))
+        passed = (self.was_ahead & (self.rel <= -self.config.overtake_threshold)).nonzero()[0]
         for i in passed:
             self._respawn(int(i), ego_s)
         return passed
@@ -155,13 +155,10 @@ class Opponents:
         key = self.s.tobytes() + self.n.tobytes()
         if self._pose_cache is not None and self._pose_cache[0] == key:
             return self._pose_cache[1]
-        m = self.count
-        x, y, psi = np.empty(m), np.empty(m), np.empty(m)
-        track = self.track
+        pose = self.track.pose
         # a scalar loop: the field is small and the track's scalar paths are ~30x faster than its array paths
-        for i, (s, n) in enumerate(zip(self.s.tolist(), self.n.tolist())):
-            x[i], y[i] = track.to_cartesian(s, n)
-            psi[i] = track.heading(s)
+        rows = [pose(s, n) for s, n in zip(self.s.tolist(), self.n.tolist())]
+        x, y, psi = (np.array(col, dtype=float) for col in zip(*rows)) if rows else (np.zeros(0) for _ in range(3))
         for a in (x, y, psi):
             a.setflags(write=False)
         self._pose_cache = (key, (x, y, psi))

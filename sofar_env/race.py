@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.ndimage import minimum_filter1d
 
-from .geometry import footprint_corners, rectangles_intersect
+from .geometry import footprint_corner_list, footprint_corners, footprint_radius, rectangles_intersect
 from .opponents import OpponentConfig, Opponents
 from .vehicle import AV21, Plant, VehicleParams
 
@@ -115,7 +115,10 @@ class Race:
         # off-track prefilter: the smallest width within +-_EDGE_WINDOW of each raceline sample
         # (the corners' own projections are only needed near an edge)
         p = self.config.vehicle
-        self._corner_reach = math.hypot(max(p.cg_to_front, p.cg_to_rear), 0.5 * p.width)
+        self._corner_reach = footprint_radius(p)
+        # two footprints can only touch when their reference points are within twice that radius
+        # (the 1 mm of slack keeps the prefilter exact whatever the rounding)
+        self._contact_dist2 = (2.0 * self._corner_reach + 1e-3) ** 2
         samples = np.asarray(track.s, float)
         spacing = track.length / len(samples)
         half = int(math.ceil(_EDGE_WINDOW / spacing))
@@ -161,13 +164,19 @@ class Race:
 
         ``s`` is absolute arc length [m], ``v`` the arc-length speed ds/dt [m/s].
         """
-        rows = [np.column_stack([self.opponents.s, self.opponents.n, self.opponents.v])] if self.opponents.count else []
+        rows = []
+        if self.opponents.count:
+            opp = np.empty((self.opponents.count, 3))  # np.column_stack of (s, n, v), without its checks
+            opp[:, 0], opp[:, 1], opp[:, 2] = self.opponents.s, self.opponents.n, self.opponents.v
+            rows.append(opp)
         others = [j for j in range(self.n_cars) if j != car and self.active[j]]
         if others:
             f = self.frenet[others]
             kappa = np.asarray(self.track.curvature(f[:, 0]), float)
             s_dot = f[:, 3] * np.cos(f[:, 2]) / (1.0 - kappa * f[:, 1])
             rows.append(np.column_stack([f[:, 0], f[:, 1], s_dot]))
+        if len(rows) == 1:
+            return rows[0]
         return np.concatenate(rows) if rows else np.zeros((0, 3))
 
     def obstacle_poses(self, car: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -189,7 +198,7 @@ class Race:
         x, y, _ = self.obstacle_poses(car)
         if x.size == 0:
             return math.inf
-        return float(np.min(np.hypot(x - self.states[car, 0], y - self.states[car, 1])))
+        return float(np.hypot(x - self.states[car, 0], y - self.states[car, 1]).min())
 
     def laps(self, car: int = 0) -> float:
         """Completed laps of car ``car``: arc length driven / track length."""
@@ -207,17 +216,19 @@ class Race:
         from the obstacle lists. Returns the events of every car (all False for inactive ones).
         """
         u = np.asarray(controls, float).reshape(self.n_cars, 2)
-        if not np.all(np.isfinite(u[self.active])):
-            raise ValueError(f"non-finite control {u.tolist()}")
+        active = [k for k, on in enumerate(self.active.tolist()) if on]
+        rows = u.tolist()
+        if not all(math.isfinite(a) and math.isfinite(dd) for a, dd in (rows[k] for k in active)):
+            raise ValueError(f"non-finite control {rows}")
         dt = self.config.dt
-        for k in np.flatnonzero(self.active):
+        for k in active:
             self.states[k] = self.plant.step(self.states[k], u[k])
         self.opponents.advance(dt)
         self.time += dt
         self.steps += 1
         events = [CarEvents() for _ in range(self.n_cars)]
         track = self.track
-        for k in np.flatnonzero(self.active):
+        for k in active:
             s_old = float(self.frenet[k, 0])
             x, y, psi, v, delta = self.states[k].tolist()
             s, n = track.to_frenet(x, y, s_hint=s_old)
@@ -252,13 +263,11 @@ class Race:
         # over the window, no corner can be beyond an edge
         if n_c + reach < self._wl_min[i] and reach - n_c < self._wr_min[i]:
             return False
-        x, y, psi = self.states[k, :3]
-        corners = footprint_corners(x, y, psi, self.config.vehicle).tolist()
-        s_hint = float(self.frenet[k, 0])
+        x, y, psi = self.states[k, :3].tolist()
         track = self.track
         # one scalar projection per corner, seeded at the car's own s (the track's scalar path is the fast one)
-        for cx, cy in corners:
-            s, n = track.to_frenet(cx, cy, s_hint=s_hint)
+        for cx, cy in footprint_corner_list(x, y, psi, self.config.vehicle):
+            s, n = track.to_frenet(cx, cy, s_hint=s_c)
             if n > track.width_left(s) or n < -track.width_right(s):
                 return True
         return False
@@ -267,10 +276,13 @@ class Race:
         x, y, psi = self.obstacle_poses(k)
         if x.size == 0:
             return False
-        # cheap distance prefilter: only cars whose reference points are within 10 m can touch
-        near = np.hypot(x - self.states[k, 0], y - self.states[k, 1]) < 10.0
-        if not near.any():
+        # bounding-circle prefilter: only cars whose reference points are within 2 footprint radii can touch
+        xk, yk = self.states[k, :2].tolist()
+        reach2 = self._contact_dist2
+        near = [(xo - xk) ** 2 + (yo - yk) ** 2 < reach2 for xo, yo in zip(x.tolist(), y.tolist())]
+        if not any(near):
             return False
+        near = np.array(near)
         p = self.config.vehicle
         obstacles = footprint_corners(x[near], y[near], psi[near], p)
         ego = footprint_corners(self.states[k, 0], self.states[k, 1], self.states[k, 2], p)

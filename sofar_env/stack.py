@@ -24,8 +24,13 @@ Additions to the paper's algorithm, each closing a failure mode seen in closed l
   reference at ``sqrt(v_o^2 + 2 follow_decel (gap - follow_gap))``, the speed from
   which braking at ``follow_decel`` ends at the opponent's speed ``follow_gap``
   behind it. An opponent behind which the ego can no longer stay (braking at
-  ``follow_reach_decel``) is not followed. The pass is re-examined at every MIQP
-  call.
+  ``follow_reach_decel`` the gap would shrink below ``min(gap, a0)``, or not reach
+  the barrier's ``a0`` within the horizon) is not followed. A car the ego is already
+  alongside is followed when braking drops the ego behind it (the follow plan keeps
+  the ego's side of it until the ego is ``a0`` behind): holding such a pass is what
+  squeezes the ego between that car and a closing edge at a corner entry.
+  The pass is re-examined at every MIQP call, with hysteresis: while following, a pass
+  is resumed only once its clearance violation has fallen to ``follow_release_slack``.
 * **Footprint-aware track edges.** Leaving the track is judged on the footprint's
   corners, the MPC keeps its reference point ``track_margin`` from the edge. The
   edges given to the planners are the narrowest within the car's length around
@@ -57,6 +62,11 @@ from .control.mpc import MPCConfig, MPCDCBF, MPCResult, MPCStageData
 from .planning.miqp import MIQPConfig, PassingSidePlanner, PlanResult
 from .vehicle import AV21, VehicleParams
 
+try:  # np.interp without its Python wrapper (same kernel, same results): called every step
+    from numpy._core.multiarray import interp as _interp
+except ImportError:  # pragma: no cover - other numpy layouts
+    _interp = np.interp
+
 __all__ = ["StackConfig", "StackOutput", "OvertakingStack"]
 
 
@@ -83,6 +93,11 @@ class StackConfig:
     semi-axis b = 2.7 m: a pass planned at about b stalls alongside the opponent (the barrier
     is near 0 there and, for small gamma, may only decay slowly), and a looser 0.8 m led to
     exactly that, and a collision, on Kentucky at rho = 0.1, gamma = 0.05."""
+    follow_release_slack: float = 0.1
+    """Hysteresis of the follow decision [m]: while following, an opponent ahead stays blocked
+    until the passing plan violates its clearance by at most this (entering takes
+    ``follow_slack``). Without it the decision can flicker every MIQP call near the threshold,
+    and each flicker trades braking for a pass attempt (Laguna Seca, last corner)."""
     follow_gap: float = 12.0
     """Arc-length distance kept behind a followed opponent [m] (the barrier's a0 = 7 m plus 5 m)."""
     follow_decel: float = 5.0
@@ -90,8 +105,11 @@ class StackConfig:
     sqrt(v_o^2 + 2 follow_decel (gap - follow_gap)), the speed from which the ego reaches the
     opponent's speed ``follow_gap`` behind it, and the MIQP node positions brake at this rate."""
     follow_reach_decel: float = 8.0
-    """Deceleration [m/s^2] that decides whether the ego can still stay behind an opponent (at
-    least the barrier's a0 behind it); if not, the pass is not abandoned."""
+    """Deceleration [m/s^2] that decides whether the ego can still stay behind an opponent
+    (:meth:`OvertakingStack._can_stay_behind`); if not, the pass is not abandoned."""
+    follow_alongside: bool = True
+    """Also follow a blocking car the ego is alongside or less than the barrier's a0 behind,
+    when braking at ``follow_reach_decel`` drops the ego behind it (else such a pass is held)."""
     pace_prediction: bool = True
     """Predict the opponents along the speed profile at their current pace ratio
     (:meth:`OvertakingStack.predict_opponents`) instead of at constant speed: the MIQP gets
@@ -109,6 +127,8 @@ class StackConfig:
             raise ValueError(f"speed_factor must lie in (0, 1.5], got {self.speed_factor}")
         if self.miqp_interval < 1:
             raise ValueError("miqp_interval must be >= 1")
+        if not 0.0 <= self.follow_release_slack <= self.follow_slack:
+            raise ValueError("follow_release_slack must lie in [0, follow_slack]")
         for name in ("follow_slack", "follow_gap"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0")
@@ -190,7 +210,8 @@ class OvertakingStack:
             return np.zeros((0, 3))
         gap = np.asarray(self.track.gap(opp[:, 0], ego_s), float).reshape(-1)
         keep = (gap >= -self.config.look_behind) & (gap <= self.config.look_ahead)
-        rel = np.column_stack([gap, opp[:, 1], opp[:, 2]])[keep]
+        rel = opp[keep]  # a copy (boolean indexing)
+        rel[:, 0] = gap[keep]
         return rel[np.argsort(np.abs(rel[:, 0]))]
 
     def predict_opponents(self, ego_s: float, opp_rel: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -209,8 +230,8 @@ class OvertakingStack:
             return opp_rel[:, :1] + opp_rel[:, 2:3] * times[None, :]
         s_abs = np.asarray(self.track.wrap(ego_s + opp_rel[:, 0]), float)
         rho = np.maximum(opp_rel[:, 2], 0.0) / np.maximum(np.asarray(self.track.speed(s_abs), float), 0.1)
-        t0 = np.interp(s_abs, self._pace_s, self._pace_t)
-        s_pred = np.interp(t0[:, None] + rho[:, None] * times[None, :], self._pace_t, self._pace_s)
+        t0 = _interp(s_abs, self._pace_s, self._pace_t)
+        s_pred = _interp(t0[:, None] + rho[:, None] * times[None, :], self._pace_t, self._pace_s)
         return opp_rel[:, :1] + (s_pred - s_abs[:, None])
 
     def _node_positions(self, ego_s: float, ego_v: float) -> np.ndarray:
@@ -256,6 +277,21 @@ class OvertakingStack:
         cap = (blocker_s - self.config.follow_gap).min(axis=0)
         return np.maximum.accumulate(np.maximum(s_brake, np.minimum(s_nodes, cap)))
 
+    def _can_stay_behind(self, ego_v: float, gap: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
+        """Whether the ego, braking at ``follow_reach_decel``, can stay (or get) behind each opponent.
+
+        ``gap`` [m] are the current gaps (opponent minus ego), ``opp_s`` [m] the predicted
+        opponent positions at the node times. With ``follow_alongside`` the gap under hard
+        braking must never shrink below ``min(gap, a0)`` and must reach ``a0`` by the end of
+        the horizon, so a car the ego is already alongside is followable when braking drops
+        the ego behind it. Without it the gap must stay at least ``a0`` throughout.
+        """
+        a0 = self.config.mpc.barrier.a0
+        room = opp_s - self._braking_positions(ego_v, self.config.follow_reach_decel)[None, :]
+        if not self.config.follow_alongside:
+            return room.min(axis=1) >= a0
+        return (room.min(axis=1) >= np.minimum(gap, a0) - 1e-6) & (room[:, -1] >= a0)
+
     def _plan_lateral(self, ego_s: float, ego_n: float, ego_v: float, opp_rel: np.ndarray) -> float:
         cfg = self.config
         s_nodes = self._node_positions(ego_s, ego_v)
@@ -266,30 +302,31 @@ class OvertakingStack:
         t0 = time.perf_counter()
         memory = self.planner.memory()
         plan = self.planner.plan(s_nodes, n_ref, n_min, n_max, ego_n, opp_rel, progress=progress, opponent_s=opp_s)
-        self._follow = None
+        was_following, self._follow = self._follow, None
         if cfg.follow and plan.success and plan.opponent_slack is not None and len(opp_rel):
             # an opponent ahead whose clearance the best passing plan violates, and behind which the
-            # ego can still stay (braking keeps it at least the barrier's a0 behind): follow it
-            s_hard = self._braking_positions(ego_v, cfg.follow_reach_decel)
-            room = (opp_s - s_hard[None, :]).min(axis=1)
-            blocked = ((plan.opponent_slack > cfg.follow_slack) & (opp_rel[:, 0] > 0.0)
-                       & (room >= cfg.mpc.barrier.a0))
+            # ego can stay or drop (_can_stay_behind): follow it
+            # hysteresis: while following, a pass is only resumed once it is (nearly) clear
+            threshold = cfg.follow_release_slack if was_following is not None else cfg.follow_slack
+            blocked = ((plan.opponent_slack > threshold) & (opp_rel[:, 0] > 0.0)
+                       & self._can_stay_behind(ego_v, opp_rel[:, 0], opp_s))
             if blocked.any():
-                # followed opponents are kept behind longitudinally (speed cap, barrier), not
-                # passed: the lateral plan only deals with the others
+                # followed opponents are kept behind longitudinally (speed cap, barrier), not passed:
+                # the lateral plan leaves them out, except those the ego is still alongside (less
+                # than a0 behind), whose side it must keep until braking has dropped it behind
                 s_follow = self._follow_positions(s_nodes, self._braking_positions(ego_v, cfg.follow_decel),
                                                   opp_s[blocked])
                 n_min_f, n_max_f = self.edges(ego_s + s_follow)
-                free = ~blocked
+                planned = ~blocked | (opp_rel[:, 0] < cfg.mpc.barrier.a0)
                 passing_memory = self.planner.memory()
                 self.planner.restore_memory(memory)
-                follow_plan = self.planner.plan(s_follow, n_ref, n_min_f, n_max_f, ego_n, opp_rel[free],
-                                                progress=progress, opponent_s=opp_s[free])
+                follow_plan = self.planner.plan(s_follow, n_ref, n_min_f, n_max_f, ego_n, opp_rel[planned],
+                                                progress=progress, opponent_s=opp_s[planned])
                 if follow_plan.success and follow_plan.max_slack < plan.max_slack:
                     sides = np.zeros(len(opp_rel), dtype=int)
-                    sides[free] = follow_plan.sides
+                    sides[planned] = follow_plan.sides
                     slack = np.zeros(len(opp_rel))
-                    slack[free] = follow_plan.opponent_slack
+                    slack[planned] = follow_plan.opponent_slack
                     plan = dataclasses.replace(follow_plan, sides=sides, opponent_slack=slack)
                     self._follow = (opp_rel[blocked].copy(), self._step)
                 else:
@@ -308,7 +345,7 @@ class OvertakingStack:
         if self._last_pred is None:
             return None
         t = self._mpc_t
-        return np.abs(np.interp(t + self.config.mpc.control_dt, t, self._last_pred[:, 2]))
+        return np.abs(_interp(t + self.config.mpc.control_dt, t, self._last_pred[:, 2]))
 
     def stage_data(self, ego_s: float) -> MPCStageData:
         """Per-stage data of the MPC at the s of its warm start."""
@@ -355,7 +392,7 @@ class OvertakingStack:
         gamma = float(gamma)
         if not math.isfinite(gamma) or not (0.0 < gamma <= 1.0):
             raise ValueError(f"gamma must be a finite number in (0, 1], got {gamma!r}")
-        s, n, e, v, delta = (float(x) for x in ego_frenet)
+        s, n, e, v, delta = np.asarray(ego_frenet, float).tolist()
         opp_rel = self.relative_opponents(s, opponents)
         miqp_ran = False
         miqp_time = 0.0

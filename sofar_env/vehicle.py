@@ -4,7 +4,8 @@ The kinematic bicycle referenced at the centre of gravity with side slip
 (paper appendix) is written **once**, as functions over an ``ops`` namespace
 (``sin``, ``cos``, ``tan``, ``atan``). Passing :mod:`casadi` builds the symbolic
 model used by the MPC; passing :mod:`math` evaluates the very same equations on
-Python floats for the plant. The two therefore cannot drift apart.
+Python floats. The two therefore cannot drift apart. (The plant's RK4 step is that
+evaluation written out for speed; a test checks it against the generic form bit for bit.)
 
 States and inputs
 -----------------
@@ -214,18 +215,35 @@ class Plant:
         return min(max(a, p.a_min), p.a_max), min(max(dd, -p.steer_rate_max), p.steer_rate_max)
 
     def step(self, x: Sequence[float], u: Sequence[float]) -> np.ndarray:
-        """State after one control period ``dt`` with input ``u`` held (zero-order hold)."""
+        """State after one control period ``dt`` with input ``u`` held (zero-order hold).
+
+        Each sub-step is ``rk4_step(cartesian_rhs, ...)`` written out for this model (the same
+        floating-point operations in the same order, so the same result to the last bit, which
+        tests/test_fast_paths.py checks): v and delta have the constant rates a and delta_dot, so
+        only the rates of x, y and psi are evaluated, three times fewer calls than the generic form.
+        """
         p = self.params
         a, dd = self.clip_input(u)
-        uu = (a, dd)
         h = self.dt / self.substeps
-        state = [float(v) for v in x]
+        half, sixth = 0.5 * h, h / 6.0
+        k_slip, wb = p.lr / p.wheelbase, p.wheelbase
+        px, py, psi, v, delta = (float(c) for c in x)
 
-        def rhs(xx, uu_):
-            return cartesian_rhs(xx, uu_, p, math)
+        def rates(psi_, v_, delta_):  # (x', y', psi') of cartesian_rhs
+            tan_delta = math.tan(delta_)
+            beta = math.atan(k_slip * tan_delta)
+            return (v_ * math.cos(psi_ + beta), v_ * math.sin(psi_ + beta),
+                    v_ / wb * math.cos(beta) * tan_delta)
 
         for _ in range(self.substeps):
-            state = rk4_step(rhs, state, uu, h, 1)
-            state[3] = max(state[3], 0.0)
-            state[4] = min(max(state[4], -p.steer_max), p.steer_max)
-        return np.array(state)
+            x1, y1, r1 = rates(psi, v, delta)
+            v2, delta2 = v + half * a, delta + half * dd  # the stage states of k2 and k3
+            x2, y2, r2 = rates(psi + half * r1, v2, delta2)
+            x3, y3, r3 = rates(psi + half * r2, v2, delta2)
+            x4, y4, r4 = rates(psi + h * r3, v + h * a, delta + h * dd)
+            px = px + sixth * (x1 + 2.0 * x2 + 2.0 * x3 + x4)
+            py = py + sixth * (y1 + 2.0 * y2 + 2.0 * y3 + y4)
+            psi = psi + sixth * (r1 + 2.0 * r2 + 2.0 * r3 + r4)
+            v = max(v + sixth * (a + 2.0 * a + 2.0 * a + a), 0.0)
+            delta = min(max(delta + sixth * (dd + 2.0 * dd + 2.0 * dd + dd), -p.steer_max), p.steer_max)
+        return np.array([px, py, psi, v, delta])

@@ -169,3 +169,46 @@ def test_follows_an_opponent_it_cannot_pass(tracks):
         followed |= out.following
     assert followed
     assert stack.counters["follow_steps"] > 0
+
+
+def test_can_stay_behind_a_car_alongside_only_if_braking_drops_the_ego_back(tracks):
+    """The follow decision's reachability test: a car alongside at equal speed is followable (hard
+    braking drops the ego behind it) with ``follow_alongside``, not without; a car being closed on
+    fast from 20 m is never followable; one 30 m ahead at equal speed always is."""
+    track = tracks["Monza"]
+    times = np.arange(StackConfig().miqp.nodes) * StackConfig().miqp.node_dt
+    v = 30.0
+    gaps = np.array([1.0, 20.0, 30.0])
+    speeds = np.array([v, 0.2 * v, v])
+    opp_s = gaps[:, None] + speeds[:, None] * times[None, :]  # constant speed, relative to the ego now
+    with_alongside = OvertakingStack(track)._can_stay_behind(v, gaps, opp_s)
+    without = OvertakingStack(track, StackConfig(follow_alongside=False))._can_stay_behind(v, gaps, opp_s)
+    assert with_alongside.tolist() == [True, False, True]
+    assert without.tolist() == [False, False, True]
+
+
+@pytest.mark.parametrize("rho, seed, gamma, until, overtakes", [
+    # the ego ends up alongside a car as the left edge closes in at the last corner; holding
+    # the pass squeezed it into that car at 110.5 s (with follow_alongside=False and
+    # follow_release_slack=0.5; either fix alone avoids it)
+    (0.65, 3252676551, 0.5, 112.0, 4),
+    # at the same corner the follow decision flickered at every MIQP call (no hysteresis,
+    # follow_release_slack = follow_slack), trading braking for pass attempts until a
+    # collision at 119.6 s
+    (0.3, 1531305125, 0.05, 121.0, 14),
+])
+def test_laguna_seca_last_corner_regressions(rho, seed, gamma, until, overtakes):
+    """Closed-loop regressions from evaluation episodes on Laguna Seca (the stack's defaults)."""
+    env = gym.make("SOfAR-LagunaSeca-v0")
+    env.reset(seed=seed, options={"rho": rho})
+    info = {}
+    while not info or info["sim_time"] < until:
+        _, _, terminated, truncated, info = env.step(np.array([gamma], np.float32))
+        assert not terminated, f"collision/off-track at {info['sim_time']:.1f} s"
+    assert info["overtakes"] >= overtakes
+    env.close()
+
+
+def test_follow_release_slack_is_validated():
+    with pytest.raises(ValueError, match="follow_release_slack"):
+        StackConfig(follow_release_slack=0.6)

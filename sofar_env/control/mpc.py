@@ -317,6 +317,19 @@ def _stage_function(vehicle: VehicleParams, bp: BarrierParams, m_max: int, subst
                        ["x", "u", "kappa", "dt", "o"], ["f", "A", "B", "alat", "dalat", "h", "dh"])
 
 
+_PIQP = None
+
+
+def _import_piqp():
+    """The piqp module, imported on first use (an import statement costs ~1 us per solve)."""
+    global _PIQP
+    if _PIQP is None:
+        import piqp
+
+        _PIQP = piqp
+    return _PIQP
+
+
 def _definition_hash(*parts: Any) -> str:
     return hashlib.sha1(repr(parts).encode()).hexdigest()[:12]
 
@@ -804,7 +817,7 @@ class MPCDCBF:
         h = self._out_h[:, :n_cand]
         resid = (1.0 - gamma) * h[:-1] - h[1:]
         keep = (h.min(axis=0) < cfg.opponent_h_keep) | (resid.max(axis=0) > -cfg.opponent_dcbf_keep)
-        return np.flatnonzero(keep)
+        return keep.nonzero()[0]
 
     # ---------------------------------------------------------------- QP
 
@@ -949,8 +962,7 @@ class MPCDCBF:
         return z, iters, "solved"
 
     def _solve_piqp(self, qs: _QPStructure, data):
-        import piqp
-
+        piqp = _import_piqp()
         c, b, hl, hu, xl, xu = data
         cfg = self.config
         if qs.solver is None:
@@ -1082,7 +1094,9 @@ class MPCDCBF:
             break
 
         if len(opp) > n_cand:  # opponents outside the window: evaluate h numerically
-            barrier_min = min(barrier_min, float(barrier(x0[None, :], opp, cfg.barrier).min()))
+            # barrier(x0[None, :], opp) without its argument checks
+            h_all = barrier_expr(x0[0:1], x0[1:2], x0[3:4], opp[:, 0], opp[:, 1], opp[:, 2], cfg.barrier)
+            barrier_min = min(barrier_min, float(h_all.min()))
         if z is None or not math.isfinite(float(xbar.sum() + ubar.sum())):
             return self._fallback(x0, message or "non-finite iterate", t_start, qp_iters, sqp_iters,
                                   barrier_min, m)
@@ -1116,7 +1130,7 @@ class MPCDCBF:
             margin = qs.solver.result.s_u[rows]  # h_u - G z, as computed by PIQP
         else:
             margin = hu[rows] - (qs.G @ z)[rows]
-        return bool(np.min(margin) < self.config.barrier_active_tol)
+        return bool(margin.min() < self.config.barrier_active_tol)
 
     def _fallback(self, x0, message, t_start, qp_iters, sqp_iters, barrier_min, m) -> MPCResult:
         cfg = self.config

@@ -91,21 +91,28 @@ order 1e-7 of the objective when slack is used, none otherwise). Slacks start in
 DAQP's working set at their bound (warm start), which saves one active-set
 iteration per pair.
 
-Per-call cost. The diagonal Hessian, the constraint types and the index arrays of
-the branch-and-bound depend only on ``(C, P)`` and are cached per planner (as are the
-Cholesky factors and the coefficients of the closing-speed derivative). The clearance
-window is evaluated for nodes and node intervals in one pass, only for opponents that
-can reach the (extended) window at all; the others cost nothing more, and a call
-without any such opponent returns before any problem is built.
+Per-call cost. The diagonal Hessian, the constraint types, the index arrays and the
+constant parts of the bounds of the branch-and-bound depend only on ``(C, P)`` and are
+cached per planner (as are the Cholesky factors and the coefficients of the
+closing-speed derivative). The clearance window is evaluated for the nodes and node
+intervals of all opponents at once (the arrays are small: the cost is the number of
+numpy calls, not the number of opponents), and a call without any relevant opponent
+returns before any problem is built.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass
 
 import numpy as np
+
+try:  # the compiled kernel behind np.interp (no Python-level argument handling)
+    from numpy._core.multiarray import interp as _interp_kernel
+except ImportError:  # pragma: no cover - other numpy layouts
+    _interp_kernel = np.interp
 
 try:  # DAQP is a hard dependency, but plan() must never raise because of it.
     import daqp
@@ -123,6 +130,7 @@ _DAQP_OK = (1, 2)    # DAQP exit flags that mean "optimal" (2: optimal with soft
 _SLACK_TOL = 1e-6    # [m] violations below this are solver tolerance, not slack use
 _SENSE_BINARY = 16
 _SENSE_ACTIVE_LOWER = 3   # DAQP: ACTIVE (1) | LOWER (2): start with this bound in the working set
+_PRIOR_SIDE = np.array([0, -1, 1])  # sides of PlanResult for a previous side -1 (unknown), 0 (right), 1 (left)
 
 
 @dataclass(frozen=True)
@@ -229,7 +237,7 @@ class PlanResult:
 
     def lateral_at(self, s_query) -> np.ndarray:
         """Plan interpolated at relative arc lengths ``s_query`` [m], constant beyond the ends."""
-        return np.interp(np.asarray(s_query, dtype=float), self.s, self.d)
+        return _interp_kernel(np.asarray(s_query, dtype=float), self.s, self.d)  # np.interp
 
 
 @dataclass
@@ -285,7 +293,18 @@ class PassingSidePlanner:
             dx1, dx2 = dt[:-1], dt[1:]
             self._grad_abc = (-(dx2) / (dx1 * (dx1 + dx2)), (dx2 - dx1) / (dx1 * dx2),
                               dx1 / (dx2 * (dx1 + dx2)))
+        # _closing_speed: the same formulas with negated coefficients (negation is exact)
+        if np.ndim(self._grad_dx) == 0:
+            self._grad_div = np.full(N, 2. * self._grad_dx)  # dx at both ends, 2 dx inside
+            self._grad_div[[0, -1]] = self._grad_dx
+        else:
+            self._grad_div = None
+            self._grad_neg_abc = tuple(-c for c in self._grad_abc)
         self._node_idx = np.arange(N)
+        # _thin_extension: whether a node at distance d (in nodes) from the box window is dropped
+        stride = int(config.closing_stride)
+        d = np.arange(8 * N + 1)
+        self._thin_drop = (d > 1) & ((d - 1) % stride != 0)
         self._bnb_cache: dict = {}  # (C, P) -> Hessian, sense and index arrays of _solve_bnb
         self.n_failures = 0
         self._prev_s: np.ndarray | None = None
@@ -365,16 +384,16 @@ class PassingSidePlanner:
         # A sum is finite iff every term is (the magnitudes here cannot overflow).
         total = (s_nodes.sum() + n_ref.sum() + lo.sum() + hi.sum() + opp.sum() + opp_s.sum()
                  + float(ego_n) + float(progress))
-        if not np.isfinite(total):
+        if not math.isfinite(total):
             return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None,
                                   "non-finite input")
 
         try:
             clear = self._clearance(s_nodes, opp_s)
             active = clear > 0.0
-            relevant = np.flatnonzero(active.any(axis=1))
+            relevant = active.any(axis=1).nonzero()[0]
             if relevant.size == 0:
-                d = np.clip(n_ref, lo, hi)
+                d = n_ref.clip(lo, hi)
                 self._remember(s_nodes, d, opp, np.zeros(M, dtype=int))
                 return PlanResult(d=d, s=s_nodes.copy(), sides=np.zeros(M, dtype=int),
                                   objective=self._cost(d, n_ref, None, 0.0, 0.0),
@@ -403,9 +422,9 @@ class PassingSidePlanner:
             return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, prior,
                                   "solver failed")
         d, b = sol
-        d = np.clip(d, prob.lo, prob.hi)  # remove solver tolerance outside the hard bounds
+        d = d.clip(prob.lo, prob.hi)  # remove solver tolerance outside the hard bounds
         obj, xi = self._evaluate(prob, d, b)
-        if not np.isfinite(obj):
+        if not math.isfinite(obj):
             return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, prior,
                                   "non-finite objective")
         sides = np.zeros(M, dtype=int)
@@ -425,7 +444,7 @@ class PassingSidePlanner:
         lo = n_min + m
         hi = n_max - m
         narrow = lo > hi
-        if np.any(narrow):
+        if narrow.any():
             mid = 0.5 * (n_min + n_max)
             lo = np.where(narrow, mid, lo)
             hi = np.where(narrow, mid, hi)
@@ -446,6 +465,30 @@ class PassingSidePlanner:
         out[:, -1] = (f[:, -1] - f[:, -2]) / dx_n
         return out
 
+    def _closing_speed(self, gap: np.ndarray) -> np.ndarray:
+        """``-np.gradient(gap, self._t, axis=1)`` (closing speed when the opponent is ahead).
+
+        The formulas of :meth:`_time_gradient` with the differences taken in reverse order
+        (and negated coefficients), which negates every value exactly (up to the sign of a
+        zero), written into one buffer."""
+        out = np.empty_like(gap)
+        mid = out[:, 1:-1]
+        if self._grad_div is None:
+            a, b, c = self._grad_neg_abc
+            np.multiply(a, gap[:, :-2], out=mid)
+            mid += b * gap[:, 1:-1]
+            mid += c * gap[:, 2:]
+            dx_0, dx_n = self._grad_dx[0], self._grad_dx[-1]
+        else:
+            np.subtract(gap[:, :-2], gap[:, 2:], out=mid)
+            mid /= self._grad_div[1:-1]
+            dx_0 = dx_n = self._grad_dx
+        np.subtract(gap[:, 0], gap[:, 1], out=out[:, 0])
+        out[:, 0] /= dx_0
+        np.subtract(gap[:, -2], gap[:, -1], out=out[:, -1])
+        out[:, -1] /= dx_n
+        return out
+
     def _clearance(self, s_nodes: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
         """(M, N) lateral clearance [m] that node k must keep from opponent i; 0: no constraint.
 
@@ -456,71 +499,70 @@ class PassingSidePlanner:
         at both end nodes keeps it on the whole interval.
 
         Rows are independent; opponents that cannot come within the (extended) window of
-        the ego at any node or node interval are skipped (their rows stay zero).
+        the ego at any node or node interval get rows of zeros.
+
+        (The arrays are small: the cost is the number of numpy calls, which is kept low;
+        every value is computed with the same floating-point operations as the plain
+        formulas in the comments.)
         """
         cfg = self.config
         N = cfg.nodes
         M = opp_s.shape[0]
-        w_all = np.zeros((M, N))
         if M == 0:
-            return w_all
+            return np.zeros((0, N))
         L = cfg.safe_lon
         gap = opp_s - s_nodes[None, :]
         closing = cfg.closing_decel > 0.0
+        two_decel = 2.0 * cfg.closing_decel
+        # (Rows that cannot come within the window, |gap| >= L + the largest extension of the row
+        # at every node and on every interval, come out as zeros; they are not filtered out first,
+        # since the cost here is per numpy call, not per row.)
         if closing:
-            dv = -self._time_gradient(gap)                 # closing speed when the opponent is ahead
-            # every window extension of row i is at most dv_max^2 / (2 closing_decel)
-            ext_max = np.abs(dv).max(axis=1) ** 2 / (2.0 * cfg.closing_decel)
-        else:
-            ext_max = np.zeros(M)
-        # exact pre-selection: a clearance needs |gap| < L + extension at a node, or a node
-        # interval that reaches a zero gap (sign change or a zero end)
-        gmin = gap.min(axis=1)
-        gmax = gap.max(axis=1)
-        cand = (np.abs(gap).min(axis=1) < L + ext_max + 1e-6) | ((gmin <= 0.0) & (gmax >= 0.0))
-        if not cand.any():
-            return w_all
-        rows = np.flatnonzero(cand)
-        if rows.size < M:
-            gap = gap[rows]
-            if closing:
-                dv = dv[rows]
+            dv = self._closing_speed(gap)
         a, b = gap[:, :-1], gap[:, 1:]
-        # the point of each interval nearest to a zero gap, and the larger extension of its ends;
-        # nodes (first N columns) and intervals (last N - 1) are evaluated together
-        g_near = np.where((a > 0.0) & (b > 0.0), np.minimum(a, b),
-                          np.where((a < 0.0) & (b < 0.0), np.maximum(a, b), 0.0))
+        # the point of each interval nearest to a zero gap (min(a, b) when both are positive,
+        # max(a, b) when both are negative, else 0: the median of a, b and 0); nodes (first N
+        # columns) and intervals (last N - 1) are evaluated together
+        g_near = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), 0.0))
         g = np.concatenate([gap, g_near], axis=1)
         safe_lat = cfg.safe_lat
-        ag = np.abs(g)
-        out = np.where(ag < L, safe_lat, 0.0)
+        over = np.abs(g) - L  # < 0 inside the box window |g| < L
         if closing:
-            ext_a = np.maximum(dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
-            ext_b = np.maximum(-dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
-            ext = np.empty_like(g)
+            # window extension on the side the cars close in, per node: ext_a = max(dv, 0)^2 /
+            # (2 closing_decel) ahead of the ego (g > 0), ext_b = max(-dv, 0)^2 / (2 closing_decel)
+            # behind it, i.e. dv^2 / (2 closing_decel) where the sign of dv fits, else 0; per
+            # interval the larger one of its two ends
+            e_sq = dv ** 2 / two_decel
+            pos_dv = dv > 0.0
+            ext_a = np.where(pos_dv, e_sq, 0.0)
+            ext_b = np.where(pos_dv, 0.0, e_sq)
             pos = g > 0.0
-            ext[:, :N] = np.where(pos[:, :N], ext_a, ext_b)
-            ext[:, N:] = np.where(pos[:, N:], np.maximum(ext_a[:, :-1], ext_a[:, 1:]),
-                                  np.maximum(ext_b[:, :-1], ext_b[:, 1:]))
-            over = ag - L
+            ext = np.concatenate([np.where(pos[:, :N], ext_a, ext_b),
+                                  np.where(pos[:, N:], np.maximum(ext_a[:, :-1], ext_a[:, 1:]),
+                                           np.maximum(ext_b[:, :-1], ext_b[:, 1:]))], axis=1)
+            # safe_lat inside the box, the elliptic taper safe_lat sqrt(1 - (over / ext)^2) in the
+            # extension (0 <= over < ext; 1 - r^2 <= 1), 0 beyond
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
                 r = over / ext
-                cap = safe_lat * np.sqrt(np.clip(1.0 - r * r, 0.0, 1.0))
-            out = np.where((ag >= L) & (ext > 0.0) & (over < ext), cap, out)
+                cap = safe_lat * np.sqrt(np.maximum(1.0 - r * r, 0.0))
+            out = np.where(over < 0.0, safe_lat, np.where(over < ext, cap, 0.0))
+        else:
+            out = np.where(over < 0.0, safe_lat, 0.0)
         w = out[:, :N]
         seg = out[:, N:]
-        w[:, :-1] = np.maximum(w[:, :-1], seg)
-        w[:, 1:] = np.maximum(w[:, 1:], seg)
-        stride = int(cfg.closing_stride)
-        if stride > 1 and closing:
-            w = self._thin_extension(w, np.abs(gap) < L, stride)
-        w_all[rows] = w
-        return w_all
+        np.maximum(w[:, :-1], seg, out=w[:, :-1])
+        np.maximum(w[:, 1:], seg, out=w[:, 1:])
+        if cfg.closing_stride > 1 and closing:
+            w = self._thin_extension(w, over[:, :N] < 0.0)
+        return np.ascontiguousarray(w)
 
-    def _thin_extension(self, w: np.ndarray, box: np.ndarray, stride: int) -> np.ndarray:
-        """Keep every ``stride``-th constrained node outside the box window, counted outwards from
-        it (the node next to the box is always kept). The clearance decreases away from the box,
+    def _thin_extension(self, w: np.ndarray, box: np.ndarray) -> np.ndarray:
+        """Keep every ``closing_stride``-th constrained node outside the box window, counted outwards
+        from it (the node next to the box is always kept). The clearance decreases away from the box,
         so each kept node requires at least what the dropped nodes beyond it would have."""
+        outside = (w > 0.0) & ~box  # constrained nodes outside the box: the candidates
+        if not outside.any():
+            return w
         N = w.shape[1]
         k = self._node_idx
         big = 4 * N
@@ -528,10 +570,13 @@ class PassingSidePlanner:
         last = np.maximum.accumulate(np.where(box, k, -big), axis=1)
         nxt = np.minimum.accumulate(np.where(box, k, 2 * big)[:, ::-1], axis=1)[:, ::-1]
         dist = np.minimum(k - last, nxt - k)
-        empty = ~box.any(axis=1)
-        if empty.any():  # window crossed between nodes: count from the largest clearance
+        # rows with candidates but no box node (window crossed between nodes): count from the
+        # largest clearance
+        empty = ~box.any(axis=1) & outside.any(axis=1)
+        if empty.any():
             dist[empty] = np.abs(k[None, :] - np.argmax(w[empty], axis=1)[:, None])
-        drop = (w > 0.0) & ~box & (dist > 1) & ((dist - 1) % stride != 0)
+        # dropped: candidates at a distance d > 1 with (d - 1) % stride != 0
+        drop = outside & self._thin_drop[dist]
         if not drop.any():
             return w
         out = w.copy()
@@ -571,7 +616,7 @@ class PassingSidePlanner:
     def _previous_plan_at(self, s_nodes: np.ndarray, progress: float) -> np.ndarray | None:
         if self._prev_d is None:
             return None
-        return np.interp(s_nodes + progress, self._prev_s, self._prev_d)
+        return _interp_kernel(s_nodes + progress, self._prev_s, self._prev_d)  # np.interp
 
     def _previous_sides(self, s_nodes: np.ndarray, progress: float, opp_rel: np.ndarray,
                         relevant: np.ndarray) -> np.ndarray:
@@ -585,7 +630,7 @@ class PassingSidePlanner:
         inherit a stale decision.
         """
         cfg = self.config
-        out = -np.ones(relevant.size, dtype=int)
+        out = np.full(relevant.size, -1)
         if self._prev_sides is None or self._prev_opp is None:
             return out
         had_side = self._prev_sides != 0
@@ -616,13 +661,15 @@ class PassingSidePlanner:
     def _build(self, s_nodes, n_ref, lo, hi, ego_n, progress, opp, active, relevant, clear, opp_s) -> _Problem:
         cfg = self.config
         opp_rel = opp[relevant]
-        n_clusters, labels = self._clusters(opp_s[relevant], active[relevant])
+        act_rel = active[relevant]
+        n_clusters, labels = self._clusters(opp_s[relevant], act_rel)
 
         lo = lo.copy()
         hi = hi.copy()
-        e = min(max(ego_n, lo[0]), hi[0])
-        lo[0] = max(lo[0], e - cfg.continuity)
-        hi[0] = min(hi[0], e + cfg.continuity)
+        lo_0, hi_0 = float(lo[0]), float(hi[0])
+        e = min(max(ego_n, lo_0), hi_0)
+        lo[0] = max(lo_0, e - cfg.continuity)
+        hi[0] = min(hi_0, e + cfg.continuity)
 
         d_prev = self._previous_plan_at(s_nodes, progress)
         _, Rinv, RinvT = self._fact[d_prev is not None]
@@ -632,15 +679,14 @@ class PassingSidePlanner:
             f_d = -2.0 * (cfg.w_dev * n_ref + cfg.w_prev * d_prev)
 
         b_prev = self._previous_sides(s_nodes, progress, opp_rel, relevant)
-        f_b = np.zeros(n_clusters)
         known = b_prev >= 0
-        # w (b - bp)^2 = w (1 - 2 bp) b + w bp for binary b and bp (constant dropped).
-        np.add.at(f_b, labels[known], cfg.w_switch * (1.0 - 2.0 * b_prev[known]))
+        # w (b - bp)^2 = w (1 - 2 bp) b + w bp for binary b and bp (constant dropped), summed per cluster.
+        f_b = np.bincount(labels[known], weights=cfg.w_switch * (1.0 - 2.0 * b_prev[known]), minlength=n_clusters)
 
-        rows, ks = np.nonzero(active[relevant])
+        rows, ks = act_rel.nonzero()
         return _Problem(lo=lo, hi=hi, f_d=f_d, Rinv=Rinv, RinvT=RinvT, pair_k=ks,
                         pair_c=labels[rows], pair_n=opp_rel[rows, 1],
-                        pair_w=clear[relevant][rows, ks], pair_r=rows, n_clusters=n_clusters,
+                        pair_w=clear[relevant[rows], ks], pair_r=rows, n_clusters=n_clusters,
                         f_b=f_b, n_ref=n_ref, d_prev=d_prev, b_prev=b_prev, rel_cluster=labels)
 
     # ------------------------------------------------------------- solvers
@@ -675,11 +721,19 @@ class PassingSidePlanner:
             r2 = np.arange(2 * P)
             slack_col = C + np.concatenate([np.arange(P), np.arange(P)])
             slack_val = np.concatenate([-np.ones(P), np.ones(P)])
-            cached = (np.diag(Hv), sense, N + r2, slack_col, slack_val)
+            # the constant parts of the bounds (the others are written per call)
+            bupper = np.empty(C + P + N + 2 * P)
+            bupper[:C] = 1.0
+            bupper[C:C + P] = _INF
+            bupper[C + 2 * P + N:] = _INF
+            blower = np.empty(C + P + N + 2 * P)
+            blower[:C + P] = 0.0
+            blower[C + P + N:C + 2 * P + N] = -_INF
+            cached = (np.diag(Hv), sense, N + r2, slack_col, slack_val, bupper, blower)
             if len(self._bnb_cache) > 64:
                 self._bnb_cache.clear()
             self._bnb_cache[key] = cached
-        H, sense, rows2, slack_col, slack_val = cached
+        H, sense, rows2, slack_col, slack_val, bupper, blower = cached
         f = np.empty(nv)
         f[:C] = prob.f_b - 0.5 * _Q_BIN
         f[C:C + P] = cfg.w_slack
@@ -690,23 +744,18 @@ class PassingSidePlanner:
         A[N:, C + P:] = prob.Rinv[pk2]
         A[rows2, np.concatenate([prob.pair_c, prob.pair_c])] = -np.concatenate([Ma, Mb])
         A[rows2, slack_col] = slack_val
-        bupper = np.empty(C + P + N + 2 * P)
-        bupper[:C] = 1.0
-        bupper[C:C + P] = _INF
+        bupper = bupper.copy()
         bupper[C + P:C + P + N] = prob.hi
         bupper[C + P + N:C + 2 * P + N] = prob.pair_n - sl
-        bupper[C + 2 * P + N:] = _INF
-        blower = np.empty(C + P + N + 2 * P)
-        blower[:C + P] = 0.0
+        blower = blower.copy()
         blower[C + P:C + P + N] = prob.lo
-        blower[C + P + N:C + 2 * P + N] = -_INF
         blower[C + 2 * P + N:] = prob.pair_n + sl - Mb
         x, _, flag, _ = daqp.solve(H, f, A, bupper, blower, sense.copy(), presolve=0)
         if flag not in _DAQP_OK:
             logger.debug("DAQP branch-and-bound exit flag %d", flag)
             return None
         x = np.asarray(x)
-        return prob.Rinv @ x[C + P:], np.round(x[:C])
+        return prob.Rinv @ x[C + P:], x[:C].round()
 
     def _solve_enumerate(self, prob: _Problem) -> tuple[np.ndarray, np.ndarray] | None:
         """One QP over x = [xi (P), u (N)] per side pattern (2^C of them)."""
@@ -748,10 +797,10 @@ class PassingSidePlanner:
     # ----------------------------------------------------------- evaluation
     def _cost(self, d, n_ref, d_prev, switch_cost, slack_cost) -> float:
         cfg = self.config
-        dd = np.diff(d)
-        val = cfg.w_dev * float(np.sum((d - n_ref) ** 2)) + cfg.w_smooth * float(dd @ dd)
+        dd = d[1:] - d[:-1]  # np.diff(d)
+        val = cfg.w_dev * float(((d - n_ref) ** 2).sum()) + cfg.w_smooth * float(dd @ dd)
         if d_prev is not None:
-            val += cfg.w_prev * float(np.sum((d - d_prev) ** 2))
+            val += cfg.w_prev * float(((d - d_prev) ** 2).sum())
         return val + switch_cost + slack_cost
 
     def _evaluate(self, prob: _Problem, d: np.ndarray, b: np.ndarray) -> tuple[float, np.ndarray]:
@@ -763,13 +812,13 @@ class PassingSidePlanner:
         xi = np.where(xi > _SLACK_TOL, xi, 0.0)
         known = prob.b_prev >= 0
         bi = b[prob.rel_cluster][known]
-        switch = cfg.w_switch * float(np.sum((bi - prob.b_prev[known]) ** 2))
+        switch = cfg.w_switch * float(((bi - prob.b_prev[known]) ** 2).sum())
         return self._cost(d, prob.n_ref, prob.d_prev, switch, cfg.w_slack * float(xi.sum())), xi
 
     # ------------------------------------------------------------- helpers
     def _prior_sides(self, relevant: np.ndarray, b_prev: np.ndarray, M: int) -> np.ndarray:
         sides = np.zeros(M, dtype=int)
-        sides[relevant] = np.where(b_prev == 1, 1, np.where(b_prev == 0, -1, 0))
+        sides[relevant] = _PRIOR_SIDE[b_prev + 1]  # b_prev 1 -> 1 (left), 0 -> -1 (right), -1 -> 0 (unknown)
         return sides
 
     def _remember(self, s_nodes, d, opp, sides) -> None:
