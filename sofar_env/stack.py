@@ -246,9 +246,11 @@ class OvertakingStack:
             v_ref = cfg.speed_factor * np.asarray(self.track.speed(ego_s + s), float)
             speeds = []  # a Python list: element-wise numpy writes cost more than the loop itself
             vk = v0
-            for vr in v_ref.tolist():
+            for vr in v_ref.tolist():  # vk <- clip(vr, vk + dv_min, vk + dv_max), without min/max calls
                 speeds.append(vk)
-                vk = min(max(vr, vk + dv_min), vk + dv_max)
+                lower = vk + dv_min
+                upper = vk + dv_max
+                vk = lower if vr < lower else (upper if vr > upper else vr)
             v = np.array(speeds)
             s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
         return s
