@@ -57,15 +57,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._interp import interp as _interp
 from .control.barrier import BarrierParams
 from .control.mpc import MPCConfig, MPCDCBF, MPCResult, MPCStageData
 from .planning.miqp import MIQPConfig, PassingSidePlanner, PlanResult
 from .vehicle import AV21, VehicleParams
 
-try:  # np.interp without its Python wrapper (same kernel, same results): called every step
-    from numpy._core.multiarray import interp as _interp
-except ImportError:  # pragma: no cover - other numpy layouts
-    _interp = np.interp
 
 __all__ = ["StackConfig", "StackOutput", "OvertakingStack"]
 

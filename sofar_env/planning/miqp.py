@@ -109,10 +109,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-try:  # the compiled kernel behind np.interp (no Python-level argument handling)
-    from numpy._core.multiarray import interp as _interp_kernel
-except ImportError:  # pragma: no cover - other numpy layouts
-    _interp_kernel = np.interp
+from .._interp import interp as _interp_kernel
 
 try:  # DAQP is a hard dependency, but plan() must never raise because of it.
     import daqp
@@ -293,13 +290,6 @@ class PassingSidePlanner:
             dx1, dx2 = dt[:-1], dt[1:]
             self._grad_abc = (-(dx2) / (dx1 * (dx1 + dx2)), (dx2 - dx1) / (dx1 * dx2),
                               dx1 / (dx2 * (dx1 + dx2)))
-        # _closing_speed: the same formulas with negated coefficients (negation is exact)
-        if np.ndim(self._grad_dx) == 0:
-            self._grad_div = np.full(N, 2. * self._grad_dx)  # dx at both ends, 2 dx inside
-            self._grad_div[[0, -1]] = self._grad_dx
-        else:
-            self._grad_div = None
-            self._grad_neg_abc = tuple(-c for c in self._grad_abc)
         self._node_idx = np.arange(N)
         # _thin_extension: whether a node at distance d (in nodes) from the box window is dropped
         stride = int(config.closing_stride)
@@ -466,27 +456,9 @@ class PassingSidePlanner:
         return out
 
     def _closing_speed(self, gap: np.ndarray) -> np.ndarray:
-        """``-np.gradient(gap, self._t, axis=1)`` (closing speed when the opponent is ahead).
-
-        The formulas of :meth:`_time_gradient` with the differences taken in reverse order
-        (and negated coefficients), which negates every value exactly (up to the sign of a
-        zero), written into one buffer."""
-        out = np.empty_like(gap)
-        mid = out[:, 1:-1]
-        if self._grad_div is None:
-            a, b, c = self._grad_neg_abc
-            np.multiply(a, gap[:, :-2], out=mid)
-            mid += b * gap[:, 1:-1]
-            mid += c * gap[:, 2:]
-            dx_0, dx_n = self._grad_dx[0], self._grad_dx[-1]
-        else:
-            np.subtract(gap[:, :-2], gap[:, 2:], out=mid)
-            mid /= self._grad_div[1:-1]
-            dx_0 = dx_n = self._grad_dx
-        np.subtract(gap[:, 0], gap[:, 1], out=out[:, 0])
-        out[:, 0] /= dx_0
-        np.subtract(gap[:, -2], gap[:, -1], out=out[:, -1])
-        out[:, -1] /= dx_n
+        """``-np.gradient(gap, self._t, axis=1)``: the closing speed when the opponent is ahead."""
+        out = self._time_gradient(gap)
+        np.negative(out, out=out)
         return out
 
     def _clearance(self, s_nodes: np.ndarray, opp_s: np.ndarray) -> np.ndarray:

@@ -28,10 +28,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
-try:  # the compiled kernel behind np.interp (no Python-level argument handling: ~1 us less per call)
-    from numpy._core.multiarray import interp as _interp_kernel
-except ImportError:  # pragma: no cover - other numpy layouts
-    _interp_kernel = np.interp
+from .._interp import interp as _interp_kernel
 
 __all__ = [
     "FORMAT_VERSION",
