@@ -25,7 +25,7 @@ __all__ = ["OpponentConfig", "Opponents"]
 
 @dataclass(frozen=True)
 class OpponentConfig:
-    """Opponent field. Sequences are cycled to ``n_opponents`` entries."""
+    """Opponent field. ``offsets`` are cycled to ``n_opponents`` entries, ``gaps`` repeated further ahead."""
 
     n_opponents: int = 4
     """Number of opponent cars."""
@@ -34,7 +34,9 @@ class OpponentConfig:
     rho: float = 0.3
     """Pace ratio: opponent speed / speed profile [-]."""
     gaps: tuple[float, ...] = (120.0, 180.0, 250.0, 400.0)
-    """Arc-length gap of each opponent ahead of the ego at spawn [m]."""
+    """Arc-length gap of each opponent ahead of the ego at spawn [m]. With more opponents than
+    entries the list repeats further ahead, each repetition shifted by its largest entry
+    (8 opponents: 120, 180, 250, 400, 520, 580, 650, 800 m), so no two cars spawn on the same spot."""
     overtake_threshold: float = 2.0
     """An opponent counts as overtaken once it is this far behind the ego [m]."""
     respawn_distance: float = 400.0
@@ -49,6 +51,9 @@ class OpponentConfig:
             raise ValueError("offsets and gaps need at least one entry")
         if not (0.0 <= self.rho <= 2.0):
             raise ValueError(f"rho must lie in [0, 2], got {self.rho}")
+        if self.n_opponents > len(self.gaps) and not max(self.gaps) > 0.0:
+            raise ValueError("with more opponents than gaps, the largest gap must be > 0 (the list repeats "
+                             "shifted by it)")
         if self.overtake_threshold <= 0 or self.respawn_distance <= 0:
             raise ValueError("overtake_threshold and respawn_distance must be positive")
 
@@ -56,7 +61,8 @@ class OpponentConfig:
         return float(self.offsets[i % len(self.offsets)])
 
     def gap(self, i: int) -> float:
-        return float(self.gaps[i % len(self.gaps)])
+        k = len(self.gaps)
+        return float(self.gaps[i % k]) + (i // k) * max(self.gaps)
 
 
 @dataclass

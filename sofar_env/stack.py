@@ -29,8 +29,9 @@ Additions to the paper's algorithm, each closing a failure mode seen in closed l
   alongside is followed when braking drops the ego behind it (the follow plan keeps
   the ego's side of it until the ego is ``a0`` behind): holding such a pass is what
   squeezes the ego between that car and a closing edge at a corner entry.
-  The pass is re-examined at every MIQP call, with hysteresis: while following, a pass
-  is resumed only once its clearance violation has fallen to ``follow_release_slack``.
+  While following, the pass is re-examined at every ``follow_recheck``-th MIQP call (in
+  between only the follow plan is re-solved), with hysteresis: a pass is resumed only
+  once its clearance violation has fallen to ``follow_release_slack``.
 * **Footprint-aware track edges.** Leaving the track is judged on the footprint's
   corners, the MPC keeps its reference point ``track_margin`` from the edge. The
   edges given to the planners are the narrowest within the car's length around
@@ -57,6 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._gradient import GridGradient
 from ._interp import interp as _interp
 from .control.barrier import BarrierParams
 from .control.mpc import MPCConfig, MPCDCBF, MPCResult, MPCStageData
@@ -95,6 +97,13 @@ class StackConfig:
     until the passing plan violates its clearance by at most this (entering takes
     ``follow_slack``). Without it the decision can flicker every MIQP call near the threshold,
     and each flicker trades braking for a pass attempt (Laguna Seca, last corner)."""
+    follow_recheck: int = 2
+    """While following, the passing plan is re-examined at every this-many-th MIQP call (1: at
+    every call). In between, only the follow plan is re-solved, for the same followed cars
+    (matched by their predicted positions); a follow plan that then violates the clearance of a
+    car it passes by more than ``follow_slack``, or a followed car that is no longer found, falls
+    back to the full pass-or-follow decision. It halves the second MIQP solve of most calls while
+    following; resuming a pass waits at most ``(follow_recheck - 1) miqp_interval`` more steps."""
     follow_gap: float = 12.0
     """Arc-length distance kept behind a followed opponent [m] (the barrier's a0 = 7 m plus 5 m)."""
     follow_decel: float = 5.0
@@ -124,6 +133,8 @@ class StackConfig:
             raise ValueError(f"speed_factor must lie in (0, 1.5], got {self.speed_factor}")
         if self.miqp_interval < 1:
             raise ValueError("miqp_interval must be >= 1")
+        if int(self.follow_recheck) != self.follow_recheck or self.follow_recheck < 1:
+            raise ValueError("follow_recheck must be an integer >= 1")
         if not 0.0 <= self.follow_release_slack <= self.follow_slack:
             raise ValueError("follow_release_slack must lie in [0, follow_slack]")
         for name in ("follow_slack", "follow_gap"):
@@ -173,6 +184,7 @@ class OvertakingStack:
         self.planner = PassingSidePlanner(self.config.miqp)
         self._node_t = np.arange(self.config.miqp.nodes) * self.config.miqp.node_dt
         self._mpc_t = self.config.mpc.time_grid()
+        self._mpc_gradient = GridGradient(self._mpc_t) if len(self._mpc_t) > 1 else None
         p = vehicle
         self._reach = max(p.cg_to_front, p.cg_to_rear)
         # footprint samples along the track: rear end, middle, front end
@@ -195,6 +207,7 @@ class OvertakingStack:
         self._last_plan_call_s: float | None = None
         self._step = 0
         self._follow: tuple | None = None  # (rows (gap, n, v) at plan time, plan step) of followed opponents
+        self._follow_calls = 0  # MIQP calls since the pass was last examined while following
         self._last_pred: np.ndarray | None = None  # previous MPC prediction (for the heading error)
         self.counters = {"steps": 0, "mpc_failures": 0, "miqp_failures": 0, "miqp_solves": 0,
                          "follow_steps": 0}
@@ -300,36 +313,40 @@ class OvertakingStack:
         progress = 0.0 if self._last_plan_call_s is None else float(self.track.gap(ego_s, self._last_plan_call_s))
         t0 = time.perf_counter()
         memory = self.planner.memory()
-        plan = self.planner.plan(s_nodes, n_ref, n_min, n_max, ego_n, opp_rel, progress=progress, opponent_s=opp_s)
         was_following, self._follow = self._follow, None
-        if cfg.follow and plan.success and plan.opponent_slack is not None and len(opp_rel):
-            # an opponent ahead whose clearance the best passing plan violates, and behind which the
-            # ego can stay or drop (_can_stay_behind): follow it
-            # hysteresis: while following, a pass is only resumed once it is (nearly) clear
-            threshold = cfg.follow_release_slack if was_following is not None else cfg.follow_slack
-            blocked = ((plan.opponent_slack > threshold) & (opp_rel[:, 0] > 0.0)
-                       & self._can_stay_behind(ego_v, opp_rel[:, 0], opp_s))
-            if blocked.any():
-                # followed opponents are kept behind longitudinally (speed cap, barrier), not passed:
-                # the lateral plan leaves them out, except those the ego is still alongside (less
-                # than a0 behind), whose side it must keep until braking has dropped it behind
-                s_follow = self._follow_positions(s_nodes, self._braking_positions(ego_v, cfg.follow_decel),
-                                                  opp_s[blocked])
-                n_min_f, n_max_f = self.edges(ego_s + s_follow)
-                planned = ~blocked | (opp_rel[:, 0] < cfg.mpc.barrier.a0)
-                passing_memory = self.planner.memory()
-                self.planner.restore_memory(memory)
-                follow_plan = self.planner.plan(s_follow, n_ref, n_min_f, n_max_f, ego_n, opp_rel[planned],
-                                                progress=progress, opponent_s=opp_s[planned])
-                if follow_plan.success and follow_plan.max_slack < plan.max_slack:
-                    sides = np.zeros(len(opp_rel), dtype=int)
-                    sides[planned] = follow_plan.sides
-                    slack = np.zeros(len(opp_rel))
-                    slack[planned] = follow_plan.opponent_slack
-                    plan = dataclasses.replace(follow_plan, sides=sides, opponent_slack=slack)
+        plan = None
+        if was_following is not None and self._follow_calls + 1 < cfg.follow_recheck:
+            # between two examinations of the pass: re-solve only the follow plan, same followed cars
+            blocked = self._followed_rows(ego_s, opp_rel, was_following)
+            if blocked is not None and self._can_stay_behind(ego_v, opp_rel[:, 0], opp_s)[blocked].all():
+                follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked, progress)
+                if follow is not None and follow.max_slack <= cfg.follow_slack:
+                    plan = follow
                     self._follow = (opp_rel[blocked].copy(), self._step)
+                    self._follow_calls += 1
                 else:
-                    self.planner.restore_memory(passing_memory)
+                    self.planner.restore_memory(memory)
+        if plan is None:
+            self._follow_calls = 0
+            plan = self.planner.plan(s_nodes, n_ref, n_min, n_max, ego_n, opp_rel, progress=progress,
+                                     opponent_s=opp_s)
+            if cfg.follow and plan.success and plan.opponent_slack is not None and len(opp_rel):
+                # an opponent ahead whose clearance the best passing plan violates, and behind which the
+                # ego can stay or drop (_can_stay_behind): follow it
+                # hysteresis: while following, a pass is only resumed once it is (nearly) clear
+                threshold = cfg.follow_release_slack if was_following is not None else cfg.follow_slack
+                blocked = ((plan.opponent_slack > threshold) & (opp_rel[:, 0] > 0.0)
+                           & self._can_stay_behind(ego_v, opp_rel[:, 0], opp_s))
+                if blocked.any():
+                    passing_memory = self.planner.memory()
+                    self.planner.restore_memory(memory)
+                    follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked,
+                                               progress)
+                    if follow is not None and follow.max_slack < plan.max_slack:
+                        plan = follow
+                        self._follow = (opp_rel[blocked].copy(), self._step)
+                    else:
+                        self.planner.restore_memory(passing_memory)
         elapsed = time.perf_counter() - t0
         self._last_plan_call_s = ego_s
         self.counters["miqp_solves"] += 1
@@ -338,6 +355,47 @@ class OvertakingStack:
         self._plan = plan
         self._plan_s = ego_s
         return elapsed
+
+    def _follow_plan(self, ego_s: float, ego_n: float, ego_v: float, s_nodes: np.ndarray, n_ref: np.ndarray,
+                     opp_rel: np.ndarray, opp_s: np.ndarray, blocked: np.ndarray,
+                     progress: float) -> PlanResult | None:
+        """The plan that follows the ``blocked`` opponents (None if it fails), sides per input row.
+
+        Followed opponents are kept behind longitudinally (speed cap, barrier), not passed: the
+        lateral plan leaves them out, except those the ego is still alongside (less than a0
+        behind), whose side it must keep until braking has dropped it behind.
+        """
+        cfg = self.config
+        s_follow = self._follow_positions(s_nodes, self._braking_positions(ego_v, cfg.follow_decel), opp_s[blocked])
+        n_min_f, n_max_f = self.edges(ego_s + s_follow)
+        planned = ~blocked | (opp_rel[:, 0] < cfg.mpc.barrier.a0)
+        plan = self.planner.plan(s_follow, n_ref, n_min_f, n_max_f, ego_n, opp_rel[planned],
+                                 progress=progress, opponent_s=opp_s[planned])
+        if not plan.success:
+            return None
+        sides = np.zeros(len(opp_rel), dtype=int)
+        sides[planned] = plan.sides
+        slack = np.zeros(len(opp_rel))
+        slack[planned] = plan.opponent_slack
+        return dataclasses.replace(plan, sides=sides, opponent_slack=slack)
+
+    def _followed_rows(self, ego_s: float, opp_rel: np.ndarray, follow: tuple) -> np.ndarray | None:
+        """Mask of the rows of ``opp_rel`` that are the followed opponents of ``follow``, matched to
+        their predicted positions (within 3 m along and 1.5 m across the track); None when one of
+        them is not found (overtaken, respawned, or out of the planners' window)."""
+        rows, step0 = follow
+        if len(opp_rel) == 0:
+            return None
+        elapsed = (self._step - step0) * self.config.mpc.control_dt
+        pred = (self.predict_opponents(self._plan_s, rows, np.array([elapsed]))[:, 0]
+                - float(self.track.gap(ego_s, self._plan_s)))
+        dist = ((opp_rel[None, :, 0] - pred[:, None]) / 3.0) ** 2 + ((opp_rel[None, :, 1] - rows[:, 1:2]) / 1.5) ** 2
+        nearest = dist.argmin(axis=1)
+        if (dist[np.arange(len(rows)), nearest] > 1.0).any():
+            return None
+        mask = np.zeros(len(opp_rel), dtype=bool)
+        mask[nearest] = True
+        return mask
 
     def _heading_error_guess(self) -> np.ndarray | None:
         """|e| along the next MPC horizon from the previous prediction shifted by one period."""
@@ -363,7 +421,7 @@ class OvertakingStack:
             t = self._mpc_t
             pred = self.predict_opponents(self._plan_s, rows, elapsed + t)  # relative to the ego at plan time
             gap = pred.T - float(self.track.gap(ego_s, self._plan_s)) - s_rel[:, None]
-            v_o = np.gradient(pred, t, axis=1).T if len(t) > 1 else rows[None, :, 2]
+            v_o = self._mpc_gradient(pred).T if self._mpc_gradient is not None else rows[None, :, 2]
             v_cap2 = v_o ** 2 + 2.0 * cfg.follow_decel * (gap - cfg.follow_gap)
             v_ref = np.minimum(v_ref, np.sqrt(np.maximum(v_cap2.min(axis=1), 0.0)))
         n_min, n_max = self.edges(s_abs)

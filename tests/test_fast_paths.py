@@ -85,3 +85,18 @@ def test_closing_speed_is_minus_the_numpy_gradient(node_dt):
     f[0] = 3.0  # a constant row (zero derivative)
     np.testing.assert_array_equal(np.abs(planner._closing_speed(f)), np.abs(np.gradient(f, planner._t, axis=1)))
     np.testing.assert_array_equal(planner._closing_speed(f)[1:], -np.gradient(f, planner._t, axis=1)[1:])
+
+
+@pytest.mark.parametrize("t", [np.arange(21) * 0.075,                                    # evenly spaced
+                               np.concatenate([np.arange(10) * 0.075, 0.675 + np.arange(1, 12) * 0.15]),
+                               np.array([0.0, 0.1]), np.array([0.0, 0.1, 0.35])])
+def test_grid_gradient_is_numpy_gradient(t):
+    from sofar_env._gradient import GridGradient
+
+    grad = GridGradient(t)
+    f = np.random.default_rng(5).normal(size=(4, t.size)) * 50.0
+    np.testing.assert_array_equal(grad(f), np.gradient(f, t, axis=-1))
+    np.testing.assert_array_equal(grad(f[0]), np.gradient(f[0], t))
+    assert grad(np.zeros((0, t.size))).shape == (0, t.size)
+    with pytest.raises(ValueError, match="samples"):
+        grad(np.zeros(t.size + 1))

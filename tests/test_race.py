@@ -192,3 +192,13 @@ def test_truncation_at_the_duration(track):
         race.step(ZERO)
         flags.append(race.truncated)
     assert flags == [False, False, False, False, True]
+
+
+def test_more_opponents_than_gaps_spawn_apart(track):
+    """The gap list repeats further ahead (shifted by its largest entry), never onto the same spot."""
+    race = make_race(track, n_opponents=8)
+    rel = np.sort(race.opponents.rel)
+    assert np.allclose(rel, [120.0, 180.0, 250.0, 400.0, 520.0, 580.0, 650.0, 800.0])
+    assert np.min(np.diff(rel)) >= 50.0
+    with pytest.raises(ValueError, match="largest gap"):
+        OpponentConfig(n_opponents=2, gaps=(-10.0,))

@@ -171,6 +171,58 @@ def test_follows_an_opponent_it_cannot_pass(tracks):
     assert stack.counters["follow_steps"] > 0
 
 
+@pytest.mark.parametrize("recheck", [1, 2])
+def test_follow_recheck_skips_the_passing_solve_between_examinations(tracks, recheck):
+    """The Kentucky follow scenario above: with ``follow_recheck = 1`` every MIQP call while
+    following solves the passing plan and the follow plan; with 2, every other call re-solves
+    only the follow plan (one solve), and the ego keeps following without a collision."""
+    track = tracks["Kentucky"]
+    s = np.linspace(0.0, track.length, 3000, endpoint=False)
+    width = np.asarray(track.width_left(s) + track.width_right(s))
+    s0 = float(s[np.argmin(width)]) - 150.0
+    race = empty_race(track, start_s=s0)
+    stack = OvertakingStack(track, StackConfig(follow_recheck=recheck))
+    solves = []
+    plan = stack.planner.plan
+
+    def counted(*args, **kwargs):
+        solves[-1] += 1
+        return plan(*args, **kwargs)
+
+    stack.planner.plan = counted
+    v_opp = 0.5 * float(race.frenet[0, 3])
+    opponent = np.array([[s0 + 60.0, 0.0, v_opp]])
+    per_call = []  # (following before the call, solves in the call)
+    for k in range(40):
+        opponent[0, 0] += 0.0 if k == 0 else v_opp * race.config.dt
+        was_following = stack._follow is not None
+        solves.append(0)
+        out = stack.step(race.frenet[0], opponent, 0.5)
+        if out.miqp_ran:
+            per_call.append((was_following, solves[-1]))
+        ev = race.step(out.u[None, :])[0]
+        assert not ev.collision and not ev.off_track
+    while_following = [n for was, n in per_call if was]
+    assert len(while_following) >= 5
+    if recheck == 1:  # two solves per call; one only in the call that resumes the pass
+        assert while_following.count(1) <= 1
+    else:
+        assert while_following.count(1) >= (len(while_following) - 1) // 2
+
+
+def test_followed_cars_are_found_again_by_their_predicted_position(tracks):
+    stack = OvertakingStack(tracks["Monza"])
+    rows = np.array([[40.0, 0.0, 30.0]])
+    stack._plan_s, stack._step = 100.0, 10
+    follow = (rows, 8)  # recorded 2 steps (0.2 s) ago, when the ego was at s = 100 m
+    ego_s = 110.0  # the ego has advanced 10 m since
+    pred = stack.predict_opponents(100.0, rows, np.array([0.2]))[0, 0] - 10.0
+    opp_rel = np.array([[pred + 0.5, -3.0, 30.0], [pred - 0.4, 0.1, 30.0], [80.0, 0.0, 25.0]])
+    assert stack._followed_rows(ego_s, opp_rel, follow).tolist() == [False, True, False]
+    assert stack._followed_rows(ego_s, opp_rel[[0, 2]], follow) is None  # the car is gone (overtaken)
+    assert stack._followed_rows(ego_s, np.zeros((0, 3)), follow) is None
+
+
 def test_can_stay_behind_a_car_alongside_only_if_braking_drops_the_ego_back(tracks):
     """The follow decision's reachability test: a car alongside at equal speed is followable (hard
     braking drops the ego behind it) with ``follow_alongside``, not without; a car being closed on
@@ -212,3 +264,5 @@ def test_laguna_seca_last_corner_regressions(rho, seed, gamma, until, overtakes)
 def test_follow_release_slack_is_validated():
     with pytest.raises(ValueError, match="follow_release_slack"):
         StackConfig(follow_release_slack=0.6)
+    with pytest.raises(ValueError, match="follow_recheck"):
+        StackConfig(follow_recheck=0)

@@ -512,6 +512,9 @@ class _QPStructure:
         self.c_buf = np.zeros((n_h, nb))
         self.c_buf[:, _N_FIXED:] = self.slack_scale * np.asarray(z1, dtype=float)
         self.c_flat = self.c_buf.reshape(-1)
+        # the weights of c[:, :7] = w7 * (x7 - ref7) (MPCDCBF._assemble), one row per stage: a
+        # same-shape product runs as one numpy loop, a broadcast (7,) row as one loop per stage
+        self.w7 = np.tile(np.concatenate([self.r2, self.q2]), (n_h, 1))
         # ---- bound buffers; entries that are never written keep their infinite / zero values
         self.hl_buf = np.full((n_h, nr), -np.inf)
         self.hu_buf = np.full((n_h, nr), np.inf)
@@ -519,10 +522,17 @@ class _QPStructure:
         self.xu_buf = np.full((n_h, nb), np.inf)
         self.xl_buf[:, _N_FIXED:] = 0.0
         self.b_buf = np.zeros((n_h, 5))
-        self.u_lo = np.array([vehicle.a_min, -vehicle.steer_rate_max])
-        self.u_hi = np.array([vehicle.a_max, vehicle.steer_rate_max])
         self.data = (self.c_flat, self.b_buf.reshape(-1), self.hl_buf.reshape(-1), self.hu_buf.reshape(-1),
                      self.xl_buf.reshape(-1), self.xu_buf.reshape(-1))
+        # views of the buffers written by MPCDCBF._assemble (made once, not per call)
+        self.c7 = self.c_buf[:, :_N_FIXED]
+        self.xl7 = self.xl_buf[:, :_N_FIXED]
+        self.xu7 = self.xu_buf[:, :_N_FIXED]
+        if lat:
+            self.hu_lat, self.hl_lat = self.hu_buf[:, self.row_lat], self.hl_buf[:, self.row_lat + 1]
+        if trk:
+            self.hu_trk, self.hl_trk = self.hu_buf[:, self.row_trk], self.hl_buf[:, self.row_trk + 1]
+        self.hu_cbf = self.hu_buf[:, self.row_cbf:]
 
         # ---- CSC patterns; entry sources permuted to CSC data order
         self.A, perm = self._csc(self.eq_rows, self.eq_cols, self.n_eq)
@@ -544,7 +554,9 @@ class _QPStructure:
 
     def fill_matrices(self, flat: np.ndarray, act: np.ndarray, gamma: float) -> None:
         """Write the values of A and G (CSC data, fixed pattern) from the flat linearisation buffer."""
-        np.take(flat, self.a_src, out=self.A.data)
+        # mode="clip": numpy buffers `out` for the default mode="raise"; the indices are in range by
+        # construction, so the clipping never applies
+        flat.take(self.a_src, out=self.A.data, mode="clip")
         self.A.data *= self.a_fac
         src = self._g_src_work
         if self.m:
@@ -552,7 +564,7 @@ class _QPStructure:
             if key != self._act:
                 src[self.g_is_cbf] = self._g_src_cbf + 3 * act[self._g_slot_cbf]
                 self._act = key
-        np.take(flat, src, out=self.G.data)
+        flat.take(src, out=self.G.data, mode="clip")
         if gamma != self._gamma:
             self._g_mult = self.g_fac + (1.0 - gamma) * self.g_gam
             self._gamma = gamma
@@ -648,9 +660,21 @@ class MPCDCBF:
         self._buf = buf  # keeps the buffer (and its pointers into the arrays above) alive
 
         self._qp: dict[tuple, _QPStructure] = {}
-        self._d_buf = np.zeros((n_h, 5))
+        # linearisation point and references per QP block (du_k, dx_{k+1}): x7 = (ubar_k, xbar_{k+1}),
+        # ref7 = (0, 0, 0, n_ref_{k+1}, 0, v_ref_{k+1}, 0) (written by _assemble)
+        self._x7 = np.zeros((n_h, _N_FIXED))
+        self._ref7 = np.zeros((n_h, _N_FIXED))
+        self._d7 = np.zeros((n_h, _N_FIXED))
         self._box_lo = np.full((n_h, _N_FIXED), -np.inf)  # box on (du_k, dx_{k+1}) at the current iterate
         self._box_hi = np.full((n_h, _N_FIXED), np.inf)
+        # the box itself, one row per stage: box_lo = lo7 - x7, box_hi = hi7 - x7 (-0.0 - v is -v to
+        # the last bit, also for v = 0; +-inf minus a finite value stays +-inf)
+        p = vehicle
+        self._lo7 = np.tile([p.a_min, -p.steer_rate_max, -np.inf, -np.inf, -np.inf, -0.0, -p.steer_max], (n_h, 1))
+        self._hi7 = np.tile([p.a_max, p.steer_rate_max, np.inf, np.inf, np.inf, np.inf, p.steer_max], (n_h, 1))
+        self._drop_lo7 = np.tile(-_BOX_DROP_DISTANCE, (n_h, 1))  # -/+ _BOX_DROP_DISTANCE per stage
+        self._drop_hi7 = np.tile(_BOX_DROP_DISTANCE, (n_h, 1))
+        self._box_mask = np.zeros((n_h, _N_FIXED), dtype=bool)
         self._trk_lo = np.zeros(n_h)  # bounds on dn_{k+1} of the track rows (without slack)
         self._trk_hi = np.zeros(n_h)
         self._w_lat = np.zeros((n_h, 2))  # work arrays of _rows_violated
@@ -895,44 +919,44 @@ class MPCDCBF:
         """QP vectors (c, b, h_l, h_u, x_l, x_u) in the buffers of ``qs``; A and G are written in place.
         ``box_dist``: None (every box bound), or per column of (du_k, dx_{k+1}) the distance from
         the linearisation point beyond which a bound is left out (see :meth:`_rows_needed`)."""
-        cfg = self.config
         p = self.vehicle
-        m = qs.m
-        # cost: c = 2 R ubar, 2 Q (xbar - xref), slack L1 weights (constant)
-        c = qs.c_buf
-        np.multiply(qs.r2, ubar, out=c[:, 0:2])
-        d = self._d_buf
-        d[:] = xbar[1:]
-        d[:, 1] -= arrays[1, 1:]
-        d[:, 3] -= arrays[2, 1:]
-        np.multiply(qs.q2, d, out=c[:, 2:7])
+        # cost: c = 2 R ubar, 2 Q (xbar - xref), slack L1 weights (constant); computed per block as
+        # w7 * (x7 - ref7) (subtracting the zeros of ref7 leaves every value as it is)
+        x7, ref7 = self._x7, self._ref7
+        x7[:, 0:2] = ubar
+        x7[:, 2:7] = xbar[1:]
+        ref7[:, 3] = arrays[1, 1:]
+        ref7[:, 5] = arrays[2, 1:]
+        np.subtract(x7, ref7, out=self._d7)
+        np.multiply(qs.w7, self._d7, out=qs.c7)
         # matrices: one gather each from the flat linearisation buffer
         qs.fill_matrices(self._flat, self._act, gamma)
         np.subtract(self._out_f[:-1], xbar[1:], out=qs.b_buf)
-        hl, hu = qs.hl_buf, qs.hu_buf
         if qs.lat:
             alat = self._out_alat[1:]
-            np.subtract(p.lat_acc_max, alat, out=hu[:, qs.row_lat])
-            np.subtract(-p.lat_acc_max, alat, out=hl[:, qs.row_lat + 1])
+            np.subtract(p.lat_acc_max, alat, out=qs.hu_lat)
+            np.subtract(-p.lat_acc_max, alat, out=qs.hl_lat)
         if qs.trk:  # bounds computed by _track_bounds at this linearisation
-            hu[:, qs.row_trk] = self._trk_hi
-            hl[:, qs.row_trk + 1] = self._trk_lo
-        if m:
-            h = self._out_h[:, self._act]
-            np.subtract(h[1:], (1.0 - gamma) * h[:-1], out=hu[:, qs.row_cbf:])
+            qs.hu_trk[:] = self._trk_hi
+            qs.hl_trk[:] = self._trk_lo
+        if qs.m:
+            h = self._out_h.take(self._act, axis=1)
+            np.subtract(h[1:], (1.0 - gamma) * h[:-1], out=qs.hu_cbf)
         # variable bounds (du_k, dx_{k+1}) in the full box, then in the QP's buffers
         lo, hi = self._box_lo, self._box_hi
-        np.subtract(qs.u_lo, ubar, out=lo[:, 0:2])
-        np.subtract(qs.u_hi, ubar, out=hi[:, 0:2])
-        np.negative(xbar[1:, 3], out=lo[:, 5])
-        np.subtract(-p.steer_max, xbar[1:, 4], out=lo[:, 6])
-        np.subtract(p.steer_max, xbar[1:, 4], out=hi[:, 6])
-        xl, xu = qs.xl_buf[:, :_N_FIXED], qs.xu_buf[:, :_N_FIXED]
+        np.subtract(self._lo7, x7, out=lo)
+        np.subtract(self._hi7, x7, out=hi)
+        xl, xu = qs.xl7, qs.xu7
         xl[:] = lo
         xu[:] = hi
         if box_dist is not None:
-            np.copyto(xl, -np.inf, where=lo < -box_dist)
-            np.copyto(xu, np.inf, where=hi > box_dist)
+            if box_dist is _BOX_DROP_DISTANCE:
+                drop_lo, drop_hi = self._drop_lo7, self._drop_hi7
+            else:
+                drop_lo, drop_hi = -box_dist, box_dist
+            mask = self._box_mask
+            np.copyto(xl, -np.inf, where=np.less(lo, drop_lo, out=mask))
+            np.copyto(xu, np.inf, where=np.greater(hi, drop_hi, out=mask))
         return qs.data
 
     def _qp_solve(self, qs: _QPStructure, data) -> tuple[np.ndarray | None, int, str]:

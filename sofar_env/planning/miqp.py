@@ -109,6 +109,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._gradient import GridGradient
 from .._interp import interp as _interp_kernel
 
 try:  # DAQP is a hard dependency, but plan() must never raise because of it.
@@ -282,14 +283,7 @@ class PassingSidePlanner:
             Rinv = np.linalg.solve(R, np.eye(N))          # d = Rinv u
             self._fact[key] = (H_d, np.ascontiguousarray(Rinv), np.ascontiguousarray(Rinv.T))
         self._t = np.arange(N) * config.node_dt
-        # np.gradient(., self._t, axis=1), precomputed: the same formulas and operation order
-        # (scalar spacing when the node times are evenly spaced in floating point).
-        dt = np.diff(self._t)
-        self._grad_dx = dt[0] if N > 1 and bool((dt == dt[0]).all()) else dt
-        if np.ndim(self._grad_dx) == 1:
-            dx1, dx2 = dt[:-1], dt[1:]
-            self._grad_abc = (-(dx2) / (dx1 * (dx1 + dx2)), (dx2 - dx1) / (dx1 * dx2),
-                              dx1 / (dx2 * (dx1 + dx2)))
+        self._time_gradient = GridGradient(self._t)  # d/dt along the nodes (np.gradient, precomputed)
         self._node_idx = np.arange(N)
         # _thin_extension: whether a node at distance d (in nodes) from the box window is dropped
         stride = int(config.closing_stride)
@@ -439,21 +433,6 @@ class PassingSidePlanner:
             lo = np.where(narrow, mid, lo)
             hi = np.where(narrow, mid, hi)
         return lo, hi
-
-    def _time_gradient(self, f: np.ndarray) -> np.ndarray:
-        """``np.gradient(f, self._t, axis=1)`` (first-order edges), same arithmetic."""
-        out = np.empty_like(f)
-        dx = self._grad_dx
-        if np.ndim(dx) == 0:
-            out[:, 1:-1] = (f[:, 2:] - f[:, :-2]) / (2. * dx)
-            dx_0 = dx_n = dx
-        else:
-            a, b, c = self._grad_abc
-            out[:, 1:-1] = a * f[:, :-2] + b * f[:, 1:-1] + c * f[:, 2:]
-            dx_0, dx_n = dx[0], dx[-1]
-        out[:, 0] = (f[:, 1] - f[:, 0]) / dx_0
-        out[:, -1] = (f[:, -1] - f[:, -2]) / dx_n
-        return out
 
     def _closing_speed(self, gap: np.ndarray) -> np.ndarray:
         """``-np.gradient(gap, self._t, axis=1)``: the closing speed when the opponent is ahead."""

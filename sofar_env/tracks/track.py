@@ -525,6 +525,8 @@ class Track:
         refinement; with ``s_hint`` (a previous s) only a local window around it
         is searched, so the result stays on the same stretch of track.
         """
+        if type(x) is float and type(y) is float and type(s_hint) is float:  # the common case
+            return self._to_frenet_scalar(x, y, s_hint)
         xs, ys = _as_scalar(x), _as_scalar(y)
         hs = None if s_hint is None else _as_scalar(s_hint)
         if xs is not None and ys is not None and (s_hint is None or hs is not None):
@@ -594,10 +596,29 @@ class Track:
     def _newton_scalar(self, x: float, y: float, s: float, robust: bool = False):
         curve = self._curve
         max_step = self._max_step
-        eval_scalar = curve.eval_scalar
         length = curve.length
-        for _ in range(_NEWTON_MAX_ITER):
-            px, py, dx, dy, ddx, ddy = eval_scalar(s)
+        # PeriodicCurve.eval_scalar(s) written out (same expressions, same order: the same
+        # result to the last bit; it saves three calls per iteration)
+        knots, coefs, last, bisect_right = curve._knots_list, curve._coef_list, curve._last, bisect.bisect_right
+        converged = False
+        # one evaluation per pass; the last pass (after convergence or the last step) only evaluates,
+        # for the tangent at the final s (curve.tangent_scalar(s), likewise written out)
+        for it in range(_NEWTON_MAX_ITER + 1):
+            i = bisect_right(knots, s) - 1
+            if i > last:
+                i = last
+            elif i < 0:
+                i = 0
+            t = s - knots[i]
+            c0, c1, c2, c3, c4, c5, c6, c7 = coefs[i]  # x then y coefficients, highest power first
+            px = ((c0 * t + c1) * t + c2) * t + c3
+            py = ((c4 * t + c5) * t + c6) * t + c7
+            dx = (3.0 * c0 * t + 2.0 * c1) * t + c2
+            dy = (3.0 * c4 * t + 2.0 * c5) * t + c6
+            if converged or it == _NEWTON_MAX_ITER:
+                break
+            ddx = 6.0 * c0 * t + 2.0 * c1
+            ddy = 6.0 * c4 * t + 2.0 * c5
             ex = px - x
             ey = py - y
             dd = dx * dx + dy * dy
@@ -612,12 +633,9 @@ class Track:
             s = (s + step) % length
             if s >= length:
                 s = 0.0
-            if -_NEWTON_TOL < step < _NEWTON_TOL:
-                break
-        else:
-            if not robust:
-                return None
-        px, py, dx, dy = curve.tangent_scalar(s)
+            converged = -_NEWTON_TOL < step < _NEWTON_TOL
+        if not converged and not robust:
+            return None
         return s, (dx * (y - py) - dy * (x - px)) / math.hypot(dx, dy)
 
     # ---------------------------------------------------------------- misc
