@@ -112,7 +112,7 @@ class DecisionTally:
             "min_barrier": self.min_h,
             "barrier_slack": self.barrier_slack,
             "mpc_status": out.mpc.status if out is not None else "",
-            "miqp_sides": tuple(map(int, np.asarray(plan.sides).tolist())) if plan is not None else (),
+            "miqp_sides": tuple(np.asarray(plan.sides, dtype=int).tolist()) if plan is not None else (),
             "mpc_failures": stack.counters["mpc_failures"],
             "miqp_failures": stack.counters["miqp_failures"],
         }
