@@ -3,7 +3,7 @@
 Usage::
 
     python eval/bench_env.py [--steps 1000] [--track LagunaSeca] [--rho 0.5] [--opponents 4]
-                             [--gamma 0.5] [--seed 0] [--repeats 3] [--json PATH]
+                             [--gamma 0.5] [--seed 0] [--repeats 3] [--vector N] [--json PATH]
 
 Two passes over the same seeded episodes:
 
@@ -16,12 +16,17 @@ Two passes over the same seeded episodes:
    calls inside it), observation (``observe``) and the rest (env + stack glue, reward
    terms, info). Times are exclusive: a component's time excludes the timed
    components it calls. The timers cost ~0.5 us per call.
+
+With ``--vector N`` a third pass times a gymnasium ``AsyncVectorEnv`` of N worker
+processes (the set-up ``train/pasta.py`` uses) and reports its total env steps/s.
+The host's 1-minute load average is printed and stored: other load only adds time.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from collections import defaultdict
@@ -108,6 +113,46 @@ def run(env: SOfARRaceEnv, steps: int, gamma: float, seed: int) -> tuple[np.ndar
                    "miqp_median_ms": float(np.median(miqp)) if miqp else float("nan")}
 
 
+def run_vector(args: argparse.Namespace) -> dict:
+    """Total env steps/s of an AsyncVectorEnv with ``args.vector`` workers, ``args.steps`` vector steps.
+
+    Worker i runs the benchmark's env seeded ``args.seed + i``; episodes that end are reset by the
+    vector env (next-step autoreset), and the steps that only reset are not counted.
+    """
+    import functools
+
+    import gymnasium as gym
+
+    n = args.vector
+    factory = functools.partial(SOfARRaceEnv, track=args.track, rho=args.rho, n_opponents=args.opponents)
+    envs = gym.vector.AsyncVectorEnv([factory] * n)
+    try:
+        actions = np.full((n, 1), args.gamma, np.float32)
+        envs.reset(seed=[args.seed + i for i in range(n)])
+        for _ in range(20):  # warm-up: the workers build (and load) their controllers
+            envs.step(actions)
+        counted, episodes, resetting = 0, 0, np.zeros(n, bool)
+        t0 = time.perf_counter()
+        for _ in range(args.steps):
+            _, _, terminated, truncated, _ = envs.step(actions)
+            counted += int(n - resetting.sum())
+            resetting = terminated | truncated
+            episodes += int(resetting.sum())
+        wall = time.perf_counter() - t0
+    finally:
+        envs.close()
+    return {"workers": n, "vector_steps": args.steps, "env_steps": counted, "wall_s": wall,
+            "steps_per_s": counted / wall, "episodes_ended": episodes}
+
+
+def _load_average() -> float | None:
+    """The host's 1-minute load average (None where the OS has none): a busy host slows every pass."""
+    try:
+        return float(os.getloadavg()[0])
+    except (AttributeError, OSError):
+        return None
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1000, help="timed env steps per pass (default 1000)")
@@ -120,6 +165,9 @@ def main(argv: list[str] | None = None) -> dict:
                         help="timed passes over the same seeded steps (default 3): the median and the best "
                              "pass are reported; on a shared machine other load only ever adds time, so the "
                              "best pass is the closest to the code's own cost (the timeit convention)")
+    parser.add_argument("--vector", type=int, default=0, metavar="N",
+                        help="also time a gymnasium AsyncVectorEnv of N worker processes (the training set-up) "
+                             "and report its total env steps/s; 0 (default) skips it")
     parser.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = parser.parse_args(argv)
 
@@ -132,8 +180,12 @@ def main(argv: list[str] | None = None) -> dict:
 
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
+    if args.vector < 0:
+        parser.error("--vector must be >= 0")
+    load_before = _load_average()
     env = make()
     passes = [run(env, args.steps, args.gamma, args.seed) for _ in range(args.repeats)]
+    load_after = _load_average()
     rates = [args.steps / t.sum() for t, _ in passes]
     times, stats = passes[int(np.argsort(rates)[len(rates) // 2])]  # the median pass
     timer = ComponentTimer()
@@ -158,16 +210,27 @@ def main(argv: list[str] | None = None) -> dict:
         **stats,
         "breakdown_ms_per_step": breakdown,
         "instrumented_ms_per_step": 1e3 * wall / args.steps,
+        "cpu_count": os.cpu_count(),
+        "load_average_1min": {"before": load_before, "after": load_after},
     }
+    if args.vector:
+        result["vector"] = run_vector(args)
     print(f"{args.track}, {args.opponents} opponents at rho={args.rho}, gamma={args.gamma}, {args.steps} steps")
     print(f"  {result['steps_per_s']:.0f} env steps/s median of {args.repeats} passes, best "
           f"{result['steps_per_s_best']:.0f} (passes: {', '.join(f'{r:.0f}' for r in rates)})")
+    if load_after is not None:
+        print(f"  host load (1-min average, this run included): {load_before:.2f} before, {load_after:.2f} after, "
+              f"on {os.cpu_count()} CPUs; other load only adds time")
     print(f"  median pass: step median {result['step_ms']['median']:.2f} ms, "
           f"p95 {result['step_ms']['p95']:.2f} ms; MPC median {stats['mpc_median_ms']:.2f} ms, "
           f"MIQP median {stats['miqp_median_ms']:.2f} ms per solve")
     print(f"  per-step breakdown (instrumented run, {result['instrumented_ms_per_step']:.2f} ms/step):")
     for name, ms in breakdown.items():
         print(f"    {name:40s} {ms:6.3f} ms  {100 * ms / result['instrumented_ms_per_step']:5.1f} %")
+    if args.vector:
+        vec = result["vector"]
+        print(f"  AsyncVectorEnv, {vec['workers']} workers: {vec['steps_per_s']:.0f} env steps/s in total "
+              f"({vec['vector_steps']} vector steps, {vec['episodes_ended']} episodes ended)")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(result, fh, indent=2)

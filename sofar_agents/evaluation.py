@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import importlib.metadata
 import json
 import logging
 import math
@@ -1062,11 +1063,11 @@ def machine_info() -> dict[str, Any]:
         pass
     info: dict[str, Any] = {"cpu": cpu, "cores": os.cpu_count(), "platform": platform.platform(),
                             "python": sys.version.split()[0]}
-    for mod in ("numpy", "casadi", "piqp", "daqp", "torch", "gymnasium"):
-        try:
-            info[mod] = __import__(mod).__version__
-        except Exception:
-            info[mod] = None
+    for dist in ("numpy", "casadi", "piqp", "daqp", "torch", "gymnasium"):
+        try:  # the installed distribution's version (daqp's module has no __version__)
+            info[dist] = importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            info[dist] = None
     return info
 
 

@@ -23,6 +23,16 @@ def test_bench_env_reports_every_pass(tmp_path):
     assert result["breakdown_ms_per_step"]["mpc"] > 0 and result["breakdown_ms_per_step"]["miqp"] > 0
 
 
+def test_bench_env_times_an_async_vector_env(tmp_path):
+    out = tmp_path / "bench.json"
+    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--steps", "10", "--repeats", "1",
+                    "--vector", "2", "--json", str(out)], check=True, capture_output=True, text=True, timeout=300)
+    vec = json.loads(out.read_text())["vector"]
+    assert vec["workers"] == 2 and vec["vector_steps"] == 10
+    assert vec["env_steps"] == 20  # no episode ends in 10 steps: every worker step counts
+    assert vec["steps_per_s"] > 0
+
+
 def test_bench_env_rejects_zero_repeats():
     proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--repeats", "0"],
                           capture_output=True, text=True, timeout=120)

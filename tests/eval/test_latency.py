@@ -42,5 +42,7 @@ def test_latency_json_report(tmp_path):
     assert report["rl_ms"]["n"] > 0 and report["rl_ms"]["mean"] > 0.0
     assert report["controller_step_ms"]["mean"] >= report["mpc_ms"]["mean"]
     assert report["machine"]["cores"] >= 1 and "cpu" in report["machine"]
+    # the solver versions are recorded (read from the installed distributions)
+    assert report["machine"]["piqp"] and report["machine"]["daqp"]
     assert report["paper_ms"]["mpc_ms"]["mean"] == 1.60
     assert "| MPC |" in proc.stdout and "1.60 ± 0.34" in proc.stdout
