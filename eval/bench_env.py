@@ -19,13 +19,17 @@ Two passes over the same seeded episodes:
 
 With ``--vector N`` a third pass times a gymnasium ``AsyncVectorEnv`` of N worker
 processes (the set-up ``train/pasta.py`` uses) and reports its total env steps/s.
-The host's 1-minute load average is printed and stored: other load only adds time.
+The host's 1-minute load average and the time of a fixed reference workload
+(:func:`reference_workload_ms`, independent of the package) are printed and stored: on
+a shared or virtual machine the same code runs slower while other tenants load the
+cores, and the reference time shows by how much.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -145,6 +149,31 @@ def run_vector(args: argparse.Namespace) -> dict:
             "steps_per_s": counted / wall, "episodes_ended": episodes}
 
 
+def reference_workload_ms(repeats: int = 5) -> float:
+    """Best-of-``repeats`` wall time [ms] of a fixed CPU-bound workload shaped like the env's hot path
+    (scalar Python float arithmetic and numpy calls on small arrays).
+
+    It does not depend on the package, so it measures the host, not the code: on a shared or
+    virtual machine the same binary runs slower while other tenants load the physical cores, and
+    the env's steps/s fall by about the factor this time rises. Reported next to the steps/s so that
+    runs on differently loaded hosts can be compared.
+    """
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal(76)
+    b = rng.standard_normal((76, 6))
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        x = 0.0
+        for i in range(20000):  # scalar float work, as in the track's and opponents' scalar paths
+            x = (x * 0.5 + i * 1e-3) % 7.0
+        for _ in range(2000):  # small-array numpy calls, as in the planners' glue
+            c = np.maximum(a, 0.0) * 2.0 - a
+            x += float(c.sum()) + float((b @ b[0]).min())
+        best = min(best, time.perf_counter() - t0)
+    return 1e3 * best
+
+
 def _load_average() -> float | None:
     """The host's 1-minute load average (None where the OS has none): a busy host slows every pass."""
     try:
@@ -183,8 +212,10 @@ def main(argv: list[str] | None = None) -> dict:
     if args.vector < 0:
         parser.error("--vector must be >= 0")
     load_before = _load_average()
+    ref_before = reference_workload_ms()
     env = make()
     passes = [run(env, args.steps, args.gamma, args.seed) for _ in range(args.repeats)]
+    ref_after = reference_workload_ms()
     load_after = _load_average()
     rates = [args.steps / t.sum() for t, _ in passes]
     times, stats = passes[int(np.argsort(rates)[len(rates) // 2])]  # the median pass
@@ -212,6 +243,7 @@ def main(argv: list[str] | None = None) -> dict:
         "instrumented_ms_per_step": 1e3 * wall / args.steps,
         "cpu_count": os.cpu_count(),
         "load_average_1min": {"before": load_before, "after": load_after},
+        "reference_workload_ms": {"before": ref_before, "after": ref_after},
     }
     if args.vector:
         result["vector"] = run_vector(args)
@@ -221,6 +253,8 @@ def main(argv: list[str] | None = None) -> dict:
     if load_after is not None:
         print(f"  host load (1-min average, this run included): {load_before:.2f} before, {load_after:.2f} after, "
               f"on {os.cpu_count()} CPUs; other load only adds time")
+    print(f"  host speed: reference workload {ref_before:.1f} ms before, {ref_after:.1f} ms after the passes "
+          f"(a fixed CPU-bound loop, independent of the package: higher = slower host)")
     print(f"  median pass: step median {result['step_ms']['median']:.2f} ms, "
           f"p95 {result['step_ms']['p95']:.2f} ms; MPC median {stats['mpc_median_ms']:.2f} ms, "
           f"MIQP median {stats['miqp_median_ms']:.2f} ms per solve")

@@ -19,6 +19,9 @@ def test_bench_env_reports_every_pass(tmp_path):
     assert len(passes) == 3 and all(r > 0 for r in passes)
     assert result["steps_per_s_best"] == max(passes)
     assert min(passes) <= result["steps_per_s"] <= max(passes)
+    # the host's state is recorded next to the rates: load average and a fixed reference workload
+    ref = result["reference_workload_ms"]
+    assert ref["before"] > 0 and ref["after"] > 0
     # the component breakdown accounts for the controller's two solvers
     assert result["breakdown_ms_per_step"]["mpc"] > 0 and result["breakdown_ms_per_step"]["miqp"] > 0
 
