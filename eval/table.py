@@ -36,6 +36,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--gammas", nargs="+", type=float, default=None,
                    help="fixed gammas (default 0.05 0.15 0.30 0.50 0.70 0.95; Table II: 0.5)")
     p.add_argument("--duration", type=float, default=None, help="episode horizon [s] (default 200)")
+    p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
+                   help="controller preset: sofar (default) or paper (the paper's Algorithm 1 as written)")
     p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")
     p.add_argument("--policy", default=None, help="adaptive policy checkpoint (default: the shipped one)")
     p.add_argument("--no-adaptive", action="store_true", help="leave out the adaptive policy")
@@ -63,7 +65,7 @@ def main(argv=None) -> int:
     duration = args.duration or (10.0 if args.quick else ev.DEFAULT_DURATION)
     out = args.out or ("results/quick" if args.quick else "results")
     strategies = ev.build_strategies(gammas, policy=policy, sb3=args.sb3, adaptive=policy is not None)
-    common = dict(base_seed=args.seed, duration=duration, workers=args.workers, progress=not args.no_progress)
+    common = dict(stack=args.stack, base_seed=args.seed, duration=duration, workers=args.workers, progress=not args.no_progress)
     try:
         if args.miqp_ablation:
             report = ev.run_miqp_ablation(strategies, out, episodes=episodes, rhos=rhos, **common)

@@ -118,7 +118,7 @@ PAPER_LATENCY_MS = {"mpc_ms": (1.60, 0.34), "miqp_ms": (5.49, 1.73), "rl_ms": (0
 EPISODE_COLUMNS: tuple[str, ...] = (
     "track", "strategy", "rho", "seed", "success", "sim_time", "laps", "overtakes", "collision", "off_track",
     "slack_steps", "steps", "mean_gamma", "mpc_failures", "miqp_failures", "wall_time",
-    "episode", "use_miqp", "duration", "policy_id",
+    "episode", "use_miqp", "duration", "policy_id", "stack", "n_opponents",
 )
 """Columns of the per-episode CSV (one row per episode)."""
 TRACE_COLUMNS: tuple[str, ...] = (
@@ -229,27 +229,33 @@ class EpisodeTask:
     """Episode horizon [s]; reaching it without a collision or leaving the track is a success."""
     n_opponents: int | None = None
     """Opponent count (None: the environment's default, 4)."""
+    stack: str = "sofar"
+    """Controller preset (``"sofar"`` or ``"paper"``, see :func:`sofar_env.stack.stack_preset`)."""
     trace: bool = False
     """Record a per-step trace (gamma, nearest opponent, smallest barrier value)."""
 
     @property
     def key(self) -> tuple:
         return _key(self.track, self.strategy.name, self.strategy.policy_id, self.rho, self.seed, self.use_miqp,
-                    self.duration)
+                    self.duration, self.stack, self.n_opponents)
 
     @property
     def env_key(self) -> tuple:
-        return (self.track, bool(self.use_miqp), float(self.duration))
+        return (self.track, bool(self.use_miqp), float(self.duration), self.stack)
 
 
-def _key(track, strategy, policy_id, rho, seed, use_miqp, duration) -> tuple:
+def _key(track, strategy, policy_id, rho, seed, use_miqp, duration, stack, n_opponents) -> tuple:
+    """The resume key: every setting that changes an episode (rows of older files: stack "sofar", the
+    default opponent count)."""
+    n_opp = "" if n_opponents in (None, "") else str(int(float(n_opponents)))
     return (str(track), str(strategy), str(policy_id or ""), _fmt_float(rho), int(seed), bool(use_miqp),
-            _fmt_float(duration))
+            _fmt_float(duration), str(stack or "sofar"), n_opp)
 
 
 def _row_key(row: Mapping[str, Any]) -> tuple:
     return _key(row["track"], row["strategy"], row.get("policy_id", ""), row["rho"], row["seed"],
-                _as_bool(row.get("use_miqp", True)), row.get("duration", DEFAULT_DURATION))
+                _as_bool(row.get("use_miqp", True)), row.get("duration", DEFAULT_DURATION),
+                row.get("stack") or "sofar", row.get("n_opponents"))
 
 
 def episode_seed(base_seed: int, track: str, rho: float, episode: int) -> int:
@@ -310,7 +316,7 @@ def build_strategies(gammas: Sequence[float] = FIXED_GAMMAS, policy: str | os.Pa
 
 def table1_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS, rhos: Sequence[float] = RHOS,
                  episodes: int = 5, base_seed: int = 0, duration: float = DEFAULT_DURATION,
-                 trace: bool | Callable[[Strategy], bool] = False) -> list[EpisodeTask]:
+                 trace: bool | Callable[[Strategy], bool] = False, stack: str = "sofar") -> list[EpisodeTask]:
     """Every (track, rho, episode, strategy) of Table I, grouped by track so workers reuse environments."""
     tasks = []
     for track in tracks:
@@ -319,13 +325,14 @@ def table1_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS,
                 seed = episode_seed(base_seed, track, rho, e)
                 for strat in strategies:
                     tr = trace(strat) if callable(trace) else bool(trace)
-                    tasks.append(EpisodeTask(track, strat, float(rho), e, seed, True, float(duration), trace=tr))
+                    tasks.append(EpisodeTask(track, strat, float(rho), e, seed, True, float(duration), stack=stack,
+                                             trace=tr))
     return tasks
 
 
 def miqp_ablation_tasks(strategies: Sequence[Strategy], episodes: int = 10, rhos: Sequence[float] = RHOS,
                         track: str = "LagunaSeca", base_seed: int = 0,
-                        duration: float = DEFAULT_DURATION) -> list[EpisodeTask]:
+                        duration: float = DEFAULT_DURATION, stack: str = "sofar") -> list[EpisodeTask]:
     """Table II: ``episodes`` episodes per (MIQP setting, strategy), rho cycling over ``rhos``.
 
     Episode ``k`` runs at ``rhos[k % len(rhos)]`` with the seed of episode ``k // len(rhos)``
@@ -338,7 +345,7 @@ def miqp_ablation_tasks(strategies: Sequence[Strategy], episodes: int = 10, rhos
             e = k // len(rhos)
             seed = episode_seed(base_seed, track, rho, e)
             for strat in strategies:
-                tasks.append(EpisodeTask(track, strat, rho, e, seed, use_miqp, float(duration)))
+                tasks.append(EpisodeTask(track, strat, rho, e, seed, use_miqp, float(duration), stack=stack))
     return tasks
 
 
@@ -367,6 +374,9 @@ class EpisodeResult:
     use_miqp: bool = True
     duration: float = DEFAULT_DURATION
     policy_id: str = ""
+    stack: str = "sofar"
+    n_opponents: int | str = ""
+    """Opponent count of the episode ("" for the environment's default)."""
 
     def to_row(self) -> dict[str, Any]:
         row = asdict(self)
@@ -442,13 +452,15 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
         mean_gamma=gamma_sum / max(steps, 1), mpc_failures=int(_info_scalar(info, "mpc_failures")),
         miqp_failures=int(_info_scalar(info, "miqp_failures")), wall_time=time.perf_counter() - t0,
         episode=int(task.episode), use_miqp=bool(task.use_miqp), duration=float(task.duration),
-        policy_id=task.strategy.policy_id,
+        policy_id=task.strategy.policy_id, stack=task.stack,
+        n_opponents="" if task.n_opponents is None else int(task.n_opponents),
     )
     return result, trace
 
 
-def make_env(track: str, use_miqp: bool = True, duration: float = DEFAULT_DURATION, **kwargs):
-    """``gymnasium.make("SOfAR-<track>-v0")`` with the MIQP setting and the episode horizon."""
+def make_env(track: str, use_miqp: bool = True, duration: float = DEFAULT_DURATION, stack: str = "sofar",
+             **kwargs):
+    """``gymnasium.make("SOfAR-<track>-v0")`` with the MIQP setting, the controller preset and the horizon."""
     import gymnasium as gym
 
     import sofar_env  # noqa: F401  (registers the environments)
@@ -458,7 +470,7 @@ def make_env(track: str, use_miqp: bool = True, duration: float = DEFAULT_DURATI
     # the registered ids cap episodes at 2000 steps (200 s); follow the requested horizon instead
     steps = int(math.ceil(float(duration) / RaceConfig().dt - 1e-9)) + 1
     return gym.make(f"SOfAR-{track}-v0", max_episode_steps=steps, use_miqp=bool(use_miqp),
-                    config={"race": {"duration": float(duration)}}, **kwargs)
+                    config={"race": {"duration": float(duration)}, "stack": stack}, **kwargs)
 
 
 class _EpisodeRunner:
@@ -471,7 +483,7 @@ class _EpisodeRunner:
     def run(self, task: EpisodeTask) -> tuple[EpisodeResult, list[tuple]]:
         env = self.envs.get(task.env_key)
         if env is None:
-            env = self.envs[task.env_key] = make_env(task.track, task.use_miqp, task.duration)
+            env = self.envs[task.env_key] = make_env(task.track, task.use_miqp, task.duration, task.stack)
         policy = self.policies.get(task.strategy)
         if policy is None:
             policy = self.policies[task.strategy] = task.strategy.build()
@@ -548,17 +560,42 @@ def read_episode_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
     rows = []
     with open(p, newline="") as f:
         reader = csv.DictReader(f)
-        missing = [c for c in EPISODE_COLUMNS if c not in (reader.fieldnames or [])]
+        missing = [c for c in EPISODE_COLUMNS if c not in (reader.fieldnames or []) and c not in _ADDED_COLUMNS]
         if missing:
             raise ValueError(f"{p} is not a SOfAR episode CSV (missing columns {missing}); use another --out")
         for row in reader:
-            if any(row.get(c) in (None, "") for c in EPISODE_COLUMNS if c != "policy_id"):
+            if any(row.get(c) in (None, "") for c in EPISODE_COLUMNS if c not in _MAY_BE_EMPTY):
                 continue
             try:
                 rows.append(_parse_row(row))
             except ValueError:
                 logger.warning("skipping an unreadable row of %s: %s", p, row)
     return rows
+
+
+_ADDED_COLUMNS = {"stack": "sofar", "n_opponents": ""}
+"""Columns added after the first format, with the value that rows of older files stand for."""
+_MAY_BE_EMPTY = {"policy_id", "n_opponents"}
+
+
+def _is_older_header(header: Sequence[str], columns: Sequence[str]) -> bool:
+    return list(header) == [c for c in columns if c not in _ADDED_COLUMNS or c in header]
+
+
+def _migrate_csv(path: Path, header: Sequence[str], columns: Sequence[str]) -> None:
+    """Rewrite an episode CSV of an older format with the current columns (atomically)."""
+    with open(path, newline="") as f:
+        rows = [r for r in csv.DictReader(f)]
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(columns))
+        w.writeheader()
+        for r in rows:
+            if None in r or any(v is None for v in r.values()):
+                continue  # a torn last line
+            w.writerow({c: r.get(c, _ADDED_COLUMNS.get(c, "")) for c in columns})
+    os.replace(tmp, path)
+    logger.info("%s: added the columns %s (older format)", path, [c for c in columns if c not in header])
 
 
 class _AppendingCSV:
@@ -574,7 +611,10 @@ class _AppendingCSV:
                 needs_newline = f.read(1) not in (b"\n", b"\r")
             with open(self.path, newline="") as f:
                 header = next(csv.reader(f), [])
-            if list(header) != list(columns):
+            if list(header) != list(columns) and _is_older_header(header, columns):
+                _migrate_csv(self.path, header, columns)
+                needs_newline = False
+            elif list(header) != list(columns):
                 raise ValueError(f"{self.path} has columns {header}, expected {list(columns)}; use another --out")
         self._f = open(self.path, "a", newline="")
         if not new and needs_newline:
@@ -979,7 +1019,7 @@ def _stats_text(stats: SweepStats) -> str:
 def run_table1(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "results", *,
                tracks: Sequence[str] = TRACKS, rhos: Sequence[float] = RHOS, episodes: int = 5, base_seed: int = 0,
                duration: float = DEFAULT_DURATION, workers: int | None = None, trace: bool = False,
-               progress: bool = True, prefix: str = "table1") -> TableReport:
+               progress: bool = True, prefix: str = "table1", stack: str = "sofar") -> TableReport:
     """Table I: run (or resume) the sweep into ``out_dir/<prefix>_episodes.csv``, write ``<prefix>.md``.
 
     With ``trace``, the per-step trace of the non-fixed strategies goes to ``<prefix>_trace.csv``.
@@ -987,13 +1027,14 @@ def run_table1(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "res
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     tasks = table1_tasks(strategies, tracks, rhos, episodes, base_seed, duration,
-                         trace=(lambda s: s.kind != "fixed") if trace else False)
+                         trace=(lambda s: s.kind != "fixed") if trace else False, stack=stack)
     csv_path = out / f"{prefix}_episodes.csv"
     stats = run_sweep(tasks, csv_path, workers=workers, progress=progress,
                       trace_path=out / f"{prefix}_trace.csv" if trace else None)
     rows = select_rows(read_episode_csv(csv_path), tasks)
     settings = {"tracks": ", ".join(tracks), "rho": ", ".join(_fmt_float(r) for r in rhos),
-                "episodes per (track, rho)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed}
+                "episodes per (track, rho)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed,
+                "controller": stack}
     parts = [_run_header("Table I: performance per circuit", settings),
              "Per circuit and metric, **bold** is the best and <u>underlined</u> the second best "
              "(success rate, simulated time, laps, overtakes: higher is better). Slack: percentage of control "
@@ -1016,16 +1057,17 @@ def run_table1(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "res
 def run_miqp_ablation(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "results", *,
                       episodes: int = 10, rhos: Sequence[float] = RHOS, track: str = "LagunaSeca",
                       base_seed: int = 0, duration: float = DEFAULT_DURATION, workers: int | None = None,
-                      progress: bool = True, prefix: str = "table2") -> TableReport:
+                      progress: bool = True, prefix: str = "table2", stack: str = "sofar") -> TableReport:
     """Table II: ``track`` with and without the MIQP layer, into ``out_dir/<prefix>_episodes.csv`` and ``.md``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    tasks = miqp_ablation_tasks(strategies, episodes, rhos, track, base_seed, duration)
+    tasks = miqp_ablation_tasks(strategies, episodes, rhos, track, base_seed, duration, stack=stack)
     csv_path = out / f"{prefix}_episodes.csv"
     stats = run_sweep(tasks, csv_path, workers=workers, progress=progress)
     rows = select_rows(read_episode_csv(csv_path), tasks)
     settings = {"track": track, "rho cycled over": ", ".join(_fmt_float(r) for r in rhos),
-                "episodes per (setting, strategy)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed}
+                "episodes per (setting, strategy)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed,
+                "controller": stack}
     parts = [_run_header("Table II: with and without the MIQP layer", settings),
              "**Bold** is the best and <u>underlined</u> the second best over the four rows (as in the paper).\n",
              format_table2(rows, strategies)]

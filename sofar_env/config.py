@@ -9,6 +9,9 @@ mapping into one, validating as it goes:
 * top-level keys are the fields of :class:`EnvConfig` plus the shortcuts
   ``n_opponents``, ``offsets``, ``rho`` (into ``race.opponents``) and
   ``speed_factor``, ``use_miqp`` (into ``stack``);
+* ``stack`` may also name a controller preset, ``"sofar"`` (the default) or
+  ``"paper"`` (the paper's Algorithm 1 as written; see
+  :func:`~sofar_env.stack.stack_preset`); the other keys apply on top of it;
 * a value for a sub-config (``race``, ``stack``, ``reward_weights``, and their
   own nested dataclasses such as ``race.opponents`` or ``stack.mpc``) may be the
   dataclass itself or a mapping of overrides applied to the current value;
@@ -200,6 +203,13 @@ def make_env_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwarg
     else:
         raise ConfigError(f"config must be an EnvConfig or a mapping, got {type(config).__name__}")
     items.update(kwargs)
+    if isinstance(items.get("stack"), str):
+        from .stack import stack_preset
+
+        try:
+            items["stack"] = stack_preset(items["stack"])
+        except ValueError as exc:
+            raise ConfigError(f"stack: {exc}") from None
     # route the shortcut keys into their sub-config, after any explicit sub-config value
     nested: dict[str, Any] = {}
     for key in list(items):
