@@ -53,6 +53,10 @@ from typing import Any
 
 import numpy as np
 
+from sofar_env.constants import CIRCUIT_ABBREVIATIONS, EPISODE_SECONDS, TABLE_ORDER
+from sofar_env.constants import FIXED_GAMMAS as _FIXED_GAMMAS
+from sofar_env.constants import RHOS as _RHOS
+
 logger = logging.getLogger(__name__)
 
 __all__ = [
@@ -95,14 +99,14 @@ __all__ = [
     "plot_gamma_figures",
 ]
 
-TRACKS: tuple[str, ...] = ("Indianapolis", "Kentucky", "LagunaSeca", "Monza")
+TRACKS: tuple[str, ...] = TABLE_ORDER
 """The four circuits of the paper, in the paper's table order."""
-TRACK_ABBREVIATIONS = {"Indianapolis": "IMS", "Kentucky": "KS", "LagunaSeca": "LS", "Monza": "Monza"}
-RHOS: tuple[float, ...] = (0.1, 0.3, 0.5, 0.65, 0.8)
+TRACK_ABBREVIATIONS = CIRCUIT_ABBREVIATIONS
+RHOS: tuple[float, ...] = _RHOS
 """Opponent pace ratios of the paper."""
-FIXED_GAMMAS: tuple[float, ...] = (0.05, 0.15, 0.30, 0.50, 0.70, 0.95)
+FIXED_GAMMAS: tuple[float, ...] = _FIXED_GAMMAS
 """Fixed barrier decays of the paper's baselines."""
-DEFAULT_DURATION = 200.0
+DEFAULT_DURATION = EPISODE_SECONDS
 """Episode horizon of the paper [s]."""
 
 PAPER_TABLE1_SUCCESS = {

@@ -16,9 +16,11 @@ from typing import Any, Sequence
 import gymnasium as gym
 import numpy as np
 
+from sofar_env.constants import RHOS
+
 __all__ = ["LinearReward", "RescaleGammaAction", "RandomRhoReset", "EVAL_RHOS"]
 
-EVAL_RHOS = (0.1, 0.3, 0.5, 0.65, 0.8)
+EVAL_RHOS = RHOS
 """Opponent pace ratios of the paper's evaluation."""
 
 

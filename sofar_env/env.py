@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from .constants import GAMMA_MAX, GAMMA_MIN
 from .config import OBJECTIVE_NAMES, EnvConfig, make_env_config
 from .control.barrier import barrier_expr
 from .observation import observe
@@ -18,10 +19,6 @@ from .rewards import reward_vector, safety_cost, scalarize
 
 __all__ = ["SOfARRaceEnv", "GAMMA_MIN", "GAMMA_MAX", "RESET_OPTIONS"]
 
-GAMMA_MIN = 0.05
-"""Lower end of the action (barrier decay) [-]."""
-GAMMA_MAX = 1.0
-"""Upper end of the action [-]."""
 RESET_OPTIONS = ("rho", "n_opponents", "start_s", "start_speed")
 """Keys accepted in ``reset(options=...)``."""
 

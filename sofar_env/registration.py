@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import gymnasium as gym
 
+from .constants import CIRCUITS
+
 __all__ = ["TRACKS", "ENV_IDS", "MAX_EPISODE_STEPS", "register_envs"]
 
-TRACKS = ("LagunaSeca", "Monza", "Indianapolis", "Kentucky")
+TRACKS = CIRCUITS
 """Circuits with a registered environment."""
 ENV_IDS = tuple(f"SOfAR-{name}-v0" for name in TRACKS)
 """The registered ids, in the order of :data:`TRACKS`."""

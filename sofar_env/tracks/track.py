@@ -25,6 +25,8 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+
+from ..constants import CIRCUITS
 from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
@@ -51,7 +53,7 @@ META_FILE = "meta.json"
 RACELINE_COLUMNS = ("s_m", "x_m", "y_m", "psi_rad", "kappa_radpm", "w_left_m", "w_right_m", "v_mps")
 EDGE_COLUMNS = ("x_m", "y_m")
 
-TRACK_NAMES = ("LagunaSeca", "Monza", "Indianapolis", "Kentucky")
+TRACK_NAMES = CIRCUITS
 """Circuits shipped with the package (folders of ``sofar_env.track_data``)."""
 
 _ALIASES = {"ls": "LagunaSeca", "ims": "Indianapolis", "ks": "Kentucky"}
