@@ -38,8 +38,8 @@ from collections import defaultdict
 import numpy as np
 
 import sofar_env  # noqa: F401  (registers the ids)
-import sofar_env.env as env_module
 from sofar_env.env import SOfARRaceEnv
+from sofar_env.observation import observe
 
 TRACK_METHODS = ("to_frenet", "to_cartesian", "pose", "heading", "curvature", "width_left", "width_right", "speed",
                  "wrap", "gap", "normal")
@@ -77,8 +77,9 @@ class ComponentTimer:
 def instrument(env: SOfARRaceEnv, timer: ComponentTimer):
     """Wrap the components of a built env (after its first reset) with ``timer``; returns an undo function.
 
-    Everything is wrapped on the env's own instances, except ``observe``, which the env module
-    looks up as a global: the undo function restores it.
+    Everything is wrapped on the env's own instances, except ``observe``, which the package's
+    modules look up as a global: it is wrapped in every loaded ``sofar_env`` module that imported
+    it, and the undo function restores them.
     """
     env.stack.mpc.solve = timer.wrap(env.stack.mpc.solve, "mpc")
     env.stack.planner.plan = timer.wrap(env.stack.planner.plan, "miqp")
@@ -86,11 +87,15 @@ def instrument(env: SOfARRaceEnv, timer: ComponentTimer):
     env.race.step = timer.wrap(env.race.step, "world")
     for name in TRACK_METHODS:
         setattr(env.track, name, timer.wrap(getattr(env.track, name), "track/Frenet"))
-    original_observe = env_module.observe
-    env_module.observe = timer.wrap(original_observe, "observation")
+    users = [m for name, m in list(sys.modules.items())
+             if name.startswith("sofar_env") and getattr(m, "observe", None) is observe]
+    timed_observe = timer.wrap(observe, "observation")
+    for module in users:
+        module.observe = timed_observe
 
     def undo() -> None:
-        env_module.observe = original_observe
+        for module in users:
+            module.observe = observe
 
     return undo
 
@@ -128,7 +133,8 @@ def run_vector(args: argparse.Namespace) -> dict:
     import gymnasium as gym
 
     n = args.vector
-    factory = functools.partial(SOfARRaceEnv, track=args.track, rho=args.rho, n_opponents=args.opponents)
+    factory = functools.partial(SOfARRaceEnv, track=args.track, rho=args.rho, n_opponents=args.opponents,
+                                timing_info=True)
     envs = gym.vector.AsyncVectorEnv([factory] * n)
     try:
         actions = np.full((n, 1), args.gamma, np.float32)
@@ -201,7 +207,7 @@ def main(argv: list[str] | None = None) -> dict:
     args = parser.parse_args(argv)
 
     def make() -> SOfARRaceEnv:
-        env = SOfARRaceEnv(track=args.track, rho=args.rho, n_opponents=args.opponents)
+        env = SOfARRaceEnv(track=args.track, rho=args.rho, n_opponents=args.opponents, timing_info=True)
         env.reset(seed=args.seed)  # builds the controllers (and compiles them on a first run)
         for _ in range(20):  # warm-up
             env.step(np.array([args.gamma], np.float32))

@@ -6,7 +6,7 @@
 
 PNG files go to results/figures/ (--out). Recorded episodes are kept in
 <out>/episodes.csv and <out>/trace.csv and reused on a rerun. The logic lives in
-sofar_agents.evaluation.
+sofar_agents.evaluation (sweep.py records the episodes, figures.py draws).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--track", default="LagunaSeca")
     p.add_argument("--episodes", type=int, default=3, help="episodes per rho")
     p.add_argument("--rhos", nargs="+", type=float, default=[0.3])
-    p.add_argument("--duration", type=float, default=200.0, help="episode horizon [s]")
+    p.add_argument("--duration", type=float, default=ev.DEFAULT_DURATION, help="episode horizon [s]")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=None)
     p.add_argument("--max-distance", type=float, default=100.0, help="x range of the distance plot [m]")

@@ -5,7 +5,7 @@
 
 gamma comes from the shipped PASTA policy (or --policy); without one the loop uses a
 fixed gamma of 0.5 and the RL column times an untrained 2 x 256 tanh MLP (labelled).
-The logic lives in sofar_agents.evaluation.
+The logic lives in sofar_agents.evaluation.latency.
 """
 
 from __future__ import annotations

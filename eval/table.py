@@ -6,7 +6,8 @@
     python eval/table.py --sb3 runs/ppo/model.zip --workers 2 --out results/
 
 Results (per-episode CSV, Markdown table) go to --out; rerunning the same command
-skips the episodes already in the CSV. The logic lives in sofar_agents.evaluation.
+skips the episodes already in the CSV. The logic lives in sofar_agents.evaluation
+(experiments.py runs a table; protocol.py says which episodes it holds).
 """
 
 from __future__ import annotations
@@ -29,13 +30,14 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--miqp-ablation", action="store_true", help="Table II instead of Table I")
     p.add_argument("--tracks", nargs="+", default=None, help=f"circuits (default {' '.join(ev.TRACKS)})")
     p.add_argument("--rhos", nargs="+", type=float, default=None,
-                   help="opponent pace ratios (default 0.1 0.3 0.5 0.65 0.8)")
+                   help=f"opponent pace ratios (default {' '.join(f'{r:g}' for r in ev.RHOS)})")
     p.add_argument("--episodes", type=int, default=None,
                    help="episodes per (track, rho) for Table I (default 5); per (setting, strategy) for Table II "
                         "(default 10, rho cycling)")
     p.add_argument("--gammas", nargs="+", type=float, default=None,
-                   help="fixed gammas (default 0.05 0.15 0.30 0.50 0.70 0.95; Table II: 0.5)")
-    p.add_argument("--duration", type=float, default=None, help="episode horizon [s] (default 200)")
+                   help=f"fixed gammas (default {' '.join(f'{g:.2f}' for g in ev.FIXED_GAMMAS)}; Table II: 0.5)")
+    p.add_argument("--duration", type=float, default=None,
+                   help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
     p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
                    help="controller preset: sofar (default) or paper (the paper's Algorithm 1 as written)")
     p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")
@@ -65,7 +67,8 @@ def main(argv=None) -> int:
     duration = args.duration or (10.0 if args.quick else ev.DEFAULT_DURATION)
     out = args.out or ("results/quick" if args.quick else "results")
     strategies = ev.build_strategies(gammas, policy=policy, sb3=args.sb3, adaptive=policy is not None)
-    common = dict(stack=args.stack, base_seed=args.seed, duration=duration, workers=args.workers, progress=not args.no_progress)
+    common = dict(stack=args.stack, base_seed=args.seed, duration=duration, workers=args.workers,
+                  progress=not args.no_progress)
     try:
         if args.miqp_ablation:
             report = ev.run_miqp_ablation(strategies, out, episodes=episodes, rhos=rhos, **common)

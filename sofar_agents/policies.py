@@ -4,17 +4,8 @@ Every policy is a callable ``policy(obs) -> np.ndarray`` of shape ``(1,)`` (floa
 holding the barrier decay gamma in ``[0.05, 1]`` for a single observation of shape
 ``(obs_dim,)``; a batch ``(n, obs_dim)`` gives ``(n, 1)``.
 
-Checkpoint format (``format_version`` 1), written by :meth:`sofar_agents.PASTA.save`:
-
-- ``<stem>.json``: ``format_version``, ``algorithm``, ``weights_file``, ``obs_dim``,
-  ``n_objectives``, ``objective_names``, ``act_dim``, ``action_low``, ``action_high``,
-  ``action_squashing`` (``"sigmoid"``: ``a = low + (high - low) * sigmoid(u)``),
-  ``activation`` (``"tanh"``), the deployment ``preference``, the PASTA ``config``,
-  the optimiser ``state`` counters and ``training`` metadata (command, seed, env,
-  code version, steps, wall time).
-- ``<stem>.pt``: ``torch.save`` of a dict of tensors / state dicts (``actor``,
-  ``critic``, ``optimizer``, normaliser statistics), read with
-  ``torch.load(weights_only=True)``.
+PASTA checkpoints (``<stem>.json`` + ``<stem>.pt``, format described in
+:mod:`sofar_agents.pasta.checkpoint`) are written by :meth:`sofar_agents.PASTA.save`.
 
 :func:`load_policy` runs the actor's mean network in numpy (no torch call per
 step), with the preference part of the first layer folded into its bias.
@@ -22,13 +13,22 @@ step), with the preference part of the first layer folded into its bias.
 
 from __future__ import annotations
 
-import json
-import re
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from sofar_agents.pasta.checkpoint import (
+    FORMAT_VERSION,
+    checkpoint_paths,
+    read_actor_layers,
+    read_checkpoint_metadata,
+    validate_actor_state,
+)
+from sofar_env.constants import GAMMA_MAX, GAMMA_MIN
+
+# FORMAT_VERSION, checkpoint_paths, read_checkpoint_metadata and validate_actor_state are
+# re-exported from sofar_agents.pasta.checkpoint, the one module that owns the format.
 __all__ = [
     "FORMAT_VERSION",
     "GAMMA_LOW",
@@ -43,100 +43,10 @@ __all__ = [
     "validate_actor_state",
 ]
 
-FORMAT_VERSION = 1
-"""Version of the PASTA checkpoint format written and accepted by this package."""
-GAMMA_LOW = 0.05
-"""Smallest barrier decay gamma (paper section V-A)."""
-GAMMA_HIGH = 1.0
-"""Largest barrier decay gamma."""
-
-_REQUIRED_KEYS = ("format_version", "obs_dim", "n_objectives", "action_low", "action_high", "preference",
-                  "config")
-
-
-def checkpoint_paths(path: str | Path) -> tuple[Path, Path]:
-    """``(json_path, pt_path)`` for a checkpoint path given as ``stem``, ``stem.json`` or ``stem.pt``."""
-    p = Path(path)
-    stem = p.with_suffix("") if p.suffix in (".json", ".pt") else p
-    return Path(f"{stem}.json"), Path(f"{stem}.pt")
-
-
-def read_checkpoint_metadata(path: str | Path) -> tuple[dict[str, Any], Path, Path]:
-    """Read and validate the JSON half of a checkpoint.
-
-    Returns ``(metadata, json_path, pt_path)``. Raises ``FileNotFoundError`` when a
-    file is missing and ``ValueError`` (naming the file) for a wrong format version
-    or inconsistent fields.
-    """
-    json_path, pt_path = checkpoint_paths(path)
-    if not json_path.is_file():
-        raise FileNotFoundError(f"checkpoint metadata {json_path} not found")
-    try:
-        meta = json.loads(json_path.read_text())
-    except json.JSONDecodeError as err:
-        raise ValueError(f"{json_path}: not a valid JSON checkpoint ({err})") from err
-    if not isinstance(meta, dict):
-        raise ValueError(f"{json_path}: expected a JSON object")
-    missing = [k for k in _REQUIRED_KEYS if k not in meta]
-    if missing:
-        raise ValueError(f"{json_path}: not a PASTA checkpoint, missing keys {missing}")
-    if meta["format_version"] != FORMAT_VERSION:
-        raise ValueError(
-            f"{json_path}: checkpoint format_version {meta['format_version']!r} is not supported "
-            f"(this version of sofar_agents reads format_version {FORMAT_VERSION})"
-        )
-    k = meta["n_objectives"]
-    if len(meta["preference"]) != k:
-        raise ValueError(f"{json_path}: preference has {len(meta['preference'])} entries for {k} objectives")
-    if "objective_names" in meta and len(meta["objective_names"]) != k:
-        raise ValueError(f"{json_path}: {len(meta['objective_names'])} objective names for {k} objectives")
-    if len(meta["action_low"]) != len(meta["action_high"]):
-        raise ValueError(f"{json_path}: action_low and action_high differ in length")
-    if meta.get("action_squashing", "sigmoid") != "sigmoid" or meta.get("activation", "tanh") != "tanh":
-        raise ValueError(f"{json_path}: unsupported squashing/activation "
-                         f"{meta.get('action_squashing')!r}/{meta.get('activation')!r}")
-    if "weights_file" in meta:
-        pt_path = json_path.parent / meta["weights_file"]
-    if not pt_path.is_file():
-        raise FileNotFoundError(f"checkpoint weights {pt_path} (referenced by {json_path}) not found")
-    return meta, json_path, pt_path
-
-
-def _actor_layers(actor_state: dict[str, np.ndarray], pt_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
-    idx = sorted({int(m.group(1)) for key in actor_state if (m := re.fullmatch(r"mean_net\.(\d+)\.weight", key))})
-    if not idx:
-        raise ValueError(f"{pt_path}: no actor layers 'mean_net.<i>.weight' in the state dict")
-    layers = []
-    for i in idx:
-        w, b = actor_state[f"mean_net.{i}.weight"], actor_state.get(f"mean_net.{i}.bias")
-        if b is None or w.ndim != 2 or b.shape != (w.shape[0],):
-            raise ValueError(f"{pt_path}: malformed actor layer {i}: weight {w.shape}, bias "
-                             f"{None if b is None else b.shape}")
-        layers.append((w, b))
-    return layers
-
-
-def validate_actor_state(actor_state: dict[str, np.ndarray], meta: dict[str, Any], pt_path: Path) -> list:
-    """Check the actor's tensor shapes against the metadata; return its linear layers."""
-    layers = _actor_layers(actor_state, pt_path)
-    obs_dim, k, act_dim = meta["obs_dim"], meta["n_objectives"], len(meta["action_low"])
-    in_dim = layers[0][0].shape[1]
-    if in_dim != obs_dim + k:
-        raise ValueError(
-            f"{pt_path}: actor input has {in_dim} features but the metadata says obs_dim {obs_dim} "
-            f"+ {k} preference weights = {obs_dim + k}"
-        )
-    for n, ((w_prev, _), (w, _)) in enumerate(zip(layers, layers[1:])):
-        if w.shape[1] != w_prev.shape[0]:
-            raise ValueError(f"{pt_path}: actor layer {n + 1} expects {w.shape[1]} inputs, "
-                             f"previous layer gives {w_prev.shape[0]}")
-    if layers[-1][0].shape[0] != act_dim:
-        raise ValueError(f"{pt_path}: actor outputs {layers[-1][0].shape[0]} values, action has {act_dim}")
-    hidden = [w.shape[0] for w, _ in layers[:-1]]
-    cfg_hidden = list(meta["config"].get("hidden_sizes", hidden))
-    if hidden != cfg_hidden:
-        raise ValueError(f"{pt_path}: actor hidden sizes {hidden} differ from the config's {cfg_hidden}")
-    return layers
+GAMMA_LOW = GAMMA_MIN
+"""Smallest barrier decay gamma (paper section V-A): the default lower bound of the policies."""
+GAMMA_HIGH = GAMMA_MAX
+"""Largest barrier decay gamma: the default upper bound of the policies."""
 
 
 class PASTAPolicy:
@@ -204,20 +114,11 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
         ValueError: wrong format version, observation size or tensor shapes (the
             message names the file and the mismatch).
     """
-    import torch  # imported lazily: only needed to read the tensor file
-
     meta, json_path, pt_path = read_checkpoint_metadata(path)
     if obs_dim is not None and meta["obs_dim"] != obs_dim:
         raise ValueError(f"{json_path}: checkpoint expects observations of size {meta['obs_dim']}, "
                          f"not {obs_dim}")
-    try:
-        state = torch.load(pt_path, map_location="cpu", weights_only=True)
-    except Exception as err:  # noqa: BLE001 - re-raised with the file name
-        raise ValueError(f"{pt_path}: cannot read the tensor file ({err})") from err
-    if not isinstance(state, dict) or "actor" not in state:
-        raise ValueError(f"{pt_path}: expected a dict with an 'actor' state dict")
-    actor = {k: v.detach().cpu().numpy() for k, v in state["actor"].items()}
-    layers = validate_actor_state(actor, meta, pt_path)
+    layers = read_actor_layers(meta, pt_path)
     return PASTAPolicy(layers, meta["obs_dim"], meta["preference"] if preference is None else preference,
                        meta["action_low"], meta["action_high"], path=json_path,
                        objective_names=meta.get("objective_names"))

@@ -117,7 +117,7 @@ def run_demo(track: str = "LagunaSeca", seconds: float = 60.0, gamma: float = 0.
              n_opponents: int = 4, seed: int = 0, out: str | None = "sofar_demo.gif") -> DemoSummary:
     """Run one race at a fixed gamma; write the animation to ``out`` (None: no video)."""
     env = SOfARRaceEnv(track=track, rho=rho, n_opponents=n_opponents, race={"duration": float(seconds)},
-                       render_mode="rgb_array" if out else None)
+                       timing_info=True, render_mode="rgb_array" if out else None)
     frames = []
     t0 = time.perf_counter()
     _, info = env.reset(seed=seed)

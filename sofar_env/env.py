@@ -1,122 +1,26 @@
-"""Gymnasium environment: the overtaking stack of the paper, with the barrier decay gamma as the action."""
+"""Gymnasium environment: the overtaking stack of the paper, with the barrier decay gamma as the action.
+
+A thin adapter over :class:`~sofar_env.core.ControlledRace` (one controlled car): spaces,
+seeding, the Gymnasium return conventions and rendering.
+"""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
-from types import SimpleNamespace
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .constants import GAMMA_MAX, GAMMA_MIN
 from .config import OBJECTIVE_NAMES, EnvConfig, make_env_config
-from .control.barrier import barrier_expr
-from .observation import observe
-from .rewards import reward_vector, safety_cost, scalarize
+from .constants import GAMMA_MAX, GAMMA_MIN
+from .core import ControlledRace, parse_gamma
 
 __all__ = ["SOfARRaceEnv", "GAMMA_MIN", "GAMMA_MAX", "RESET_OPTIONS"]
 
 RESET_OPTIONS = ("rho", "n_opponents", "start_s", "start_speed")
 """Keys accepted in ``reset(options=...)``."""
-
-
-def parse_gamma(action: Any) -> float:
-    """The scalar gamma of an action: ValueError if it is not one finite number, clipped to [0.05, 1]."""
-    a = np.asarray(action, dtype=float).reshape(-1)
-    if a.size != 1:
-        raise ValueError(f"the action must hold exactly one value (gamma), got shape {np.shape(action)}")
-    g = float(a[0])
-    if not math.isfinite(g):
-        raise ValueError(f"non-finite action {g!r}: gamma must be a finite number in [{GAMMA_MIN}, {GAMMA_MAX}]")
-    return min(max(g, GAMMA_MIN), GAMMA_MAX)
-
-
-_MATH_OPS = SimpleNamespace(abs=abs, exp=math.exp, log1p=math.log1p, tanh=math.tanh)
-
-
-def min_barrier(track, ego_frenet: np.ndarray, opponents: np.ndarray, params) -> float:
-    """Smallest barrier value h of the ego against the opponent rows (s, n, v) now; inf without opponents.
-
-    The barrier of :mod:`sofar_env.control.barrier` evaluated on Python floats (the field is
-    small; this is ~20x faster than the numpy path), with s taken relative to the ego.
-    """
-    s, n, v = float(ego_frenet[0]), float(ego_frenet[1]), float(ego_frenet[3])
-    h = math.inf
-    for s_o, n_o, v_o in opponents.tolist():
-        h = min(h, barrier_expr(0.0, n, v, track.gap(s_o, s), n_o, v_o, params, _MATH_OPS))
-    return h
-
-
-class DecisionTally:
-    """Sums the per-control-step terms of one car over one decision (``decision_interval`` steps)."""
-
-    def __init__(self) -> None:
-        self.vector = np.zeros(len(OBJECTIVE_NAMES))
-        self.cost = 0.0
-        self.barrier_slack = 0.0
-        self.mpc_time = 0.0
-        self.miqp_time = 0.0
-        self.collision = False
-        self.off_track = False
-        self.min_h = math.inf
-        self.nearest = math.inf
-        self.gamma = math.nan
-        self.last = None
-
-    def add(self, race, car: int, out, events, opponents_after: np.ndarray, profile_speed: float,
-            previous_gamma: float, barrier_params) -> None:
-        """Record one control step of car ``car``: ``out`` its stack output, ``events`` its CarEvents,
-        ``opponents_after`` its opponent rows after the step, ``profile_speed`` the speed profile at its
-        arc length before the step [m/s]."""
-        slack = float(out.mpc.slack.get("barrier", 0.0))
-        self.min_h = min_barrier(race.track, race.frenet[car], opponents_after, barrier_params)
-        self.nearest = race.nearest_distance(car)  # now: a crashed car may be removed from the race next
-        self.vector += reward_vector(
-            collision=events.collision, off_track=events.off_track, overtakes=events.overtakes,
-            progress=events.progress, profile_speed=profile_speed, dt=race.config.dt, barrier_slack=slack,
-            min_h=self.min_h, gamma=out.gamma, previous_gamma=previous_gamma,
-        )
-        self.cost += safety_cost(events.collision, events.off_track, slack)
-        self.barrier_slack = max(self.barrier_slack, slack)
-        self.mpc_time += out.mpc_time
-        self.miqp_time += out.miqp_time
-        self.collision |= events.collision
-        self.off_track |= events.off_track
-        self.gamma = out.gamma
-        self.last = out
-
-    @property
-    def terminated(self) -> bool:
-        return self.collision or self.off_track
-
-    def info(self, race, stack, car: int = 0, timings: bool = True) -> dict:
-        """The per-step info dictionary (see the environment docstring); ``timings`` adds the solve times."""
-        out = self.last
-        plan = out.plan if out is not None else None
-        info = {
-            "reward_vector": self.vector.astype(np.float32),
-            "cost": self.cost,
-            "overtakes": int(race.overtakes[car]),
-            "laps": race.laps(car),
-            "sim_time": race.time,
-            "gamma": self.gamma,
-            "collision": self.collision,
-            "off_track": self.off_track,
-            "nearest_opponent_m": self.nearest,
-            "min_barrier": self.min_h,
-            "barrier_slack": self.barrier_slack,
-            "mpc_status": out.mpc.status if out is not None else "",
-            "miqp_sides": tuple(np.asarray(plan.sides, dtype=int).tolist()) if plan is not None else (),
-            "mpc_failures": stack.counters["mpc_failures"],
-            "miqp_failures": stack.counters["miqp_failures"],
-        }
-        if timings:
-            info["mpc_time_ms"] = 1e3 * self.mpc_time
-            info["miqp_time_ms"] = 1e3 * self.miqp_time
-        return info
 
 
 class SOfARRaceEnv(gym.Env):
@@ -218,12 +122,13 @@ class SOfARRaceEnv(gym.Env):
     length), ``sim_time`` [s], ``gamma``, ``collision``, ``off_track``,
     ``nearest_opponent_m`` (distance between reference points [m], inf if none),
     ``min_barrier`` (min h over the opponents now, inf if none), ``barrier_slack``,
-    ``mpc_status``, ``miqp_sides`` (1 = pass left, 0 = right, per opponent cluster),
-    ``mpc_failures``, ``miqp_failures`` (episode counters), ``is_success`` at the end, and
-    the wall-clock solve times ``mpc_time_ms``, ``miqp_time_ms`` of the step (unless
-    ``timing_info=False``: they are the only values that differ between two runs with the
-    same seed, so checks that compare infos exactly, such as Gymnasium's ``check_env``,
-    need them off).
+    ``mpc_status``, ``miqp_sides`` (per opponent the planners saw, nearest first: +1 = the plan passes it
+    on the left, -1 = on the right, 0 = not constrained by the plan),
+    ``mpc_failures``, ``miqp_failures`` (episode counters), ``is_success`` at the end. With
+    ``timing_info=True`` also the wall-clock solve times ``mpc_time_ms``, ``miqp_time_ms`` of
+    the step: off by default, because they are the only values that differ between two runs
+    with the same seed, and checks that compare infos exactly (Gymnasium's ``check_env``,
+    PettingZoo's seed test) would fail; the benchmark scripts in ``eval/`` turn them on.
 
     ## Arguments
 
@@ -239,7 +144,9 @@ class SOfARRaceEnv(gym.Env):
     ``n_opponents``, ``offsets``, ``rho``, ``speed_factor``, ``use_miqp``,
     ``decision_interval``, ``reward_mode``, ``reward_weights``, ``initial_gamma``, ``timing_info``,
     ``race`` (:class:`~sofar_env.race.RaceConfig`), ``stack``
-    (:class:`~sofar_env.stack.StackConfig`). The controllers are built on the first
+    (:class:`~sofar_env.stack.StackConfig`, or a preset name: ``"sofar"``, the default, or
+    ``"paper"``, the paper's Algorithm 1 as written, see :func:`~sofar_env.stack.stack_preset`).
+    The controllers are built on the first
     ``reset()``, so constructing the environment is cheap.
 
     ## Version History
@@ -265,79 +172,48 @@ class SOfARRaceEnv(gym.Env):
             high=np.array([0.0, float(k * max(cfg.n_opponents, 1)), 2.0 * k, 0.0, 0.0], np.float32),
             dtype=np.float32,
         )
-        self._weights = cfg.reward_weights.as_array()
-        self.track = None
-        self.race = None
-        self.stack = None
+        self.core = ControlledRace(cfg)
+        """The simulation core: the race world and the controller of the ego (car 0)."""
         self._renderer = None
-        self._opponents = np.zeros((0, 3))
-        self._previous_gamma = cfg.initial_gamma
-        self.last_output = None
+
+    # read-only views of the core, for users and the renderer
+    @property
+    def track(self):
+        return self.core.track
+
+    @property
+    def race(self):
+        return self.core.race
+
+    @property
+    def stack(self):
+        return self.core.stacks[0] if self.core.stacks else None
+
+    @property
+    def last_output(self):
         """The controller output of the last control step (MPC prediction, MIQP plan), for rendering."""
-
-    # ------------------------------------------------------------------ building
-    def _build(self) -> None:
-        from .race import Race
-        from .stack import OvertakingStack
-        from .tracks import Track
-
-        cfg = self.config
-        self.track = Track.load(cfg.track)
-        self.race = Race(self.track, cfg.race)
-        self.stack = OvertakingStack(self.track, cfg.stack, vehicle=cfg.race.vehicle)
+        return self.core.outputs[0]
 
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        super().reset(seed=seed)
         options = dict(options or {})
         unknown = set(options) - set(RESET_OPTIONS)
         if unknown:
             raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: {', '.join(RESET_OPTIONS)}")
-        if self.race is None:
-            self._build()
-        self.race.reset(self.np_random, **options)
-        self.stack.reset()
-        self._previous_gamma = self.config.initial_gamma
-        self.last_output = None
-        self._opponents = self.race.opponent_frenet(0)
-        tally = DecisionTally()
-        tally.min_h = min_barrier(self.track, self.race.frenet[0], self._opponents, self.config.stack.mpc.barrier)
-        tally.gamma = self._previous_gamma
-        tally.nearest = self.race.nearest_distance(0)
-        info = tally.info(self.race, self.stack, timings=self.config.timing_info)
+        self.core.check_reset(**options)  # before anything changes: a failed reset leaves the env as it was
+        super().reset(seed=seed)
+        first = self.core.reset(self.np_random, **options)[0]
         if self.render_mode == "human":
             self.render()
-        return observe(self.race, 0, self._opponents), info
+        return first.observation, first.info
 
     def step(self, action):
-        if self.race is None:
+        if not self.core.built:
             raise gym.error.ResetNeeded("call reset() before step()")
-        gamma = parse_gamma(action)
-        race, stack, track = self.race, self.stack, self.track
-        bp = self.config.stack.mpc.barrier
-        tally = DecisionTally()
-        for _ in range(self.config.decision_interval):
-            out = stack.step(race.frenet[0], self._opponents, gamma)
-            profile_speed = track.speed(float(race.frenet[0, 0]))
-            events = race.step(out.u[None, :])[0]
-            self._opponents = race.opponent_frenet(0)
-            tally.add(race, 0, out, events, self._opponents, profile_speed, self._previous_gamma, bp)
-            self._previous_gamma = gamma
-            if tally.terminated or race.truncated:
-                break
-        self.last_output = tally.last
-        terminated = tally.terminated
-        truncated = race.truncated and not terminated
-        info = tally.info(race, stack, timings=self.config.timing_info)
-        if terminated or truncated:
-            info["is_success"] = not terminated
-        if self.config.reward_mode == "vector":
-            reward = tally.vector.astype(np.float32)
-        else:
-            reward = scalarize(tally.vector, self._weights)
+        result = self.core.step({0: parse_gamma(action)})[0]
         if self.render_mode == "human":
             self.render()
-        return observe(race, 0, self._opponents), reward, terminated, truncated, info
+        return result.observation, result.reward, result.terminated, result.truncated, result.info
 
     def render(self):
         if self.render_mode is None:
@@ -345,14 +221,14 @@ class SOfARRaceEnv(gym.Env):
                 "render() called without a render_mode; pass render_mode='rgb_array' or 'human' to the constructor"
             )
             return None
-        if self.race is None:
+        if not self.core.built:
             raise gym.error.ResetNeeded("call reset() before render()")
         if self._renderer is None:
             from .render import Renderer
 
             self._renderer = Renderer(self.track, self.config.race.vehicle, self.config.stack.mpc.barrier,
                                       fps=self.metadata["render_fps"])
-        frame = self._renderer.draw(self.race, self.last_output, gamma=self._previous_gamma)
+        frame = self.core.render_frame(self._renderer, 0)
         if self.render_mode == "human":
             self._renderer.show(frame)
             return None

@@ -1,11 +1,11 @@
 """PettingZoo parallel environment: several cars, each driven by its own overtaking stack.
 
-A thin adapter over the same :class:`~sofar_env.race.Race` as the Gymnasium
-environment, with ``n_cars = n_agents`` controlled cars and no scripted opponents:
+A thin adapter over the same simulation core as the Gymnasium environment
+(:class:`~sofar_env.core.ControlledRace`), with ``n_agents`` controlled cars and no scripted opponents:
 every car's opponents are the other active cars (``race.opponent_frenet(car)``).
 Each agent's action is its own gamma; observation, action, reward terms and info
-are those of :class:`~sofar_env.env.SOfARRaceEnv`, per car (PettingZoo's seed
-test compares infos exactly: run it with ``timing_info=False``). Cars start
+are those of :class:`~sofar_env.env.SOfARRaceEnv`, per car (wall-clock solve times
+only with ``timing_info=True``). Cars start
 ``race.car_spacing`` (40 m) apart, car 0 in front on the raceline, the others at
 the lateral offsets ``race.car_offsets``. Give them different ``speed_factors`` for
 overtakes to happen.
@@ -30,9 +30,8 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from .config import OBJECTIVE_NAMES, EnvConfig, apply_overrides, make_env_config
-from .env import GAMMA_MAX, GAMMA_MIN, DecisionTally, min_barrier, parse_gamma
-from .observation import observe
-from .rewards import scalarize
+from .constants import GAMMA_MAX, GAMMA_MIN
+from .core import ControlledRace, parse_gamma
 
 __all__ = ["SOfARParallelEnv", "parallel_env"]
 
@@ -64,17 +63,14 @@ class SOfARParallelEnv(ParallelEnv):
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
         if speed_factors is None:
             speed_factors = (self.config.stack.speed_factor,)
-        self.speed_factors = tuple(float(speed_factors[i % len(speed_factors)]) for i in range(self.n_agents))
+        self.core = ControlledRace(self.config, n_cars=self.n_agents, speed_factors=speed_factors,
+                                   remove_crashed=True)
+        """The simulation core: the race world and one controller per car."""
+        self.speed_factors = self.core.speed_factors
         self._observation_spaces = {a: spaces.Box(-1.0, 1.0, (12,), np.float32) for a in self.possible_agents}
         self._action_spaces = {a: spaces.Box(GAMMA_MIN, GAMMA_MAX, (1,), np.float32) for a in self.possible_agents}
         self.objective_names = OBJECTIVE_NAMES
-        self._weights = self.config.reward_weights.as_array()
-        self.track = None
-        self.race = None
-        self.stacks = []
         self._np_random = None
-        self._previous_gamma = np.full(self.n_agents, self.config.initial_gamma)
-        self._outputs: list = [None] * self.n_agents
         self._renderer = None
 
     def observation_space(self, agent: str) -> spaces.Box:
@@ -83,97 +79,50 @@ class SOfARParallelEnv(ParallelEnv):
     def action_space(self, agent: str) -> spaces.Box:
         return self._action_spaces[agent]
 
-    # ------------------------------------------------------------------ building
-    def _build(self) -> None:
-        from .race import Race
-        from .stack import OvertakingStack
-        from .tracks import Track
+    @property
+    def track(self):
+        return self.core.track
 
-        cfg = self.config
-        self.track = Track.load(cfg.track)
-        self.race = Race(self.track, cfg.race, n_cars=self.n_agents)
-        self.stacks = [
-            OvertakingStack(self.track, apply_overrides(cfg.stack, {"speed_factor": sf}), vehicle=cfg.race.vehicle)
-            for sf in self.speed_factors
-        ]
+    @property
+    def race(self):
+        return self.core.race
+
+    @property
+    def stacks(self) -> list:
+        return self.core.stacks
 
     # ------------------------------------------------------------------ API
     def reset(self, seed: int | None = None, options: dict | None = None):
-        if seed is not None or self._np_random is None:
-            self._np_random, _ = seeding.np_random(seed)
         options = dict(options or {})
         ignored = sorted(set(options) - set(_MA_RESET_OPTIONS))
         if ignored:
             logger.warning("ignoring unknown reset option(s) %s; valid: %s", ignored, ", ".join(_MA_RESET_OPTIONS))
-        if self.race is None:
-            self._build()
-        self.race.reset(self._np_random, **{k: options[k] for k in _MA_RESET_OPTIONS if k in options})
-        for stack in self.stacks:
-            stack.reset()
+        race_options = {k: options[k] for k in _MA_RESET_OPTIONS if k in options}
+        self.core.check_reset(**race_options)  # a failed reset leaves the env as it was
+        if seed is not None or self._np_random is None:
+            self._np_random, _ = seeding.np_random(seed)
+        first = self.core.reset(self._np_random, **race_options)
         self.agents = list(self.possible_agents)
-        self._previous_gamma[:] = self.config.initial_gamma
-        self._outputs = [None] * self.n_agents
-        bp = self.config.stack.mpc.barrier
-        observations, infos = {}, {}
-        for agent in self.agents:
-            i = self._index[agent]
-            opp = self.race.opponent_frenet(i)
-            tally = DecisionTally()
-            tally.min_h = min_barrier(self.track, self.race.frenet[i], opp, bp)
-            tally.gamma = self._previous_gamma[i]
-            tally.nearest = self.race.nearest_distance(i)
-            observations[agent] = observe(self.race, i, opp)
-            infos[agent] = tally.info(self.race, self.stacks[i], i, timings=self.config.timing_info)
+        observations = {a: first[self._index[a]].observation for a in self.agents}
+        infos = {a: first[self._index[a]].info for a in self.agents}
         if self.render_mode == "human":
             self.render()
         return observations, infos
 
     def step(self, actions: Mapping[str, Any]):
-        if self.race is None:
+        if not self.core.built:
             raise RuntimeError("call reset() before step()")
-        race, track = self.race, self.track
-        live = [self._index[a] for a in self.agents]
         missing = [a for a in self.agents if a not in actions]
         if missing:
             raise ValueError(f"no action for live agent(s) {missing}")
-        gammas = {i: parse_gamma(actions[self.possible_agents[i]]) for i in live}
-        tallies = {i: DecisionTally() for i in live}
-        bp = self.config.stack.mpc.barrier
-        running = list(live)
-        for _ in range(self.config.decision_interval):
-            controls = np.zeros((self.n_agents, 2))
-            outs = {}
-            for i in running:
-                outs[i] = self.stacks[i].step(race.frenet[i], race.opponent_frenet(i), gammas[i])
-                controls[i] = outs[i].u
-            profile = {i: track.speed(race.frenet[i, 0]) for i in running}
-            events = race.step(controls)
-            for i in running:
-                tallies[i].add(race, i, outs[i], events[i], race.opponent_frenet(i), profile[i],
-                               self._previous_gamma[i], bp)
-                self._previous_gamma[i] = gammas[i]
-                self._outputs[i] = outs[i]
-            for i in [i for i in running if tallies[i].terminated]:
-                race.deactivate(i)
-                running.remove(i)
-            if not running or race.truncated:
-                break
-        truncate_all = race.truncated
-        observations, rewards, terminations, truncations, infos = {}, {}, {}, {}, {}
-        for i in live:
-            agent = self.possible_agents[i]
-            tally = tallies[i]
-            observations[agent] = observe(race, i)
-            if self.config.reward_mode == "vector":
-                rewards[agent] = tally.vector.astype(np.float32)
-            else:
-                rewards[agent] = scalarize(tally.vector, self._weights)
-            terminations[agent] = tally.terminated
-            truncations[agent] = truncate_all and not tally.terminated
-            info = tally.info(race, self.stacks[i], i, timings=self.config.timing_info)
-            if terminations[agent] or truncations[agent]:
-                info["is_success"] = not terminations[agent]
-            infos[agent] = info
+        gammas = {self._index[a]: parse_gamma(actions[a]) for a in self.agents}
+        results = self.core.step(gammas)
+        names = {i: self.possible_agents[i] for i in results}
+        observations = {names[i]: r.observation for i, r in results.items()}
+        rewards = {names[i]: r.reward for i, r in results.items()}
+        terminations = {names[i]: r.terminated for i, r in results.items()}
+        truncations = {names[i]: r.truncated for i, r in results.items()}
+        infos = {names[i]: r.info for i, r in results.items()}
         self.agents = [a for a in self.agents if not (terminations[a] or truncations[a])]
         if self.render_mode == "human":
             self.render()
@@ -183,7 +132,7 @@ class SOfARParallelEnv(ParallelEnv):
         if self.render_mode is None:
             logger.warning("render() called without a render_mode")
             return None
-        if self.race is None:
+        if not self.core.built:
             raise RuntimeError("call reset() before render()")
         if self._renderer is None:
             from .render import Renderer
@@ -191,7 +140,7 @@ class SOfARParallelEnv(ParallelEnv):
             self._renderer = Renderer(self.track, self.config.race.vehicle, self.config.stack.mpc.barrier,
                                       fps=self.metadata["render_fps"])
         car = self._index[self.agents[0]] if self.agents else 0
-        frame = self._renderer.draw(self.race, self._outputs[car], gamma=float(self._previous_gamma[car]), car=car)
+        frame = self.core.render_frame(self._renderer, car)
         if self.render_mode == "human":
             self._renderer.show(frame)
             return None

@@ -42,6 +42,14 @@ _EDGE_WINDOW = 15.0
 (within ~2.6 m of the reference point) projects within it unless 1 - kappa n < 0.2."""
 
 
+MAX_START_SPEED_FACTOR = 1.1
+"""A start speed may exceed the circuit's fastest speed-profile value by at most this factor."""
+
+
+def _is_real(x) -> bool:
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+
+
 @dataclass(frozen=True)
 class RaceConfig:
     """World parameters."""
@@ -68,11 +76,26 @@ class RaceConfig:
     """The scripted opponent field."""
 
     def __post_init__(self) -> None:
-        if self.dt <= 0 or self.duration <= 0:
-            raise ValueError("dt and duration must be positive")
+        for name in ("dt", "duration"):
+            value = getattr(self, name)
+            if not (_is_real(value) and math.isfinite(value) and value > 0):
+                raise ValueError(f"race.{name} must be a finite number > 0 [s], got {value!r}")
+        if self.duration < self.dt:
+            raise ValueError(f"race.duration ({self.duration} s) must be at least one step (dt = {self.dt} s)")
+        if not (isinstance(self.plant_substeps, (int, np.integer)) and self.plant_substeps >= 1):
+            raise ValueError(f"race.plant_substeps must be an integer >= 1, got {self.plant_substeps!r}")
+        if not _is_real(self.start_s) or not math.isfinite(self.start_s):
+            raise ValueError(f"race.start_s must be a finite number [m], got {self.start_s!r}")
+        if len(self.start_speed_fraction) != 2:
+            raise ValueError(f"race.start_speed_fraction must be a pair, got {self.start_speed_fraction!r}")
         lo, hi = self.start_speed_fraction
-        if not (0.0 <= lo <= hi):
-            raise ValueError("start_speed_fraction must be an ordered pair of non-negative numbers")
+        if not (_is_real(lo) and _is_real(hi) and 0.0 <= lo <= hi <= 1.5):
+            raise ValueError("race.start_speed_fraction must be an ordered pair in [0, 1.5] (fractions of the "
+                             f"speed profile), got {self.start_speed_fraction!r}")
+        if not (_is_real(self.car_spacing) and math.isfinite(self.car_spacing) and self.car_spacing > 0):
+            raise ValueError(f"race.car_spacing must be a finite number > 0 [m], got {self.car_spacing!r}")
+        if not self.car_offsets or not all(_is_real(o) and math.isfinite(o) for o in self.car_offsets):
+            raise ValueError(f"race.car_offsets must be finite numbers [m], got {self.car_offsets!r}")
 
     @property
     def max_steps(self) -> int:
@@ -125,8 +148,66 @@ class Race:
         self._samples = samples.tolist()
         self._wl_min = minimum_filter1d(np.asarray(track.width_left(samples), float), 2 * half + 1, mode="wrap").tolist()
         self._wr_min = minimum_filter1d(np.asarray(track.width_right(samples), float), 2 * half + 1, mode="wrap").tolist()
+        self._check_opponent_field()
+
+    def _check_opponent_field(self) -> None:
+        """Raise ``ValueError`` if the configured opponent field cannot be placed on this circuit."""
+        cfg = self.config.opponents
+        half_width = 0.5 * self.config.vehicle.width
+        wl = float(np.min(self.track.width_left(np.asarray(self.track.s, float))))
+        wr = float(np.min(self.track.width_right(np.asarray(self.track.s, float))))
+        for o in cfg.offsets:
+            if not (o + half_width <= wl and half_width - o <= wr):
+                raise ValueError(f"race.opponents.offsets: an opponent at n = {o:g} m would leave {self.track.name} "
+                                 f"where it is narrowest (raceline-to-edge {wl:.2f} m left, {wr:.2f} m right, car "
+                                 f"half-width {half_width:g} m): use offsets in [{half_width - wr:.2f}, "
+                                 f"{wl - half_width:.2f}] m")
+        if self.n_cars == 1:
+            self.check_opponent_count(cfg.n_opponents)
 
     # ------------------------------------------------------------------ reset
+    def check_reset(self, *, start_s=None, start_speed=None, rho=None, n_opponents=None) -> None:
+        """Raise ``ValueError`` naming the option if a :meth:`reset` with these options would be invalid.
+
+        Nothing is changed: callers validate first, so a failed reset leaves the race as it was.
+        """
+        if start_s is not None and not (_is_real(start_s) and math.isfinite(start_s)):
+            raise ValueError(f"start_s must be a finite number [m], got {start_s!r}")
+        if start_speed is not None:
+            top = MAX_START_SPEED_FACTOR * float(np.max(self.track.speed(np.asarray(self.track.s, float))))
+            if not (_is_real(start_speed) and math.isfinite(start_speed) and 0.0 <= start_speed <= top):
+                raise ValueError(f"start_speed must be a number in [0, {top:.1f}] m/s ({MAX_START_SPEED_FACTOR} x "
+                                 f"the circuit's top profile speed), got {start_speed!r}")
+        if rho is not None and not (_is_real(rho) and 0.0 <= rho <= 2.0):
+            raise ValueError(f"rho must be a number in [0, 2], got {rho!r}")
+        if n_opponents is not None:
+            if not (_is_real(n_opponents) and float(n_opponents) == int(n_opponents) and n_opponents >= 0):
+                raise ValueError(f"n_opponents must be a whole number >= 0, got {n_opponents!r}")
+            if n_opponents and self.n_cars > 1:
+                raise ValueError("scripted opponents are supported in single-car races only")
+            self.check_opponent_count(int(n_opponents))
+
+    def check_opponent_count(self, n: int) -> None:
+        """Raise ``ValueError`` if ``n`` opponents do not fit on the lap at their spawn gaps."""
+        if n == 0:
+            return
+        cfg = self.config.opponents
+        furthest = cfg.gap(n - 1)
+        room = self.track.length - self.config.opponents.respawn_clearance
+        if furthest >= room:
+            raise ValueError(f"n_opponents = {n} does not fit on {self.track.name}: the last opponent would spawn "
+                             f"{furthest:.0f} m ahead, beyond the lap ({self.track.length:.0f} m) less "
+                             f"{cfg.respawn_clearance:g} m; at most {self.max_opponents()} fit")
+
+    def max_opponents(self) -> int:
+        """The largest opponent count whose spawn gaps fit on the lap."""
+        cfg = self.config.opponents
+        room = self.track.length - cfg.respawn_clearance
+        n = 0
+        while cfg.gap(n) < room and n < 10_000:
+            n += 1
+        return n
+
     def reset(self, rng: np.random.Generator, *, start_s: float | None = None, start_speed: float | None = None,
               rho: float | None = None, n_opponents: int | None = None) -> None:
         """Start a new race. Draws the start from ``rng`` unless given explicitly."""

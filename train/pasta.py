@@ -26,8 +26,6 @@ import logging
 import shlex
 import sys
 import time
-import types
-import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,7 +36,8 @@ import torch
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
-from sofar_agents.pasta import PASTA, PASTAConfig, dataclass_field_docs
+from sofar_agents.cli import add_dataclass_options
+from sofar_agents.pasta import PASTA, PASTAConfig
 from sofar_agents.wrappers import LinearReward, RandomRhoReset
 
 logger = logging.getLogger("train.pasta")
@@ -96,7 +95,6 @@ class Args:
 # ---------------------------------------------------------------------------- arguments
 
 
-
 def _code_commit() -> str | None:
     """The git commit of the source tree this script runs from (``+dirty`` if modified), if known."""
     import subprocess
@@ -111,43 +109,12 @@ def _code_commit() -> str | None:
         return None
     return commit + ("+dirty" if dirty else "")
 
-def _unwrap_optional(tp: Any) -> Any:
-    if typing.get_origin(tp) in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        if len(args) == 1:
-            return args[0]
-    return tp
-
-
-def _add_dataclass_options(parser: argparse.ArgumentParser, cls: type, title: str) -> None:
-    """One ``--field-name`` option per dataclass field, help from the field docstring.
-
-    Defaults are ``None`` so that only the options actually given are applied.
-    """
-    group = parser.add_argument_group(title)
-    docs = dataclass_field_docs(cls)
-    hints = typing.get_type_hints(cls)
-    for f in dataclasses.fields(cls):
-        tp = _unwrap_optional(hints[f.name])
-        default = f.default if f.default is not dataclasses.MISSING else None
-        kw: dict[str, Any] = {"default": None, "dest": f.name,
-                              "help": f"{docs.get(f.name, '')} (default: {default})"}
-        origin = typing.get_origin(tp)
-        if tp is bool:
-            kw["action"] = argparse.BooleanOptionalAction
-        elif origin in (tuple, list):
-            kw["nargs"] = "+"
-            kw["type"] = typing.get_args(tp)[0]
-        else:
-            kw["type"] = tp
-        group.add_argument("--" + f.name.replace("_", "-"), **kw)
-
 
 def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
     """Parse the command line into run options and PASTA config overrides."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    _add_dataclass_options(parser, Args, "run")
-    _add_dataclass_options(parser, PASTAConfig, "PASTA hyper-parameters")
+    add_dataclass_options(parser, Args, "run")
+    add_dataclass_options(parser, PASTAConfig, "PASTA hyper-parameters")
     ns = vars(parser.parse_args(argv))
     run_names = {f.name for f in dataclasses.fields(Args)}
     args = Args(**{k: v for k, v in ns.items() if k in run_names and v is not None})

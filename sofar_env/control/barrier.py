@@ -21,7 +21,7 @@ Choices and why
   ``(4.9 / 7.0)^2 + (1.9 / 2.7)^2 = 0.985 < 1``, so with the defaults ``a0 = 7.0 m``
   and ``b = 2.7 m`` the whole rectangle lies in ``{h < 0}`` even at zero closing
   speed; ``h >= 0`` therefore certifies "no contact" for aligned cars. There is no
-  extra additive margin constant (the reference code subtracts ``1 + 0.5``); the
+  extra additive margin constant (the authors' reference code subtracts ``1 + 0.5``); the
   margin is in the semi-axes, where it has a geometric meaning.
 * **Braking distance.** ``a`` grows with the square of the closing speed over twice
   the braking capability ``a_brake = 10 m/s^2`` (the AV-21's strongest braking), so
@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BarrierParams", "barrier_expr", "barrier", "casadi_barrier", "semi_axis_s", "softplus"]
+__all__ = ["BarrierParams", "barrier_expr", "barrier", "casadi_barrier", "casadi_ops", "semi_axis_s", "softplus"]
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,8 @@ class BarrierParams:
 _NUMPY_OPS = SimpleNamespace(abs=np.abs, exp=np.exp, log1p=np.log1p, tanh=np.tanh)
 
 
-def _casadi_ops() -> SimpleNamespace:
+def casadi_ops() -> SimpleNamespace:
+    """The ``ops`` namespace of CasADi (``abs``, ``exp``, ``log1p``, ``tanh``) for :func:`barrier_expr`."""
     import casadi as ca
 
     return SimpleNamespace(abs=ca.fabs, exp=ca.exp, log1p=ca.log1p, tanh=ca.tanh)
@@ -132,5 +133,5 @@ def casadi_barrier(p: BarrierParams = BarrierParams()):
 
     x = ca.SX.sym("x", 5)
     o = ca.SX.sym("o", 3)
-    h = barrier_expr(x[0], x[1], x[3], o[0], o[1], o[2], p, _casadi_ops())
+    h = barrier_expr(x[0], x[1], x[3], o[0], o[1], o[2], p, casadi_ops())
     return ca.Function("barrier", [x, o], [h], ["x", "o"], ["h"])

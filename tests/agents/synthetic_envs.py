@@ -17,6 +17,8 @@ import gymnasium as gym
 import numpy as np
 
 OBJECTIVES = ("safety", "overtakes", "progress", "barrier_margin", "gamma_smoothness")
+PREF = (0.31, 0.45, 0.05, 0.04, 0.15)
+"""The reference deployment preference over :data:`OBJECTIVES`."""
 
 
 def bandit_rewards(a: float | np.ndarray) -> np.ndarray:

@@ -24,7 +24,7 @@ def test_parallel_api(n_agents):
 
 def test_parallel_seed():
     # the seed test compares infos exactly: leave out the wall-clock solve times
-    parallel_seed_test(lambda: make(2, timing_info=False), num_cycles=10)
+    parallel_seed_test(lambda: make(2), num_cycles=10)
 
 
 def test_spaces_are_cached_per_agent():

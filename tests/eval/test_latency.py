@@ -28,6 +28,17 @@ def test_latency_stats_hand_computed():
     assert empty["n"] == 0 and math.isnan(empty["mean"])
 
 
+def test_format_latency_next_to_the_paper():
+    s = {"mean": 3.2, "std": 0.5, "median": 3.0, "p95": 4.0, "n": 10}
+    md = ev.format_latency({"mpc_ms": s, "rl_ms": dict(s, mean=0.41), "rl_source": "policy x",
+                            "machine": {"cpu": "CPU X", "cores": 2}})
+    lines = md.splitlines()
+    assert lines[2] == "| MPC | 3.200 ± 0.500 | 3.000 | 4.000 | 10 | 1.60 ± 0.34 | 2.00 |"
+    assert lines[3].startswith("| RL (policy x) | 0.410") and lines[3].endswith("| 0.82 ± 0.12 | 0.50 |")
+    assert not any(line.startswith("| MIQP") for line in lines)  # not measured: no row
+    assert lines[-1].startswith("This machine: CPU X, 2 cores.")
+
+
 def test_latency_json_report(tmp_path):
     out = tmp_path / "latency.json"
     proc = subprocess.run([sys.executable, str(ROOT / "eval" / "latency.py"), "--seconds", "3", "--json", str(out)],

@@ -1,4 +1,5 @@
-"""Tests of the passing-side MIQP (sofar_env.planning.miqp)."""
+"""Tests of the passing-side planner (sofar_env.planning.miqp): optimality against an independent
+brute force, side decisions, bounds, special cases and robustness."""
 
 from __future__ import annotations
 
@@ -7,32 +8,10 @@ import itertools
 import numpy as np
 import pytest
 
-import sofar_env.planning.miqp as miqp_mod
+import sofar_env.planning.solvers as solvers_mod
 from sofar_env.planning import MIQPConfig, PassingSidePlanner, PlanResult
 
-CFG = MIQPConfig()
-N = CFG.nodes
-HALF_WIDTH = 6.0  # m, a 12 m wide track centred on the raceline
-
-
-def straight(v: float = 50.0, half_width: float = HALF_WIDTH):
-    """Node arc lengths at constant speed, zero reference, symmetric edges."""
-    s = v * CFG.node_dt * np.arange(N)
-    return s, np.zeros(N), -half_width * np.ones(N), half_width * np.ones(N)
-
-
-def random_instance(rng: np.random.Generator, min_gap: float = 10.0):
-    v = rng.uniform(40.0, 60.0)
-    t = CFG.node_dt * np.arange(N)
-    s = v * t
-    shift = rng.uniform(-2.0, 2.0)
-    n_min = -HALF_WIDTH + shift + 0.5 * np.sin(s / 80.0)
-    n_max = n_min + 12.0
-    n_ref = 0.8 * np.sin(s / 60.0 + rng.uniform(0, 6))
-    M = int(rng.integers(1, 5))
-    opp = np.column_stack([rng.uniform(min_gap, 120.0, M), rng.uniform(-3.5, 3.5, M),
-                           v * rng.uniform(0.75, 0.97, M)])
-    return s, n_ref, n_min, n_max, float(rng.uniform(-1.0, 1.0)), opp
+from .instances import CFG, HALF_WIDTH, N, random_instance, straight
 
 
 # --------------------------------------------------------------------------
@@ -132,32 +111,6 @@ def test_optimum_equals_brute_force(solver):
     assert checked >= 10 and with_binaries >= 2
 
 
-def test_daqp_and_enumeration_agree_with_memory():
-    """Closed-loop-like sequences: consistency and hysteresis terms active."""
-    rng = np.random.default_rng(3)
-    p_bnb = PassingSidePlanner(MIQPConfig(solver="daqp"))
-    p_enum = PassingSidePlanner(MIQPConfig(solver="enumerate"))
-    solved = 0
-    for _ in range(4):
-        s, n_ref, n_min, n_max, ego_n, opp = random_instance(rng, min_gap=25.0)
-        v = s[1] / CFG.node_dt
-        p_bnb.reset()
-        p_enum.reset()
-        progress = 0.0
-        for _ in range(8):
-            a = p_bnb.plan(s, n_ref, n_min, n_max, ego_n, opp, progress=progress)
-            b = p_enum.plan(s, n_ref, n_min, n_max, ego_n, opp, progress=progress)
-            assert a.success and b.success
-            np.testing.assert_array_equal(a.sides, b.sides)
-            assert a.objective == pytest.approx(b.objective, rel=1e-6, abs=1e-6)
-            progress = 0.15 * v
-            ego_n = float(a.lateral_at(progress))
-            opp = opp.copy()
-            opp[:, 0] += (opp[:, 2] - v) * 0.15
-            solved += a.status == "optimal"
-    assert solved > 10
-
-
 # --------------------------------------------------------------------------
 # Decisions
 # --------------------------------------------------------------------------
@@ -196,55 +149,6 @@ def test_wide_blocking_pair_forces_the_free_side(pair, free_side):
     res = PassingSidePlanner().plan(s, n_ref, n_min, n_max, 0.0, opp)
     assert res.success and res.max_slack == 0.0
     np.testing.assert_array_equal(res.sides, [free_side, free_side])
-
-
-def test_hysteresis_keeps_the_previous_side():
-    s, n_ref, n_min, n_max = straight()
-    v = s[1] / CFG.node_dt
-    # first call: opponent slightly right of centre -> left is cheaper
-    opp1 = np.array([[80.0, -0.15, 42.0]])
-    # 0.1 s later it sits slightly left of centre -> right would now be cheaper
-    progress = 0.1 * v
-    opp2 = np.array([[80.0 + (42.0 - v) * 0.1, 0.15, 42.0]])
-
-    fresh = PassingSidePlanner().plan(s, n_ref, n_min, n_max, 0.0, opp2)
-    assert fresh.sides[0] == -1
-
-    for cfg, expected in ((MIQPConfig(), +1), (MIQPConfig(w_switch=0.0, w_prev=0.0), -1),
-                          (MIQPConfig(w_prev=0.0), +1),
-                          (MIQPConfig(solver="enumerate"), +1)):
-        planner = PassingSidePlanner(cfg)
-        first = planner.plan(s, n_ref, n_min, n_max, 0.0, opp1)
-        assert first.sides[0] == +1
-        second = planner.plan(s, n_ref, n_min, n_max, float(first.lateral_at(progress)), opp2,
-                              progress=progress)
-        assert second.sides[0] == expected, cfg
-
-
-def test_hysteresis_follows_the_car_not_the_row():
-    s, n_ref, n_min, n_max = straight()
-    far = [150.0, 2.0, 45.0]  # irrelevant car listed first in the second call
-    planner = PassingSidePlanner(MIQPConfig(w_prev=0.0))
-    first = planner.plan(s, n_ref, n_min, n_max, 0.0, np.array([[80.0, -0.15, 42.0], far]))
-    assert first.sides[0] == +1
-    second = planner.plan(s, n_ref, n_min, n_max, 0.0, np.array([far, [79.0, 0.15, 42.0]]),
-                          progress=5.0)
-    assert second.sides[1] == +1  # a fresh planner would pass this one on the right
-    fresh = PassingSidePlanner().plan(s, n_ref, n_min, n_max, 0.0, np.array([[79.0, 0.15, 42.0]]))
-    assert fresh.sides[0] == -1
-
-
-def test_hysteresis_ignores_a_respawned_opponent():
-    s, n_ref, n_min, n_max = straight()
-    planner = PassingSidePlanner(MIQPConfig(w_prev=0.0))
-    first = planner.plan(s, n_ref, n_min, n_max, 0.0, np.array([[60.0, -0.15, 42.0]]))
-    assert first.sides[0] == +1
-    # same row index, but a different car 200 m further ahead: no inherited side
-    second = planner.plan(s, n_ref, n_min, n_max, 0.0, np.array([[260.0, 0.15, 42.0]]),
-                          progress=5.0)
-    fresh = PassingSidePlanner(MIQPConfig(w_prev=0.0)).plan(
-        s, n_ref, n_min, n_max, 0.0, np.array([[260.0, 0.15, 42.0]]))
-    assert second.sides[0] == fresh.sides[0]
 
 
 # --------------------------------------------------------------------------
@@ -342,7 +246,7 @@ def test_solver_failure_falls_back_without_raising(monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("numerical trouble")
 
-    monkeypatch.setattr(miqp_mod.daqp, "solve", broken)
+    monkeypatch.setattr(solvers_mod.daqp, "solve", broken)
     planner = PassingSidePlanner()
     n_ref = 8.0 * np.ones(N)
     res = planner.plan(s, n_ref, n_min, n_max, 0.0, np.array([[40.0, -3.0, 40.0]]))
@@ -351,101 +255,9 @@ def test_solver_failure_falls_back_without_raising(monkeypatch):
     np.testing.assert_array_equal(res.sides, [0])
 
 
-def test_invalid_configuration_and_shapes_raise():
-    with pytest.raises(ValueError):
-        MIQPConfig(solver="gurobi")
-    with pytest.raises(ValueError):
-        MIQPConfig(w_dev=0.0)
+def test_invalid_shapes_raise():
     s, n_ref, n_min, n_max = straight()
     with pytest.raises(ValueError):
         PassingSidePlanner().plan(s[:-1], n_ref, n_min, n_max, 0.0, np.zeros((0, 3)))
     with pytest.raises(ValueError):
         PassingSidePlanner().plan(s, n_ref, n_min, n_max, 0.0, np.zeros((2, 2)))
-
-
-# --------------------------------------------------------------------------
-# The vectorised clearance window against a direct (per-row, per-node) form.
-# --------------------------------------------------------------------------
-def reference_clearance(cfg: MIQPConfig, t: np.ndarray, s_nodes: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
-    """The clearance window of the module docstring, written out row by row."""
-    L = cfg.safe_lon
-    gap = opp_s - s_nodes[None, :]
-    if cfg.closing_decel > 0.0:
-        dv = -np.gradient(gap, t, axis=1)
-        ext_ahead = np.maximum(dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
-        ext_behind = np.maximum(-dv, 0.0) ** 2 / (2.0 * cfg.closing_decel)
-    else:
-        ext_ahead = ext_behind = np.zeros_like(gap)
-
-    def required(g, e_ahead, e_behind):
-        ext = np.where(g > 0.0, e_ahead, e_behind)
-        a = np.abs(g)
-        out = np.where(a < L, cfg.safe_lat, 0.0)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            r = (a - L) / ext
-            cap = cfg.safe_lat * np.sqrt(np.clip(1.0 - r * r, 0.0, 1.0))
-        return np.where((a >= L) & (ext > 0.0) & (a - L < ext), cap, out)
-
-    w = required(gap, ext_ahead, ext_behind)
-    a, b = gap[:, :-1], gap[:, 1:]
-    g_near = np.where((a > 0.0) & (b > 0.0), np.minimum(a, b),
-                      np.where((a < 0.0) & (b < 0.0), np.maximum(a, b), 0.0))
-    seg = required(g_near, np.maximum(ext_ahead[:, :-1], ext_ahead[:, 1:]),
-                   np.maximum(ext_behind[:, :-1], ext_behind[:, 1:]))
-    w[:, :-1] = np.maximum(w[:, :-1], seg)
-    w[:, 1:] = np.maximum(w[:, 1:], seg)
-    stride = int(cfg.closing_stride)
-    if stride > 1 and cfg.closing_decel > 0.0:
-        box = np.abs(gap) < L
-        out = w.copy()
-        k = np.arange(w.shape[1])
-        for i in range(w.shape[0]):
-            bk = np.flatnonzero(box[i])
-            if bk.size == 0:
-                bk = np.array([int(np.argmax(w[i]))])
-            dist = np.abs(k[:, None] - bk[None, :]).min(axis=1)
-            drop = (w[i] > 0.0) & ~box[i] & (dist > 1) & ((dist - 1) % stride != 0)
-            out[i, drop] = 0.0
-        w = out
-    return w
-
-
-@pytest.mark.parametrize("closing_decel, stride", [(0.0, 3), (10.0, 1), (10.0, 3), (4.0, 2)])
-def test_clearance_matches_the_direct_form_exactly(closing_decel, stride):
-    cfg = MIQPConfig(closing_decel=closing_decel, closing_stride=stride)
-    planner = PassingSidePlanner(cfg)
-    rng = np.random.default_rng(3)
-    t = CFG.node_dt * np.arange(N)
-    for _ in range(200):
-        v = rng.uniform(20.0, 70.0)
-        s_nodes = v * t + 0.5 * rng.uniform(-4.0, 2.0) * t ** 2
-        s_nodes = np.maximum.accumulate(np.maximum(s_nodes, 0.0))
-        M = int(rng.integers(0, 6))
-        s0 = rng.uniform(-40.0, 400.0, M)  # includes far opponents (skipped rows)
-        vo = v * rng.uniform(0.3, 1.3, M)
-        acc = rng.uniform(-5.0, 5.0, M)
-        opp_s = s0[:, None] + vo[:, None] * t[None, :] + 0.5 * acc[:, None] * t[None, :] ** 2
-        got = planner._clearance(s_nodes, opp_s)
-        np.testing.assert_array_equal(got, reference_clearance(cfg, t, s_nodes, opp_s))
-
-
-def test_time_gradient_matches_numpy():
-    planner = PassingSidePlanner(MIQPConfig(closing_decel=10.0))
-    f = np.random.default_rng(0).normal(size=(4, N)) * 50.0
-    np.testing.assert_array_equal(planner._time_gradient(f), np.gradient(f, planner._t, axis=1))
-
-
-def test_solver_inputs_are_not_shared_between_calls():
-    """The cached Hessian and constraint types of the branch-and-bound are reused unchanged."""
-    s, n_ref, n_min, n_max = straight()
-    planner = PassingSidePlanner()
-    opp = np.array([[30.0, 0.5, 40.0], [45.0, -2.0, 42.0]])
-    first = planner.plan(s, n_ref, n_min, n_max, 0.0, opp)
-    cached = {k: tuple(np.copy(a) for a in v) for k, v in planner._bnb_cache.items()}
-    planner.reset()
-    again = planner.plan(s, n_ref, n_min, n_max, 0.0, opp)
-    for k, v in planner._bnb_cache.items():
-        for a, b in zip(v, cached[k]):
-            np.testing.assert_array_equal(a, b)
-    np.testing.assert_array_equal(first.sides, again.sides)
-    np.testing.assert_allclose(first.d, again.d, atol=1e-9)

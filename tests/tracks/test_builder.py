@@ -1,4 +1,5 @@
-"""Tests of the circuit builder on small synthetic circuits."""
+"""End-to-end tests of the circuit builder (sofar_env.tracks.builder.pipeline) on small synthetic
+circuits: edges or centreline file -> Track."""
 
 from __future__ import annotations
 
@@ -7,29 +8,10 @@ import math
 
 import numpy as np
 import pytest
+from synthetic_circuits import R, circle, write_edges
 
-from sofar_env.tracks import BuildConfig, Track, TrackFormatError, build_track
-from sofar_env.tracks.__main__ import main as cli_main
-from sofar_env.tracks.builder import polyline_distance, speed_profile
-
-R = 60.0  # [m] radius of the synthetic circles
-
-
-def circle(radius: float, count: int, phase: float = 0.0, ccw: bool = True, center=(10.0, -5.0)) -> np.ndarray:
-    ang = phase + np.linspace(0.0, 2.0 * math.pi, count, endpoint=False)
-    if not ccw:
-        ang = ang[::-1]
-    return np.column_stack([center[0] + radius * np.cos(ang), center[1] + radius * np.sin(ang)])
-
-
-def write_edges(path, left: np.ndarray, right: np.ndarray) -> None:
-    """Edges CSV without header; the edges have different sample counts (NaN padding)."""
-    rows = max(len(left), len(right))
-    data = np.full((rows, 4), np.nan)
-    data[: len(left), :2] = left
-    data[: len(right), 2:] = right
-    lines = [",".join("" if math.isnan(v) else f"{v:.6f}" for v in row) for row in data]
-    path.write_text("\n".join(lines) + "\n")
+from sofar_env.tracks import BuildConfig, build_track
+from sofar_env.tracks.builder import polyline_distance
 
 
 def test_ccw_circle_from_edges_centred_in_narrow_corridor(tmp_path):
@@ -116,47 +98,8 @@ def test_ellipse_raceline_keeps_clearance_and_limits(tmp_path):
     assert meta["builder"]["clearance"] == 2.5 and len(meta["source"]["sha256"]) == 64
 
 
-def test_speed_profile_closed_loop():
-    n = 400
-    kappa = np.full(n, 1e-4)
-    kappa[100:110] = 0.05  # one slow corner
-    ds = np.full(n, 2.0)
-    v = speed_profile(kappa, ds, 15.0, 3.0, 10.0, 85.0)
-    assert np.max(v * v * np.abs(kappa)) <= 15.0 + 1e-9
-    acc = (np.roll(v, -1) ** 2 - v**2) / (2.0 * ds)
-    assert acc.max() <= 3.0 + 1e-9 and acc.min() >= -10.0 - 1e-9
-    assert v[100] == pytest.approx(math.sqrt(15.0 / 0.05))
-    assert v.max() <= 85.0
-    # braking before the corner wraps around the start of the loop correctly
-    assert np.argmax(v) < 100 or np.argmax(v) > 110
-    # constant curvature: constant speed
-    assert np.allclose(speed_profile(np.full(50, 0.01), np.ones(50), 15.0, 3.0, 10.0, 85.0), math.sqrt(1500.0))
-
-
-def test_source_errors_name_the_file(tmp_path):
-    with pytest.raises(TrackFormatError, match="nothere.csv"):
-        build_track(tmp_path / "nothere.csv", "X")
-    bad = tmp_path / "bad.csv"
-    bad.write_text("1,2,3\n4,5,6\n")
-    with pytest.raises(TrackFormatError, match="bad.csv"):
-        build_track(bad, "X")
-    text = tmp_path / "text.csv"
-    text.write_text("1,2,3,4\n5,6,x,8\n")
-    with pytest.raises(TrackFormatError, match="text.csv"):
-        build_track(text, "X")
-    with pytest.raises(ValueError, match="format"):
-        build_track(bad, "X", source_format="gpx")
-
-
-def test_cli_build_and_info(tmp_path, capsys):
+def test_unknown_source_format_raises(tmp_path):
     src = tmp_path / "circle.csv"
     write_edges(src, circle(R - 1.5, 150), circle(R + 1.5, 170))
-    out = tmp_path / "Cli"
-    with pytest.warns(UserWarning):
-        assert cli_main(["build", str(src), "--name", "Cli", "--out", str(out), "--top-speed", "20"]) == 0
-    for fname in ("raceline.csv", "left_edge.csv", "right_edge.csv", "centerline.csv", "meta.json"):
-        assert (out / fname).is_file()
-    track = Track.load(out)
-    assert track.name == "Cli" and track.max_speed == pytest.approx(20.0)
-    assert cli_main(["info", str(out)]) == 0
-    assert "Cli" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="format"):
+        build_track(src, "X", source_format="gpx")

@@ -1,0 +1,82 @@
+"""The paper's evaluation: episodes, resumable sweeps, aggregation and the tables and figures.
+
+The logic behind ``eval/table.py`` (Tables I and II), ``eval/latency.py`` (Table III)
+and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module per job:
+
+* :mod:`~sofar_agents.evaluation.protocol`: strategies, episode tasks, paired seeds,
+  the task lists of Tables I and II (what to run);
+* :mod:`~sofar_agents.evaluation.episode`: one episode in one environment (``make_env``,
+  ``run_episode``);
+* :mod:`~sofar_agents.evaluation.sweep`: many episodes over a process pool, resumed from
+  the CSV (``run_sweep``);
+* :mod:`~sofar_agents.evaluation.results`: the episode record and the episode/trace CSV
+  files (columns, reading, appending, resume keys);
+* :mod:`~sofar_agents.evaluation.tables`: totals per group and the Markdown of Tables I/II;
+* :mod:`~sofar_agents.evaluation.experiments`: Tables I and II end to end (``run_table1``,
+  ``run_miqp_ablation``);
+* :mod:`~sofar_agents.evaluation.latency`: Table III (``measure_latency``);
+* :mod:`~sofar_agents.evaluation.figures`: Fig. 5 (``plot_gamma_figures``).
+
+Every public name is re-exported here: ``from sofar_agents import evaluation as ev``
+then ``ev.run_table1(...)``.
+"""
+
+from sofar_agents.evaluation.episode import make_env, run_episode, slack_active
+from sofar_agents.evaluation.experiments import TableReport, run_miqp_ablation, run_table1
+from sofar_agents.evaluation.figures import plot_gamma_figures
+from sofar_agents.evaluation.latency import (PAPER_LATENCY_MS, format_latency, latency_stats, machine_info,
+                                             measure_latency, write_json)
+from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FULL_TABLE1_STEPS, RHOS,
+                                              TRACK_ABBREVIATIONS, TRACKS, EpisodeTask, Strategy,
+                                              build_strategies, episode_seed, miqp_ablation_tasks,
+                                              resolve_policy_path, table1_tasks)
+from sofar_agents.evaluation.results import (EPISODE_COLUMNS, TRACE_COLUMNS, EpisodeResult, read_episode_csv,
+                                             read_trace_csv, select_rows)
+from sofar_agents.evaluation.sweep import SweepStats, run_sweep
+from sofar_agents.evaluation.tables import (PAPER_TABLE1_SUCCESS, Summary, aggregate, format_table1,
+                                            format_table2, paper_comparison, rank_marks, summarize)
+
+__all__ = [
+    "TRACKS",
+    "TRACK_ABBREVIATIONS",
+    "RHOS",
+    "FIXED_GAMMAS",
+    "DEFAULT_DURATION",
+    "FULL_TABLE1_STEPS",
+    "EPISODE_COLUMNS",
+    "TRACE_COLUMNS",
+    "PAPER_TABLE1_SUCCESS",
+    "PAPER_LATENCY_MS",
+    "Strategy",
+    "EpisodeTask",
+    "EpisodeResult",
+    "Summary",
+    "SweepStats",
+    "episode_seed",
+    "resolve_policy_path",
+    "build_strategies",
+    "table1_tasks",
+    "miqp_ablation_tasks",
+    "make_env",
+    "run_episode",
+    "slack_active",
+    "run_sweep",
+    "run_table1",
+    "run_miqp_ablation",
+    "TableReport",
+    "read_episode_csv",
+    "select_rows",
+    "paper_comparison",
+    "summarize",
+    "aggregate",
+    "rank_marks",
+    "format_table1",
+    "format_table2",
+    "latency_stats",
+    "measure_latency",
+    "format_latency",
+    "machine_info",
+    "write_json",
+    "read_trace_csv",
+    "plot_gamma_figures",
+]

@@ -1,0 +1,107 @@
+"""Tables I and II end to end: tasks -> sweep (resumed) -> rows -> Markdown report on disk."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, RHOS, TRACKS, Strategy, _fmt_float,
+                                              miqp_ablation_tasks, table1_tasks)
+from sofar_agents.evaluation.results import read_episode_csv, select_rows
+from sofar_agents.evaluation.sweep import SweepStats, run_sweep
+from sofar_agents.evaluation.tables import format_table1, format_table2, paper_comparison
+
+
+@dataclass
+class TableReport:
+    """Outcome of :func:`run_table1` / :func:`run_miqp_ablation`."""
+
+    markdown: str
+    stats: SweepStats
+    csv_path: Path
+    markdown_path: Path
+    rows: list[dict[str, Any]]
+
+
+def _run_header(title: str, settings: Mapping[str, Any]) -> str:
+    items = ", ".join(f"{k} = {v}" for k, v in settings.items())
+    return f"# {title}\n\n{items}. Generated {time.strftime('%Y-%m-%d %H:%M')}.\n"
+
+
+def _stats_text(stats: SweepStats) -> str:
+    if stats.completed == 0:
+        return f"{stats.skipped} episodes taken from the CSV, none run."
+    rate = stats.steps_per_second_per_worker
+    return (f"{stats.completed} episodes run ({stats.skipped} taken from the CSV, {stats.failed} failed) "
+            f"with {stats.workers} workers in {stats.elapsed:.0f} s: {stats.steps} control steps, "
+            f"{rate:.0f} steps/s per worker.")
+
+
+def run_table1(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "results", *,
+               tracks: Sequence[str] = TRACKS, rhos: Sequence[float] = RHOS, episodes: int = 5, base_seed: int = 0,
+               duration: float = DEFAULT_DURATION, workers: int | None = None, trace: bool = False,
+               progress: bool = True, prefix: str = "table1", stack: str = "sofar") -> TableReport:
+    """Table I: run (or resume) the sweep into ``out_dir/<prefix>_episodes.csv``, write ``<prefix>.md``.
+
+    With ``trace``, the per-step trace of the non-fixed strategies goes to ``<prefix>_trace.csv``.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tasks = table1_tasks(strategies, tracks, rhos, episodes, base_seed, duration,
+                         trace=(lambda s: s.kind != "fixed") if trace else False, stack=stack)
+    csv_path = out / f"{prefix}_episodes.csv"
+    stats = run_sweep(tasks, csv_path, workers=workers, progress=progress,
+                      trace_path=out / f"{prefix}_trace.csv" if trace else None)
+    rows = select_rows(read_episode_csv(csv_path), tasks)
+    settings = {"tracks": ", ".join(tracks), "rho": ", ".join(_fmt_float(r) for r in rhos),
+                "episodes per (track, rho)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed,
+                "controller": stack}
+    parts = [_run_header("Table I: performance per circuit", settings),
+             "Per circuit and metric, **bold** is the best and <u>underlined</u> the second best "
+             "(success rate, simulated time, laps, overtakes: higher is better). Slack: percentage of control "
+             "steps in which the MPC used DCBF slack.\n",
+             format_table1(rows, strategies, tracks)]
+    cmp = paper_comparison(rows, strategies)
+    if cmp:
+        parts += ["\n## Success rate next to the paper's Table I\n", cmp]
+    missing = len(tasks) - len(rows)
+    if missing:
+        parts.append(f"\n**Incomplete:** {missing} of {len(tasks)} episodes are missing; rerun the same command "
+                     "to finish them.")
+    parts.append("\n" + _stats_text(stats))
+    md = "\n".join(parts) + "\n"
+    md_path = out / f"{prefix}.md"
+    md_path.write_text(md)
+    return TableReport(md, stats, csv_path, md_path, rows)
+
+
+def run_miqp_ablation(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "results", *,
+                      episodes: int = 10, rhos: Sequence[float] = RHOS, track: str = "LagunaSeca",
+                      base_seed: int = 0, duration: float = DEFAULT_DURATION, workers: int | None = None,
+                      progress: bool = True, prefix: str = "table2", stack: str = "sofar") -> TableReport:
+    """Table II: ``track`` with and without the MIQP layer, into ``out_dir/<prefix>_episodes.csv`` and ``.md``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tasks = miqp_ablation_tasks(strategies, episodes, rhos, track, base_seed, duration, stack=stack)
+    csv_path = out / f"{prefix}_episodes.csv"
+    stats = run_sweep(tasks, csv_path, workers=workers, progress=progress)
+    rows = select_rows(read_episode_csv(csv_path), tasks)
+    settings = {"track": track, "rho cycled over": ", ".join(_fmt_float(r) for r in rhos),
+                "episodes per (setting, strategy)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed,
+                "controller": stack}
+    parts = [_run_header("Table II: with and without the MIQP layer", settings),
+             "**Bold** is the best and <u>underlined</u> the second best over the four rows (as in the paper).\n",
+             format_table2(rows, strategies)]
+    missing = len(tasks) - len(rows)
+    if missing:
+        parts.append(f"\n**Incomplete:** {missing} of {len(tasks)} episodes are missing; rerun the same command "
+                     "to finish them.")
+    parts.append("\n" + _stats_text(stats))
+    md = "\n".join(parts) + "\n"
+    md_path = out / f"{prefix}.md"
+    md_path.write_text(md)
+    return TableReport(md, stats, csv_path, md_path, rows)

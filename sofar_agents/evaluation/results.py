@@ -1,0 +1,223 @@
+"""Episode records and their CSV files: columns, typed reading, flushed appending, resume keys.
+
+A sweep appends one row of :data:`EPISODE_COLUMNS` per finished episode (and, when
+traced, rows of :data:`TRACE_COLUMNS` per control step). Files of an older format
+(without the ``stack`` and ``n_opponents`` columns) are migrated in place on the next
+append; their rows stand for the ``sofar`` controller and the default opponent count.
+A row's resume key (:func:`_row_key`) equals :attr:`EpisodeTask.key` of the task that
+produced it, so a rerun skips the episodes already in the file.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sofar_agents.evaluation.protocol import DEFAULT_DURATION, EpisodeTask, _key
+
+logger = logging.getLogger(__name__)
+
+EPISODE_COLUMNS: tuple[str, ...] = (
+    "track", "strategy", "rho", "seed", "success", "sim_time", "laps", "overtakes", "collision", "off_track",
+    "slack_steps", "steps", "mean_gamma", "mpc_failures", "miqp_failures", "wall_time",
+    "episode", "use_miqp", "duration", "policy_id", "stack", "n_opponents",
+)
+"""Columns of the per-episode CSV (one row per episode)."""
+TRACE_COLUMNS: tuple[str, ...] = (
+    "track", "strategy", "rho", "seed", "step", "sim_time", "gamma", "nearest_opponent_m", "min_barrier",
+)
+"""Columns of the per-step trace CSV."""
+
+
+@dataclass
+class EpisodeResult:
+    """What one episode produced (one CSV row)."""
+
+    track: str
+    strategy: str
+    rho: float
+    seed: int
+    success: bool
+    sim_time: float
+    laps: float
+    overtakes: int
+    collision: bool
+    off_track: bool
+    slack_steps: int
+    steps: int
+    mean_gamma: float
+    mpc_failures: int
+    miqp_failures: int
+    wall_time: float
+    episode: int = 0
+    use_miqp: bool = True
+    duration: float = DEFAULT_DURATION
+    policy_id: str = ""
+    stack: str = "sofar"
+    n_opponents: int | str = ""
+    """Opponent count of the episode ("" for the environment's default)."""
+
+    def to_row(self) -> dict[str, Any]:
+        row = asdict(self)
+        return {k: row[k] for k in EPISODE_COLUMNS}
+
+
+def _as_bool(x: Any) -> bool:
+    if isinstance(x, str):
+        return x.strip().lower() in ("1", "true", "yes", "1.0")
+    return bool(x)
+
+
+_INT_COLUMNS = {"seed", "overtakes", "slack_steps", "steps", "mpc_failures", "miqp_failures", "episode"}
+_BOOL_COLUMNS = {"success", "collision", "off_track", "use_miqp"}
+_FLOAT_COLUMNS = {"rho", "sim_time", "laps", "mean_gamma", "wall_time", "duration"}
+
+
+def _parse_row(row: Mapping[str, Any]) -> dict[str, Any]:
+    out = dict(row)
+    for k, v in row.items():
+        if k in _BOOL_COLUMNS:
+            out[k] = _as_bool(v)
+        elif k in _INT_COLUMNS:
+            out[k] = int(float(v))
+        elif k in _FLOAT_COLUMNS:
+            out[k] = float(v)
+    return out
+
+
+def _csv_value(v: Any) -> Any:
+    if isinstance(v, bool):
+        return int(v)
+    if isinstance(v, float):
+        return f"{v:.6g}" if abs(v) < 1e5 else f"{v:.1f}"
+    return v
+
+
+def read_episode_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
+    """The rows of a per-episode CSV, typed; incomplete rows (a run killed mid-write) are dropped."""
+    p = Path(path)
+    if not p.exists() or p.stat().st_size == 0:
+        return []
+    rows = []
+    with open(p, newline="") as f:
+        reader = csv.DictReader(f)
+        missing = [c for c in EPISODE_COLUMNS if c not in (reader.fieldnames or []) and c not in _ADDED_COLUMNS]
+        if missing:
+            raise ValueError(f"{p} is not a SOfAR episode CSV (missing columns {missing}); use another --out")
+        present = [c for c in EPISODE_COLUMNS if c in (reader.fieldnames or [])]
+        for row in reader:
+            if any(row.get(c) in (None, "") for c in present if c not in _MAY_BE_EMPTY):
+                continue
+            for c, default in _ADDED_COLUMNS.items():  # rows of an older format
+                row.setdefault(c, default)
+            try:
+                rows.append(_parse_row(row))
+            except ValueError:
+                logger.warning("skipping an unreadable row of %s: %s", p, row)
+    return rows
+
+
+_ADDED_COLUMNS = {"stack": "sofar", "n_opponents": ""}
+"""Columns added after the first format, with the value that rows of older files stand for."""
+_MAY_BE_EMPTY = {"policy_id", "n_opponents"}
+
+
+def _is_older_header(header: Sequence[str], columns: Sequence[str]) -> bool:
+    return list(header) == [c for c in columns if c not in _ADDED_COLUMNS or c in header]
+
+
+def _migrate_csv(path: Path, header: Sequence[str], columns: Sequence[str]) -> None:
+    """Rewrite an episode CSV of an older format with the current columns (atomically)."""
+    with open(path, newline="") as f:
+        rows = [r for r in csv.DictReader(f)]
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(columns))
+        w.writeheader()
+        for r in rows:
+            if None in r or any(v is None for v in r.values()):
+                continue  # a torn last line
+            w.writerow({c: r.get(c, _ADDED_COLUMNS.get(c, "")) for c in columns})
+    os.replace(tmp, path)
+    logger.info("%s: added the columns %s (older format)", path, [c for c in columns if c not in header])
+
+
+class _AppendingCSV:
+    """A CSV opened for appending: header when new, one flushed row per write."""
+
+    def __init__(self, path: str | os.PathLike, columns: Sequence[str]) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        new = not self.path.exists() or self.path.stat().st_size == 0
+        if not new:
+            with open(self.path, "rb") as f:  # a run killed mid-line leaves no newline: start a fresh line
+                f.seek(-1, os.SEEK_END)
+                needs_newline = f.read(1) not in (b"\n", b"\r")
+            with open(self.path, newline="") as f:
+                header = next(csv.reader(f), [])
+            if list(header) != list(columns) and _is_older_header(header, columns):
+                _migrate_csv(self.path, header, columns)
+                needs_newline = False
+            elif list(header) != list(columns):
+                raise ValueError(f"{self.path} has columns {header}, expected {list(columns)}; use another --out")
+        self._f = open(self.path, "a", newline="")
+        if not new and needs_newline:
+            self._f.write("\n")
+        self._w = csv.writer(self._f)
+        self.columns = tuple(columns)
+        if new:
+            self._w.writerow(self.columns)
+            self._f.flush()
+
+    def write(self, row: Mapping[str, Any] | Sequence[Any]) -> None:
+        values = [row[c] for c in self.columns] if isinstance(row, Mapping) else list(row)
+        self._w.writerow([_csv_value(v) for v in values])
+        self._f.flush()
+
+    def write_many(self, rows: Iterable[Sequence[Any]]) -> None:
+        self._w.writerows([[_csv_value(v) for v in r] for r in rows])
+        self._f.flush()
+
+    def close(self) -> None:
+        self._f.close()
+
+
+def _row_key(row: Mapping[str, Any]) -> tuple:
+    return _key(row["track"], row["strategy"], row.get("policy_id", ""), row["rho"], row["seed"],
+                _as_bool(row.get("use_miqp", True)), row.get("duration", DEFAULT_DURATION),
+                row.get("stack") or "sofar", row.get("n_opponents"))
+
+
+def select_rows(rows: Iterable[Mapping[str, Any]], tasks: Sequence[EpisodeTask]) -> list[dict[str, Any]]:
+    """The rows of ``rows`` that belong to ``tasks`` (a CSV may hold episodes of other runs)."""
+    wanted = {t.key for t in tasks}
+    out, seen = [], set()
+    for r in rows:
+        k = _row_key(r)
+        if k in wanted and k not in seen:
+            out.append(_parse_row(r))
+            seen.add(k)
+    return out
+
+
+def read_trace_csv(path: str | os.PathLike, strategy: str | None = None) -> dict[str, np.ndarray]:
+    """gamma and nearest-opponent distance from a trace CSV (optionally one strategy only)."""
+    gam, dist, barrier = [], [], []
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            if strategy is not None and row.get("strategy") != strategy:
+                continue
+            try:
+                gam.append(float(row["gamma"]))
+                dist.append(float(row["nearest_opponent_m"]))
+                barrier.append(float(row.get("min_barrier", "nan") or "nan"))
+            except (KeyError, ValueError):
+                continue
+    return {"gamma": np.asarray(gam), "nearest_opponent_m": np.asarray(dist), "min_barrier": np.asarray(barrier)}

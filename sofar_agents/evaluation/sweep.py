@@ -1,0 +1,216 @@
+"""Sweeps: run a list of episodes over a process pool, appending each result to a CSV.
+
+Workers (spawn context) pull tasks from a queue, build their environments and
+policies lazily and keep them for later episodes of the same track/configuration.
+Each finished episode is appended to the CSV (flushed), and episodes already in the
+CSV are skipped, so an interrupted sweep resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import multiprocessing as mp
+import os
+import queue
+import time
+import traceback
+import warnings
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+from sofar_agents.evaluation.episode import make_env, run_episode
+from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
+from sofar_agents.evaluation.results import (EPISODE_COLUMNS, TRACE_COLUMNS, EpisodeResult, _AppendingCSV,
+                                             _row_key, read_episode_csv)
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class SweepStats:
+    """What a sweep did."""
+
+    requested: int = 0
+    skipped: int = 0
+    """Episodes already in the CSV."""
+    completed: int = 0
+    failed: int = 0
+    steps: int = 0
+    """Control steps simulated by the completed episodes."""
+    episode_wall_time: float = 0.0
+    """Sum of the episodes' wall times [s] (about workers x elapsed)."""
+    elapsed: float = 0.0
+    """Wall time of the sweep [s]."""
+    workers: int = 0
+    errors: list[str] = field(default_factory=list)
+
+    @property
+    def steps_per_second_per_worker(self) -> float:
+        return self.steps / self.episode_wall_time if self.episode_wall_time > 0 else math.nan
+
+    def estimate_hours(self, total_steps: float, workers: int) -> float:
+        """Wall hours for ``total_steps`` control steps on ``workers`` workers at the measured speed."""
+        rate = self.steps_per_second_per_worker
+        return total_steps / (rate * max(workers, 1)) / 3600.0 if rate > 0 else math.nan
+
+
+def _progress_bar(total: int, enabled: bool):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, unit="ep", desc="episodes", disable=not enabled, dynamic_ncols=True, smoothing=0.05)
+
+
+class _EpisodeRunner:
+    """Runs tasks, building environments and policies on first use and keeping them."""
+
+    def __init__(self) -> None:
+        self.envs: dict[tuple, Any] = {}
+        self.policies: dict[Strategy, Callable] = {}
+
+    def run(self, task: EpisodeTask) -> tuple[EpisodeResult, list[tuple]]:
+        env = self.envs.get(task.env_key)
+        if env is None:
+            env = self.envs[task.env_key] = make_env(task.track, task.use_miqp, task.duration, task.stack)
+        policy = self.policies.get(task.strategy)
+        if policy is None:
+            policy = self.policies[task.strategy] = task.strategy.build()
+        return run_episode(env, policy, task)
+
+    def close(self) -> None:
+        for env in self.envs.values():
+            try:
+                env.close()
+            except Exception:  # pragma: no cover
+                pass
+        self.envs.clear()
+
+
+def _worker_loop(tasks, results) -> int:
+    """Process-pool worker: run tasks from ``tasks`` until a None, report to ``results``."""
+    warnings.simplefilter("ignore", UserWarning)  # the parent reports failures; keep worker output quiet
+    runner = _EpisodeRunner()
+    done = 0
+    try:
+        while True:
+            item = tasks.get()
+            if item is None:
+                break
+            idx, task = item
+            try:
+                result, trace = runner.run(task)
+                results.put(("ok", idx, result.to_row(), trace))
+            except Exception:
+                results.put(("error", idx, traceback.format_exc(), None))
+            done += 1
+    finally:
+        runner.close()
+    return done
+
+
+def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, workers: int | None = None,
+              trace_path: str | os.PathLike | None = None, progress: bool = True) -> SweepStats:
+    """Run every task not yet in ``csv_path``, appending one row per finished episode.
+
+    ``workers`` processes (default ``os.cpu_count()``; 1 runs in this process). A failed episode
+    is logged and left out of the CSV, so the next run retries it.
+    """
+    t_start = time.perf_counter()
+    done = {_row_key(r) for r in read_episode_csv(csv_path)}
+    pending, seen = [], set()
+    for t in tasks:
+        if t.key not in done and t.key not in seen:
+            pending.append(t)
+            seen.add(t.key)
+    stats = SweepStats(requested=len(tasks), skipped=len(tasks) - len(pending))
+    if not pending:
+        stats.elapsed = time.perf_counter() - t_start
+        return stats
+    pending.sort(key=lambda t: (t.env_key, t.strategy.name))
+    n_workers = max(1, min(int(workers or os.cpu_count() or 1), len(pending)))
+    stats.workers = n_workers
+    out = _AppendingCSV(csv_path, EPISODE_COLUMNS)
+    trace_out = _AppendingCSV(trace_path, TRACE_COLUMNS) if trace_path is not None else None
+    bar = _progress_bar(len(pending), progress)
+
+    def handle(msg) -> None:
+        status, idx, payload, trace = msg
+        if status == "ok":
+            out.write(payload)
+            if trace_out is not None and trace:
+                trace_out.write_many(trace)
+            stats.completed += 1
+            stats.steps += int(payload["steps"])
+            stats.episode_wall_time += float(payload["wall_time"])
+            rate = stats.steps / stats.episode_wall_time if stats.episode_wall_time > 0 else 0.0
+            bar.set_postfix(steps_per_s=f"{rate * n_workers:.0f}", failed=stats.failed, refresh=False)
+        else:
+            stats.failed += 1
+            stats.errors.append(payload)
+            t = pending[idx]
+            logger.error("episode %s/%s rho=%g seed=%d failed:\n%s", t.track, t.strategy.name, t.rho, t.seed, payload)
+        bar.update(1)
+
+    try:
+        if n_workers == 1:
+            runner = _EpisodeRunner()
+            try:
+                for i, t in enumerate(pending):
+                    try:
+                        res, trace = runner.run(t)
+                        handle(("ok", i, res.to_row(), trace))
+                    except Exception:
+                        handle(("error", i, traceback.format_exc(), None))
+            finally:
+                runner.close()
+        else:
+            _run_pool(pending, n_workers, handle)
+    finally:
+        bar.close()
+        out.close()
+        if trace_out is not None:
+            trace_out.close()
+        stats.elapsed = time.perf_counter() - t_start
+    return stats
+
+
+def _run_pool(pending: Sequence[EpisodeTask], n_workers: int, handle: Callable) -> None:
+    ctx = mp.get_context("spawn")
+    with ctx.Manager() as manager:
+        task_q, result_q = manager.Queue(), manager.Queue()
+        for i, t in enumerate(pending):
+            task_q.put((i, t))
+        for _ in range(n_workers):
+            task_q.put(None)
+        received = 0
+        pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
+        try:
+            futures = [pool.submit(_worker_loop, task_q, result_q) for _ in range(n_workers)]
+            while received < len(pending):
+                try:
+                    msg = result_q.get(timeout=0.5)
+                except queue.Empty:
+                    if all(f.done() for f in futures):
+                        break
+                    continue
+                handle(msg)
+                received += 1
+            while received < len(pending):  # drain what finished workers left behind
+                try:
+                    handle(result_q.get_nowait())
+                    received += 1
+                except queue.Empty:
+                    break
+            for f in futures:
+                exc = f.exception() if f.done() else None
+                if exc is not None:
+                    logger.error("a worker process failed: %r", exc)
+            if received < len(pending):
+                logger.error("%d episodes got no result (a worker died); rerun to retry them",
+                             len(pending) - received)
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown(wait=True)

@@ -1,0 +1,156 @@
+"""Hyper-parameters of PASTA (:class:`PASTAConfig`), validated on construction."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["PASTAConfig"]
+
+
+@dataclass(frozen=True)
+class PASTAConfig:
+    """Hyper-parameters of PASTA.
+
+    Defaults follow the reference PASTA implementation and the paper (2 x 256 hidden
+    units). Step counts are environment steps; regrets, margins and reward clips are
+    in units of the running return scale of their objective (see ``normalize_returns``).
+    """
+
+    learning_rate: float = 3e-4
+    """Adam learning rate shared by the actor and the critic."""
+    adam_eps: float = 1e-5
+    """Adam epsilon."""
+    n_steps: int = 2048
+    """Environment steps collected **per environment** per rollout; one update
+    consumes ``n_steps * n_envs`` transitions."""
+    batch_size: int = 64
+    """Minibatch size (transitions) for the PPO epochs."""
+    n_epochs: int = 10
+    """Passes over the rollout per update."""
+    clip_range: float = 0.2
+    """PPO clipping parameter epsilon of the probability ratio."""
+    discount: float = 0.99
+    """Discount factor of the returns (the RL gamma, not the barrier gamma)."""
+    gae_lambda: float = 0.95
+    """GAE lambda."""
+    vf_coef: float = 0.5
+    """Weight c1 of the value loss (sum over the heads of squared errors of the
+    normalised per-objective returns)."""
+    ent_coef: float = 0.01
+    """Weight c2 of the entropy bonus (entropy of the squashed action distribution)."""
+    max_grad_norm: float = 0.5
+    """Global gradient-norm clip, applied separately to the actor and the critic."""
+    target_kl: float | None = None
+    """If set, stop the epochs of an update early once the approximate KL of a
+    minibatch exceeds ``1.5 * target_kl``."""
+    normalize_advantage: bool = True
+    """Centre each objective's advantages per minibatch and divide all of them by
+    one common scale (root-mean of the per-objective variances). A common scale
+    keeps the relative size of the objectives: an objective without signal is not
+    blown up into unit-variance noise."""
+    normalize_returns: bool = True
+    """Divide each objective's rewards by a running standard deviation of its
+    discounted return (Welford / Chan parallel update over all transitions seen)."""
+    reward_clip: float | None = 10.0
+    """Clip of the normalised rewards (in return standard deviations); None disables."""
+    scalarization: str = "stch"
+    """``"stch"``: smooth-Tchebycheff attention weights; ``"linear"``: the
+    preference itself (alpha = w), i.e. linear scalarisation, for ablations."""
+    maintenance: float = 0.15
+    """Maintenance rate: share of the attention mixed uniformly over the objectives,
+    so that no objective's weight drops below ``maintenance / K``."""
+    utopia_margin: float = 0.1
+    """Margin added to every regret (in return standard deviations), i.e. the utopia
+    lies slightly beyond the best performance seen. It lets the preference w shape
+    the attention even when every objective is at its utopia."""
+    utopia_quantile: float = 0.9
+    """Quantile of the rollout's per-state lambda-returns (per objective) taken as that
+    rollout's estimate of the best achievable return. The running utopia is the
+    (slowly decaying) maximum of these estimates; 0.5 to 1."""
+    utopia_decay: float = 0.01
+    """Per-update rate at which the running utopia relaxes towards the current
+    estimate when the latter is below it (0 = plain running maximum)."""
+    regret_clip: float = 10.0
+    """Upper clip of the normalised regret (return standard deviations)."""
+    mu_max: float = 10.0
+    """Upper bound and initial value of the smoothing temperature mu."""
+    mu_min: float = 0.05
+    """Lower bound of mu, reached at the end of the linear decay."""
+    mu_ema: float = 0.05
+    """EMA rate with which mu follows its target each update."""
+    kappa: float = 0.4
+    """Conflict threshold: above this gradient-conflict ratio the target mu is pushed
+    back towards ``mu_max`` in proportion to ``(conflict - kappa) / (1 - kappa)``."""
+    mu_decay_steps: int = 1_000_000
+    """Environment steps over which the target mu decays linearly from ``mu_max``
+    to ``mu_min`` (the reference's ``total_train_steps``)."""
+    mu_decay: bool = True
+    """Enable the linear decay of the target mu."""
+    conflict_boost: bool = True
+    """Enable the conflict-driven push of the target mu towards ``mu_max``."""
+    fixed_mu: float | None = None
+    """If set, use this constant mu and disable the controller."""
+    pcgrad: bool = False
+    """De-conflict the per-objective actor gradients with PCGrad before summing."""
+    conflict_every: int = 1
+    """Measure the gradient conflict on every n-th minibatch (PCGrad, when on, needs
+    the per-objective gradients of every minibatch regardless)."""
+    hidden_sizes: tuple[int, ...] = (256, 256)
+    """Hidden widths of the actor and of the critic trunk (tanh activations)."""
+    critic_head_hidden: int = 64
+    """Hidden width of each per-objective value head (0 = a single linear layer)."""
+    log_std_init: float = -0.5
+    """Initial log standard deviation of the pre-squash Gaussian (state independent)."""
+    initial_action: float | None = None
+    """If set, the actor's output bias is initialised so that the deterministic action of
+    the untrained policy is this value (in action units, strictly inside the bounds), e.g. a
+    known-good fixed gamma; ``None`` starts at the middle of the action range."""
+    preference_sampling: str = "dirichlet"
+    """``"dirichlet"``: draw a preference w per episode from a Dirichlet whose mean is
+    the agent's preference; ``"fixed"``: always use the agent's preference."""
+    dirichlet_concentration: float = 1.0
+    """Concentration c of the preference Dirichlet, ``Dir(c * K * w)``. With a uniform
+    w and c = 1 this is the uniform distribution on the simplex."""
+
+    def __post_init__(self) -> None:
+        if self.n_steps < 1 or self.batch_size < 1 or self.n_epochs < 1:
+            raise ValueError("n_steps, batch_size and n_epochs must be positive")
+        if not 0.0 < self.discount <= 1.0 or not 0.0 <= self.gae_lambda <= 1.0:
+            raise ValueError("discount must lie in (0, 1] and gae_lambda in [0, 1]")
+        if not 0.0 < self.mu_min <= self.mu_max:
+            raise ValueError(f"need 0 < mu_min <= mu_max, got {self.mu_min}, {self.mu_max}")
+        if not 0.0 <= self.maintenance <= 1.0:
+            raise ValueError(f"maintenance must lie in [0, 1], got {self.maintenance}")
+        if not 0.0 <= self.kappa < 1.0:
+            raise ValueError(f"kappa must lie in [0, 1), got {self.kappa}")
+        if self.scalarization not in ("stch", "linear"):
+            raise ValueError(f"scalarization must be 'stch' or 'linear', got {self.scalarization!r}")
+        if self.preference_sampling not in ("dirichlet", "fixed"):
+            raise ValueError(
+                f"preference_sampling must be 'dirichlet' or 'fixed', got {self.preference_sampling!r}"
+            )
+        if not 0.5 <= self.utopia_quantile <= 1.0:
+            raise ValueError(f"utopia_quantile must lie in [0.5, 1], got {self.utopia_quantile}")
+        if self.conflict_every < 1:
+            raise ValueError("conflict_every must be >= 1")
+        object.__setattr__(self, "hidden_sizes", tuple(int(h) for h in self.hidden_sizes))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable dictionary of the fields."""
+        d = dataclasses.asdict(self)
+        d["hidden_sizes"] = list(self.hidden_sizes)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PASTAConfig:
+        """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError``."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise ValueError(f"unknown PASTAConfig fields: {sorted(unknown)}")
+        d = dict(d)
+        if "hidden_sizes" in d:
+            d["hidden_sizes"] = tuple(d["hidden_sizes"])
+        return cls(**d)

@@ -1,0 +1,396 @@
+"""The MPC-DCBF controller, :class:`MPCDCBF`: one SQP real-time iteration per solve.
+
+Real-time iteration
+-------------------
+One QP per :meth:`MPCDCBF.solve` (Gauss-Newton SQP, full step), linearised at the
+previous solution shifted in time by ``control_dt`` (:mod:`.warmstart`). When a barrier
+constraint is near-active in the QP solution (``extra_iteration_when_active``) a second
+iteration re-linearises at the new iterate: with an opponent close, one RTI step keeps
+less distance than the converged solution. A cold start (first solve, after
+:meth:`MPCDCBF.reset` or a brake fallback) runs ``cold_start_iterations`` iterations.
+The linearisation is one compiled C call (:mod:`.linearisation`), the QP matrices are
+gathered into a fixed pattern (:mod:`.layout`) and solved by PIQP or OSQP
+(:mod:`.backends`). :meth:`MPCDCBF.solve_converged` solves the very same NLP to
+convergence with IPOPT, for validation (:mod:`.reference`).
+
+QP size (PIQP backend). Constraints far from the linearisation point are left out of
+the QP and checked afterwards: the lateral-acceleration rows when ``|a_lat|`` stays 3 m/s^2
+below its bound at every stage, the track rows when ``n`` stays 0.5 m inside the
+margined edges, and each box bound (on ``a``, ``delta_dot``, ``v >= 0``, ``delta``)
+farther than a fixed distance from the linearisation point. When the solution
+violates a left-out constraint (by more than 1e-6), the QP is solved again with it.
+A constraint that holds at the optimum of the smaller QP leaves that optimum
+unchanged (it is also the optimum of the QP with the constraint, whose slack is
+then zero), so the answer is that of the full QP. The gain is mostly in
+interior-point iterations: far-away bounds (above all ``v >= 0`` at racing speed) cost
+PIQP about 4 of its 10 iterations. Each pattern (number of opponent slots with rows,
+presence of the lateral-acceleration and of the track rows) gets its own solver
+instance.
+
+Opponents: of the given rows, those inside the gap window
+``[-opponent_range_behind, opponent_range_ahead]`` are candidates; if there are more
+than ``max_opponents``, those with the smallest barrier along the warm start win
+(:func:`~.model.select_opponents`). A candidate gets no QP rows when its barrier stays
+above ``opponent_h_keep`` along the warm start and all its DCBF rows are inactive there
+by more than ``opponent_dcbf_keep`` (:func:`~.model.relevant_slots`); this keeps the QP
+small when opponents are far.
+
+Failure handling: a solver status other than solved, or a non-finite number
+anywhere, never raises. The controller returns the first control of the shifted
+previous plan (``status = "fallback_shift"``) while that plan still covers the
+horizon, else a safe brake ``a = a_min / 2`` with the steering rate driving delta
+towards 0 (``"fallback_brake"``). Failures are counted in ``n_failures`` and logged
+at debug level. ``ValueError`` is raised only for malformed arguments.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+
+import numpy as np
+
+from ...vehicle import AV21, VehicleParams
+from ..barrier import barrier
+from ..codegen import CodegenInfo
+from .backends import dcbf_margin, solve_qp
+from .layout import N_FIXED, QPStructure
+from .linearisation import StageLinearisation
+from .model import relevant_slots, select_opponents, stage_reference, track_limits, variable_box
+from .reference import IpoptReference
+from .types import (STATUS_FALLBACK_BRAKE, STATUS_FALLBACK_SHIFT, STATUS_SOLVED, MPCConfig, MPCResult,
+                    MPCStageData, validate_arguments)
+from .warmstart import PlanShift, cold_guess
+
+__all__ = ["MPCDCBF"]
+
+logger = logging.getLogger(__name__)
+
+# The lateral-acceleration (track) rows are left out of a QP whose linearisation point keeps
+# |a_lat| below lat_acc_max by this margin [m/s^2] (n inside the margined edges by this margin [m])
+# at every stage; the solution is then checked against them (tolerance below) and the QP re-solved
+# with the rows when one is violated (MPCDCBF._rows_needed).
+_LAT_ROWS_MARGIN = 3.0
+_TRK_ROWS_MARGIN = 0.5
+# Likewise each bound of the box (a, delta_dot, -, -, -, v >= 0, delta) on (u_k, x_{k+1}) whose
+# linearisation point is farther from it than this distance.
+_BOX_DROP_DISTANCE = np.array([2.0, 0.15, np.inf, np.inf, np.inf, 5.0, 0.08])
+_ROWS_CHECK_TOL = 1e-6
+
+
+class MPCDCBF:
+    """MPC-DCBF solved by an SQP real-time iteration (see the module docstring).
+
+    Typical loop::
+
+        mpc = MPCDCBF(MPCConfig())
+        s_pred = mpc.predicted_s(v0=x[3]) + s_ego          # where to evaluate the track
+        stage = MPCStageData(kappa=track.kappa(s_pred), n_ref=..., v_ref=...,
+                             n_min=-track.width_right(s_pred), n_max=track.width_left(s_pred))
+        res = mpc.solve(np.array([0, n, e, v, delta]), stage, opponents_rel, gamma)
+        plant.step(..., res.u)
+    """
+
+    def __init__(self, config: MPCConfig = MPCConfig(), vehicle: VehicleParams = AV21):
+        self.config = config
+        self.vehicle = vehicle
+        self._n = config.horizon
+        self._t = config.time_grid()
+        self._dts = np.diff(self._t)
+        self._lin = StageLinearisation(config, vehicle, self._dts)
+        self.codegen_info: CodegenInfo = self._lin.codegen_info
+        """How the linearisation is evaluated (compiled C or CasADi), and whether it was built now."""
+        self._qp: dict[tuple, QPStructure] = {}
+        self._box = variable_box(vehicle)  # hard bounds on (u_k, x_{k+1})
+        self._box_lo = self._box_hi = None  # the box on (du_k, dx_{k+1}) at the current iterate
+        self._trk_lo = self._trk_hi = None  # bounds on dn_{k+1} of the track rows (without slack)
+        self._act = np.zeros(0, dtype=np.intp)  # slots with QP rows in the current solve
+        self._shift = PlanShift(config, vehicle)
+        self._reference: IpoptReference | None = None  # built by the first solve_converged()
+        self.n_row_resolves = 0
+        """QPs re-solved because a left-out row or bound was violated (diagnostics)."""
+        self.n_failures = 0
+        """Number of failed solves since construction or the last reset()."""
+        self.reset()
+
+    # ---------------------------------------------------------------- warm start
+
+    def reset(self) -> None:
+        """Forget the warm start and zero the failure counter."""
+        self._xg: np.ndarray | None = None  # (N+1, 5) guess for the next solve, s re-anchored
+        self._ug: np.ndarray | None = None  # (N, 2)
+        self._plan_age = 0  # consecutive fallbacks since the last successful plan
+        self.n_failures = 0
+
+    def predicted_s(self, v0: float | None = None) -> np.ndarray:
+        """(N+1,) arc lengths of the warm start, relative to the ego at the next solve [m].
+
+        Evaluate the track (curvature, edges, references) at these points plus the
+        ego's absolute s. Without a plan (before the first solve, after reset() or a
+        brake fallback) the guess is constant speed ``v0`` [m/s] (None: 0).
+        """
+        if self._xg is not None:
+            return self._xg[:, 0].copy()
+        return max(float(v0 or 0.0), 0.0) * self._t
+
+    def _guess(self, x0: np.ndarray, opponents: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Linearisation point of the first iteration: the shifted plan, or a cold guess."""
+        if self._xg is None:
+            xbar, ubar = cold_guess(x0, self._t, self.vehicle, self.config.barrier, opponents)
+        else:
+            xbar, ubar = self._xg.copy(), self._ug.copy()
+        xbar[0] = x0
+        return xbar, ubar
+
+    def _clip_input(self, u: np.ndarray) -> np.ndarray:
+        """(a, delta_dot) clipped to the hard input bounds."""
+        return np.clip(u, self._box[0][:2], self._box[1][:2])
+
+    # ---------------------------------------------------------------- solve
+
+    def solve(self, x0, stage: MPCStageData, opponents, gamma: float) -> MPCResult:
+        """One real-time iteration (see the module docstring). Never raises for numerical trouble.
+
+        ``x0 = (0, n, e, v, delta)`` (s is taken as 0); ``opponents`` (M, 3) rows
+        ``(s_rel, n, v)`` at time 0, any M >= 0; ``gamma`` in [0, 1].
+        """
+        t_start = time.perf_counter()
+        cfg = self.config
+        x0, arrays, opp, gamma = validate_arguments(x0, stage, opponents, gamma, self._n)
+        p = self.vehicle
+        dt0 = float(self._dts[0])
+        if abs(x0[4]) > p.steer_max + dt0 * p.steer_rate_max or x0[3] < -dt0 * p.a_max:
+            # the hard bounds on delta_1 (or v_1 >= 0) cannot be met: the QP would be infeasible
+            bmin = float(barrier(x0[None, :], opp, cfg.barrier).min()) if len(opp) else math.inf
+            return self._fallback(x0, "state outside the reach of the hard bounds", t_start, 0, 0, bmin, 0)
+        cold = self._xg is None
+        xbar, ubar = self._guess(x0, opp)
+        lin = self._lin
+        sel = select_opponents(opp, xbar, self._t, cfg)
+        n_cand = len(sel)
+        lin.set_opponents(sel, self._t)
+        kappa = arrays[0]
+        lin.evaluate(xbar, ubar, kappa)
+        # stage 0 is x0 against the opponents at t = 0
+        barrier_min = float(lin.h[0, :n_cand].min()) if n_cand else math.inf
+        act = relevant_slots(lin.h[:, :n_cand], gamma, cfg)
+        m = len(act)
+        self._act = act
+        if cold:  # new situation: set the QP solvers up afresh (their scaling is reused until then)
+            for qs in self._qp.values():
+                qs.solver = None
+
+        n_iter = cfg.cold_start_iterations if cold else 1
+        qp_iters = 0
+        sqp_iters = 0
+        qp_time = 0.0
+        z = None
+        message = ""
+        while True:
+            if sqp_iters > 0:
+                lin.evaluate(xbar, ubar, kappa)
+            self._track_bounds(xbar, arrays)
+            lat, trk, all_boxes = self._rows_needed(xbar, arrays)
+            box_dist = None if all_boxes else _BOX_DROP_DISTANCE
+            while True:
+                qs = self._structure(m, lat, trk)
+                data = self._assemble(qs, xbar, ubar, arrays, gamma, box_dist)
+                t_qp = time.perf_counter()
+                z, it, message = self._qp_solve(qs, data)
+                qp_time += time.perf_counter() - t_qp
+                qp_iters += it
+                if z is None:
+                    break
+                zz = z.reshape(self._n, qs.nb)
+                add_lat, add_trk, add_box = self._rows_violated(qs, box_dist, zz)
+                if not (add_lat or add_trk or add_box is not None):
+                    break
+                # solve again with the violated kind of constraint (for the box: its violated columns)
+                lat, trk = lat or add_lat, trk or add_trk
+                if add_box is not None:
+                    box_dist = np.where(add_box, np.inf, box_dist)
+                self.n_row_resolves += 1
+            sqp_iters += 1
+            if z is None:
+                break
+            xbar[1:] += zz[:, 2:7]
+            ubar += zz[:, 0:2]
+            if sqp_iters < n_iter:
+                continue
+            if (sqp_iters == n_iter and m and cfg.extra_iteration_when_active
+                    and dcbf_margin(qs, z, data[3]).min() < cfg.barrier_active_tol):
+                continue
+            break
+
+        if len(opp) > n_cand:  # opponents outside the window: evaluate h numerically
+            barrier_min = min(barrier_min, float(barrier(x0[None, :], opp, cfg.barrier).min()))
+        if z is None or not (np.isfinite(xbar).all() and np.isfinite(ubar).all()):
+            return self._fallback(x0, message or "non-finite iterate", t_start, qp_iters, sqp_iters,
+                                  barrier_min, m)
+
+        zz = z.reshape(self._n, qs.nb)
+        slack = {
+            "lat_acc": float(max(zz[:, qs.col_lat].max() * qs.slack_scale[0], 0.0)) if qs.lat else 0.0,
+            "track": float(max(zz[:, qs.col_trk].max() * qs.slack_scale[int(qs.lat)], 0.0)) if qs.trk else 0.0,
+            "barrier": 0.0,
+        }
+        first = 0.0
+        if m:  # slacks in their physical units
+            sig = zz[:, qs.col_cbf:] * qs.slack_scale[-1]
+            slack["barrier"] = float(max(sig.max(), 0.0))
+            first = float(max(sig[0].max(), 0.0))
+        x_pred, u_pred = xbar.copy(), ubar.copy()
+        self._xg, self._ug = self._shift(xbar, ubar)
+        self._plan_age = 0
+        return MPCResult(u=self._clip_input(ubar[0]), x_pred=x_pred, u_pred=u_pred, status=STATUS_SOLVED,
+                         success=True, slack=slack, barrier_min=barrier_min,
+                         solve_time=time.perf_counter() - t_start, qp_iterations=qp_iters,
+                         sqp_iterations=sqp_iters, barrier_slack_first=first, n_opponents=m, qp_time=qp_time)
+
+    def _fallback(self, x0, message, t_start, qp_iters, sqp_iters, barrier_min, m) -> MPCResult:
+        cfg = self.config
+        p = self.vehicle
+        self.n_failures += 1
+        self._plan_age += 1
+        if self._xg is not None and self._plan_age * max(cfg.control_dt, cfg.ts) < self._t[-1]:
+            status = STATUS_FALLBACK_SHIFT
+            x_pred, u_pred = self._xg.copy(), self._ug.copy()
+            u = self._clip_input(u_pred[0])
+            self._xg, self._ug = self._shift(x_pred, u_pred)
+        else:
+            status = STATUS_FALLBACK_BRAKE
+            period = cfg.control_dt if cfg.control_dt > 0.0 else cfg.ts
+            u = self._clip_input(np.array([0.5 * p.a_min, -x0[4] / period]))
+            x_pred, u_pred = cold_guess(x0, self._t, p, cfg.barrier)
+            u_pred[:] = u
+            self._xg, self._ug = None, None
+        logger.debug("MPC solve failed (%s); %s, failure #%d", message, status, self.n_failures)
+        return MPCResult(u=u, x_pred=x_pred, u_pred=u_pred, status=status, success=False,
+                         slack={"lat_acc": 0.0, "track": 0.0, "barrier": 0.0}, barrier_min=barrier_min,
+                         solve_time=time.perf_counter() - t_start, qp_iterations=qp_iters,
+                         sqp_iterations=sqp_iters, barrier_slack_first=0.0, n_opponents=m)
+
+    # ---------------------------------------------------------------- QP
+
+    def _structure(self, m: int, lat: bool = True, trk: bool = True) -> QPStructure:
+        key = (m, lat, trk)
+        qs = self._qp.get(key)
+        if qs is None:
+            lin = self._lin
+            qs = QPStructure(self.config, m, lat, trk, lin.a_sparsity, lin.b_sparsity, lin.layout)
+            self._qp[key] = qs
+        return qs
+
+    def _rows_needed(self, xbar: np.ndarray, arrays: np.ndarray) -> list[bool]:
+        """Which of [lateral-acceleration rows, track rows, all box bounds] the QP at this
+        linearisation starts with (module docstring, "QP size").
+
+        The rows are left out when the linearisation point keeps away from them at every
+        stage (by ``_LAT_ROWS_MARGIN``, ``_TRK_ROWS_MARGIN``), each box bound when the
+        linearisation point is farther from it than ``_BOX_DROP_DISTANCE``; what was left
+        out is checked by :meth:`_rows_violated` (for the box: per column).
+        """
+        if self.config.qp_solver != "piqp":
+            # OSQP's solutions (eps 1e-4) miss the 1e-6 check often: re-solves cost more than they save
+            return [True, True, True]
+        lat = np.abs(self._lin.alat[1:]).max() > self.vehicle.lat_acc_max - _LAT_ROWS_MARGIN
+        trk = self._trk_hi.min() < _TRK_ROWS_MARGIN or self._trk_lo.max() > -_TRK_ROWS_MARGIN
+        return [bool(lat), bool(trk), False]
+
+    def _track_bounds(self, xbar: np.ndarray, arrays: np.ndarray) -> None:
+        """Bounds on dn_{k+1} of the track rows without slack, at this linearisation."""
+        lo, hi = track_limits(self.config, arrays)
+        self._trk_lo = lo - xbar[1:, 1]
+        self._trk_hi = hi - xbar[1:, 1]
+
+    def _rows_violated(self, qs: QPStructure, box_dist: np.ndarray | None,
+                       zz: np.ndarray) -> tuple[bool, bool, np.ndarray | None]:
+        """Left-out constraints that the QP solution ``zz`` violates: (lateral-acceleration rows,
+        track rows, None or the columns of the box (as in ``_BOX_DROP_DISTANCE``) with a violated bound)."""
+        lat = trk = False
+        box = None
+        if not qs.lat:
+            lin = self._lin
+            alat = np.abs((lin.dalat[1:] * zz[:, 5:7]).sum(axis=1) + lin.alat[1:])
+            lat = alat.max() > self.vehicle.lat_acc_max + _ROWS_CHECK_TOL
+        if not qs.trk:  # the track rows' bounds on dn were written by _track_bounds
+            trk = max((zz[:, 3] - self._trk_hi).max(), (self._trk_lo - zz[:, 3]).max()) > _ROWS_CHECK_TOL
+        if box_dist is not None:
+            dz = zz[:, :N_FIXED]
+            worst = np.maximum((self._box_lo - dz).max(axis=0), (dz - self._box_hi).max(axis=0))
+            if worst.max() > _ROWS_CHECK_TOL:
+                box = worst > _ROWS_CHECK_TOL
+        return bool(lat), bool(trk), box
+
+    def _assemble(self, qs: QPStructure, xbar, ubar, arrays, gamma, box_dist: np.ndarray | None = None):
+        """QP vectors (c, b, h_l, h_u, x_l, x_u) in the buffers of ``qs``; A and G are written in place.
+        ``box_dist``: None (every box bound), or per column of (du_k, dx_{k+1}) the distance from
+        the linearisation point beyond which a bound is left out (see :meth:`_rows_needed`)."""
+        p = self.vehicle
+        lin = self._lin
+        x7 = np.hstack([ubar, xbar[1:]])  # linearisation point of the blocks (du_k, dx_{k+1})
+        # cost: c = 2 R ubar, 2 Q (xbar - xref); the slack L1 weights are constant
+        qs.c_buf[:, :N_FIXED] = qs.w7 * (x7 - stage_reference(arrays))
+        qs.fill_matrices(lin.flat, self._act, gamma)
+        qs.b_buf[:] = lin.f[:-1] - xbar[1:]
+        if qs.lat:
+            alat = lin.alat[1:]
+            qs.hu_buf[:, qs.row_lat] = p.lat_acc_max - alat
+            qs.hl_buf[:, qs.row_lat + 1] = -p.lat_acc_max - alat
+        if qs.trk:  # bounds computed by _track_bounds at this linearisation
+            qs.hu_buf[:, qs.row_trk] = self._trk_hi
+            qs.hl_buf[:, qs.row_trk + 1] = self._trk_lo
+        if qs.m:
+            h = lin.h[:, self._act]
+            qs.hu_buf[:, qs.row_cbf:] = h[1:] - (1.0 - gamma) * h[:-1]
+        # variable bounds (du_k, dx_{k+1}): the full box, then without the bounds left out
+        self._box_lo = lo = self._box[0] - x7
+        self._box_hi = hi = self._box[1] - x7
+        if box_dist is not None:
+            lo = np.where(lo < -box_dist, -np.inf, lo)
+            hi = np.where(hi > box_dist, np.inf, hi)
+        qs.xl_buf[:, :N_FIXED] = lo
+        qs.xu_buf[:, :N_FIXED] = hi
+        return qs.data()
+
+    def _qp_solve(self, qs: QPStructure, data) -> tuple[np.ndarray | None, int, str]:
+        """(z or None, iterations, message); the matrices are already in qs.A / qs.G."""
+        c, b, hl, hu, xl, xu = data
+        # every linearisation output enters one of these (a NaN or inf anywhere shows up)
+        checked = [b, c, qs.A.data, qs.G.data, self._lin.alat] + ([self._lin.h[:, self._act]] if qs.m else [])
+        if not all(np.isfinite(a).all() for a in checked):
+            return None, 0, "non-finite QP data"
+        if (xl > xu).any():
+            return None, 0, "inconsistent hard bounds"
+        return solve_qp(qs, data, self.config)
+
+    # ---------------------------------------------------------------- IPOPT reference
+
+    def solve_converged(self, x0, stage: MPCStageData, opponents, gamma: float) -> MPCResult:
+        """The same NLP solved to convergence with IPOPT (validation reference, ~10-100 ms).
+
+        Same arguments, result and failure handling as :meth:`solve`; the solution also
+        becomes the warm start of the next call.
+        """
+        t_start = time.perf_counter()
+        cfg = self.config
+        x0, arrays, opp, gamma = validate_arguments(x0, stage, opponents, gamma, self._n)
+        xbar, ubar = self._guess(x0, None)
+        sel = select_opponents(opp, xbar, self._t, cfg)
+        m = len(sel)
+        if self._reference is None:
+            self._reference = IpoptReference(cfg, self.vehicle, self._lin.stage)
+        barrier_min = float(barrier(x0[None, :], opp, cfg.barrier).min()) if len(opp) else math.inf
+        sol = self._reference.solve(x0, arrays, sel, gamma, xbar, ubar)
+        if not sol.success:
+            return self._fallback(x0, f"ipopt: {sol.message}", t_start, sol.iterations, 1, barrier_min, m)
+        first = float(max(sol.slack_barrier[0].max(), 0.0)) if m else 0.0
+        slack = {"lat_acc": float(max(sol.slack_lat_acc.max(), 0.0)), "track": float(max(sol.slack_track.max(), 0.0)),
+                 "barrier": float(max(sol.slack_barrier.max(), 0.0)) if m else 0.0}
+        self._xg, self._ug = self._shift(sol.x, sol.u)
+        self._plan_age = 0
+        return MPCResult(u=self._clip_input(sol.u[0]), x_pred=sol.x, u_pred=sol.u, status=STATUS_SOLVED,
+                         success=True, slack=slack, barrier_min=barrier_min,
+                         solve_time=time.perf_counter() - t_start, qp_iterations=sol.iterations,
+                         sqp_iterations=1, barrier_slack_first=first, n_opponents=m)

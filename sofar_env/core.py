@@ -1,0 +1,300 @@
+"""The controlled race: one simulation core under the Gymnasium and the PettingZoo adapters.
+
+:class:`ControlledRace` owns everything a step of either environment does:
+
+* the world (:class:`~sofar_env.race.Race`: plant, scripted opponents, events),
+* one :class:`~sofar_env.stack.OvertakingStack` per controlled car,
+* the per-decision tally of each car (:class:`DecisionTally`: the reward vector summed over
+  the control steps of one decision, the events, the solver counters),
+* the observation, reward vector and info of each car.
+
+The adapters (:mod:`sofar_env.env`, :mod:`sofar_env.multi_agent`) only translate between
+this core and their API: spaces, seeding, action parsing, the Gymnasium / PettingZoo
+return conventions and rendering. Neither steps a stack or a race itself.
+
+One decision of the live cars (:meth:`ControlledRace.step`), repeated ``decision_interval``
+times with gamma held:
+
+1. each running car's stack computes its control from its own Frenet state and the rows
+   ``(s, n, v)`` of everything it must avoid (:meth:`Race.opponent_frenet`);
+2. the race integrates all controls over ``dt`` and reports each car's events (collision,
+   leaving the track, overtakes, progress);
+3. each car's tally adds the step's reward vector; a car that collided or left the track
+   stops running (in a multi-car race it also leaves the race: :meth:`Race.deactivate`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from .config import EnvConfig, apply_overrides
+from .constants import GAMMA_MAX, GAMMA_MIN
+from .control.barrier import barrier_expr
+from .observation import observe
+from .rewards import reward_vector, safety_cost, scalarize
+
+__all__ = ["ControlledRace", "CarStep", "DecisionTally", "min_barrier", "parse_gamma"]
+
+
+def parse_gamma(action: Any) -> float:
+    """The scalar gamma of an action, validated once at the API boundary.
+
+    Raises ``ValueError`` unless ``action`` is exactly one finite real number; a finite
+    value outside ``[GAMMA_MIN, GAMMA_MAX]`` is clipped into it. Below this point gamma is
+    only asserted.
+    """
+    arr = np.asarray(action)
+    if arr.dtype.kind not in "iuf":  # strings, None, booleans, objects: not a number, whatever they spell
+        raise ValueError(f"the action must be one real number (gamma) in [{GAMMA_MIN}, {GAMMA_MAX}], got "
+                         f"{action!r} of type {type(action).__name__}")
+    a = arr.astype(float).reshape(-1)
+    if a.size != 1:
+        raise ValueError(f"the action must hold exactly one value (gamma), got shape {np.shape(action)}")
+    g = float(a[0])
+    if not math.isfinite(g):
+        raise ValueError(f"non-finite action {g!r}: gamma must be a finite number in [{GAMMA_MIN}, {GAMMA_MAX}]")
+    return min(max(g, GAMMA_MIN), GAMMA_MAX)
+
+
+_MATH_OPS = SimpleNamespace(abs=abs, exp=math.exp, log1p=math.log1p, tanh=math.tanh)
+
+
+def min_barrier(track, ego_frenet: np.ndarray, opponents: np.ndarray, params) -> float:
+    """Smallest barrier value h of the ego against the opponent rows (s, n, v) now; inf without opponents.
+
+    The barrier of :mod:`sofar_env.control.barrier` evaluated on Python floats (the field is
+    small), with s taken relative to the ego.
+    """
+    s, n, v = float(ego_frenet[0]), float(ego_frenet[1]), float(ego_frenet[3])
+    h = math.inf
+    for s_o, n_o, v_o in opponents.tolist():
+        h = min(h, barrier_expr(0.0, n, v, track.gap(s_o, s), n_o, v_o, params, _MATH_OPS))
+    return h
+
+
+class DecisionTally:
+    """Sums the per-control-step terms of one car over one decision (``decision_interval`` steps)."""
+
+    def __init__(self, n_objectives: int = 5) -> None:
+        self.vector = np.zeros(n_objectives)
+        self.cost = 0.0
+        self.barrier_slack = 0.0
+        self.mpc_time = 0.0
+        self.miqp_time = 0.0
+        self.collision = False
+        self.off_track = False
+        self.min_h = math.inf
+        self.nearest = math.inf
+        self.gamma = math.nan
+        self.last = None
+
+    def add(self, race, car: int, out, events, opponents_after: np.ndarray, profile_speed: float,
+            previous_gamma: float, barrier_params) -> None:
+        """Record one control step of car ``car``: ``out`` its stack output, ``events`` its CarEvents,
+        ``opponents_after`` its opponent rows after the step, ``profile_speed`` the speed profile at its
+        arc length before the step [m/s]."""
+        slack = float(out.mpc.slack.get("barrier", 0.0))
+        self.min_h = min_barrier(race.track, race.frenet[car], opponents_after, barrier_params)
+        self.nearest = race.nearest_distance(car)  # now: a crashed car may be removed from the race next
+        self.vector += reward_vector(
+            collision=events.collision, off_track=events.off_track, overtakes=events.overtakes,
+            progress=events.progress, profile_speed=profile_speed, dt=race.config.dt, barrier_slack=slack,
+            min_h=self.min_h, gamma=out.gamma, previous_gamma=previous_gamma,
+        )
+        self.cost += safety_cost(events.collision, events.off_track, slack)
+        self.barrier_slack = max(self.barrier_slack, slack)
+        self.mpc_time += out.mpc_time
+        self.miqp_time += out.miqp_time
+        self.collision |= events.collision
+        self.off_track |= events.off_track
+        self.gamma = out.gamma
+        self.last = out
+
+    @property
+    def terminated(self) -> bool:
+        return self.collision or self.off_track
+
+    def info(self, race, stack, car: int = 0, timings: bool = False) -> dict:
+        """The per-step info dictionary (see the environment docstring); ``timings`` adds the solve times."""
+        out = self.last
+        plan = out.plan if out is not None else None
+        info = {
+            "reward_vector": self.vector.astype(np.float32),
+            "cost": self.cost,
+            "overtakes": int(race.overtakes[car]),
+            "laps": race.laps(car),
+            "sim_time": race.time,
+            "gamma": self.gamma,
+            "collision": self.collision,
+            "off_track": self.off_track,
+            "nearest_opponent_m": self.nearest,
+            "min_barrier": self.min_h,
+            "barrier_slack": self.barrier_slack,
+            "mpc_status": out.mpc.status if out is not None else "",
+            "miqp_sides": tuple(np.asarray(plan.sides, dtype=int).tolist()) if plan is not None else (),
+            "mpc_failures": stack.counters["mpc_failures"],
+            "miqp_failures": stack.counters["miqp_failures"],
+        }
+        if timings:
+            info["mpc_time_ms"] = 1e3 * self.mpc_time
+            info["miqp_time_ms"] = 1e3 * self.miqp_time
+        return info
+
+
+@dataclass
+class CarStep:
+    """What one controlled car gets from one decision (or from a reset)."""
+
+    observation: np.ndarray
+    """Its observation after the decision (float32)."""
+    reward: Any
+    """Its reward: the float ``weights . vector`` (``reward_mode="scalar"``) or the float32 vector."""
+    terminated: bool
+    """It collided or left the track."""
+    truncated: bool
+    """The race reached its duration (and the car was not terminated)."""
+    info: dict
+    """Its info dictionary (``is_success`` added at the end of its episode)."""
+
+
+class ControlledRace:
+    """The race world plus one overtaking stack per controlled car (see the module docstring).
+
+    ``n_cars`` controlled cars (car 0 first); ``speed_factors`` gives each car's speed
+    factor (cycled; default: the stack config's). With ``remove_crashed`` a car that is
+    terminated leaves the race (multi-car races); otherwise it stays where it is (the
+    single-car environment ends its episode there anyway). The world and the controllers
+    are built on the first :meth:`reset`.
+    """
+
+    def __init__(self, config: EnvConfig, n_cars: int = 1, speed_factors=None, remove_crashed: bool = False):
+        self.config = config
+        self.n_cars = int(n_cars)
+        if speed_factors is None:
+            self.speed_factors = None
+        else:
+            self.speed_factors = tuple(float(speed_factors[i % len(speed_factors)]) for i in range(self.n_cars))
+        self.remove_crashed = bool(remove_crashed)
+        self._weights = config.reward_weights.as_array()
+        self.track = None
+        self.race = None
+        self.stacks: list = []
+        self.live: list[int] = []
+        self.previous_gamma = np.full(self.n_cars, config.initial_gamma)
+        self.outputs: list = [None] * self.n_cars
+        """Each car's controller output of its last control step (MPC prediction, MIQP plan), for rendering."""
+        self._opponents: list[np.ndarray] = [np.zeros((0, 3))] * self.n_cars
+
+    # ------------------------------------------------------------------ building
+    def build(self) -> None:
+        """Load the circuit, build the world and the controllers (done by the first :meth:`reset`)."""
+        from .race import Race
+        from .stack import OvertakingStack
+        from .tracks import Track
+
+        cfg = self.config
+        self.track = Track.load(cfg.track)
+        self.race = Race(self.track, cfg.race, n_cars=self.n_cars)
+        if self.speed_factors is None:
+            configs = [cfg.stack] * self.n_cars
+        else:
+            configs = [apply_overrides(cfg.stack, {"speed_factor": sf}) for sf in self.speed_factors]
+        self.stacks = [OvertakingStack(self.track, c, vehicle=cfg.race.vehicle) for c in configs]
+
+    @property
+    def built(self) -> bool:
+        return self.race is not None
+
+    # ------------------------------------------------------------------ episode
+    def check_reset(self, **race_options: Any) -> None:
+        """Raise ``ValueError`` if :meth:`reset` with these options would fail; changes nothing (but builds)."""
+        if self.race is None:
+            self.build()
+        self.race.check_reset(**race_options)
+
+    def reset(self, rng: np.random.Generator, **race_options: Any) -> dict[int, CarStep]:
+        """Start an episode (``race_options`` go to :meth:`Race.reset`); each car's observation and info."""
+        self.check_reset(**race_options)
+        self.race.reset(rng, **race_options)
+        for stack in self.stacks:
+            stack.reset()
+        self.live = list(range(self.n_cars))
+        self.previous_gamma[:] = self.config.initial_gamma
+        self.outputs = [None] * self.n_cars
+        bp = self.config.stack.mpc.barrier
+        out = {}
+        for i in self.live:
+            opp = self._opponents[i] = self.race.opponent_frenet(i)
+            tally = DecisionTally()
+            tally.min_h = min_barrier(self.track, self.race.frenet[i], opp, bp)
+            tally.gamma = self.previous_gamma[i]
+            tally.nearest = self.race.nearest_distance(i)
+            out[i] = CarStep(observe(self.race, i, opp), None, False, False, self._info(tally, i))
+        return out
+
+    def step(self, gammas: dict[int, float]) -> dict[int, CarStep]:
+        """One decision of every live car: ``gammas`` maps each live car to its (validated) gamma."""
+        race, track = self.race, self.track
+        bp = self.config.stack.mpc.barrier
+        live = list(self.live)
+        tallies = {i: DecisionTally() for i in live}
+        running = list(live)
+        controls = np.zeros((self.n_cars, 2))
+        for _ in range(self.config.decision_interval):
+            controls[:] = 0.0
+            outs = {}
+            for i in running:
+                gamma = gammas[i]
+                assert GAMMA_MIN <= gamma <= GAMMA_MAX, "gamma is validated by parse_gamma at the API boundary"
+                outs[i] = self.stacks[i].step(race.frenet[i], self._opponents[i], gamma)
+                controls[i] = outs[i].u
+            profile = {i: track.speed(float(race.frenet[i, 0])) for i in running}
+            events = race.step(controls)
+            for i in range(self.n_cars):
+                self._opponents[i] = race.opponent_frenet(i)
+            for i in running:
+                tallies[i].add(race, i, outs[i], events[i], self._opponents[i], profile[i],
+                               self.previous_gamma[i], bp)
+                self.previous_gamma[i] = gammas[i]
+                self.outputs[i] = outs[i]
+            crashed = [i for i in running if tallies[i].terminated]
+            for i in crashed:
+                running.remove(i)
+                if self.remove_crashed:
+                    race.deactivate(i)
+            if crashed and self.remove_crashed:  # the others no longer see the crashed cars
+                for i in range(self.n_cars):
+                    self._opponents[i] = race.opponent_frenet(i)
+            if not running or race.truncated:
+                break
+        truncate_all = race.truncated
+        out = {}
+        for i in live:
+            tally = tallies[i]
+            terminated = tally.terminated
+            truncated = truncate_all and not terminated
+            info = self._info(tally, i)
+            if terminated or truncated:
+                info["is_success"] = not terminated
+            out[i] = CarStep(observe(race, i, self._opponents[i]), self._reward(tally.vector), terminated,
+                             truncated, info)
+        self.live = [i for i in live if not (out[i].terminated or out[i].truncated)]
+        return out
+
+    # ------------------------------------------------------------------ per car
+    def _reward(self, vector: np.ndarray):
+        if self.config.reward_mode == "vector":
+            return vector.astype(np.float32)
+        return scalarize(vector, self._weights)
+
+    def _info(self, tally: DecisionTally, car: int) -> dict:
+        return tally.info(self.race, self.stacks[car], car, timings=self.config.timing_info)
+
+    def render_frame(self, renderer, car: int):
+        """Draw car ``car``'s view with ``renderer`` (:class:`~sofar_env.render.Renderer`)."""
+        return renderer.draw(self.race, self.outputs[car], gamma=float(self.previous_gamma[car]), car=car)

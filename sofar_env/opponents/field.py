@@ -1,0 +1,274 @@
+"""The opponent field on one track: motion, overtakes and respawn, poses.
+
+With every behaviour off (the default, the paper's field) each opponent drives
+along the raceline at a constant lateral offset ``n`` [m] with arc-length speed
+``ds/dt = rho * v_profile(s)`` [m/s] (midpoint rule), ignoring the ego and each
+other; no random number is drawn.
+
+With a behaviour on (:class:`~sofar_env.opponents.config.OpponentConfig`) every
+step moves each car
+
+* along the track at ``pace_i * lift_i(t) * v_profile(s)``
+  (:mod:`~sofar_env.opponents.pace`), within the traffic rules among opponents
+  (:mod:`~sofar_env.opponents.traffic`: following, passing where two cars fit,
+  yielding);
+* across the track toward its target offset, the ego's offset of its one
+  defensive move (:mod:`~sofar_env.opponents.defence`) or else its own line
+  (:mod:`~sofar_env.opponents.lines`), with bounded lateral speed and
+  acceleration, inside the edges, clear of the other opponents and, while the ego
+  is (about to be) alongside, of the ego (:mod:`~sofar_env.opponents.steering`).
+
+All random numbers come from two generators seeded from the ``rng`` given to
+:meth:`Opponents.reset` (one for the per-episode parameters, one for the lift
+times), in a fixed order, so a seed gives the same field whichever behaviours are on.
+
+Overtakes. For every opponent the signed gap to the ego, ``s_opp - s_ego`` [m],
+is tracked *unwrapped* (increments of the periodic gap are accumulated), so a
+car that falls half a lap behind is never mistaken for one just passed. An
+opponent that has been ahead (gap > 0) and then falls ``overtake_threshold``
+behind is counted once and respawned ``respawn_distance`` ahead of the ego (the
+spot is moved further ahead while it would overlap another opponent on the
+same side; any other opponent when a behaviour is on), with a new identity
+(``ids``) and fresh per-approach state.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..vehicle import AV21, VehicleParams
+from .config import OpponentConfig
+from .defence import Defence
+from .lateral import EdgeBand
+from .lines import Lines
+from .pace import LiftSchedule, draw_paces
+from .steering import MAX_HEADING_TAN, steer
+from .traffic import limit_advances
+
+__all__ = ["Opponents"]
+
+class _Episode:
+    """Per-episode draws and per-car behaviour state of an interactive field."""
+
+    def __init__(self, cfg: OpponentConfig, offsets: np.ndarray, rho: float, length: float, car_length: float,
+                 rng: np.random.Generator):
+        m = offsets.shape[0]
+        params, lifts = (np.random.default_rng(int(seed)) for seed in rng.integers(0, 2 ** 63, size=2))
+        self.pace = draw_paces(rho, m, cfg.pace, params)
+        self.lines = Lines(offsets, length, cfg.lines, params)
+        self.defence = Defence(m, cfg.defence, params, car_length)
+        self.lifts = LiftSchedule(m, cfg.pace, lifts)
+
+
+class Opponents:
+    """State of the opponent field on one track (arrays of length ``count``)."""
+
+    def __init__(self, track, config: OpponentConfig, vehicle: VehicleParams = AV21):
+        self.track = track
+        self.config = config
+        self.vehicle = vehicle
+        if config.interactive and not config.traffic.follow_gap > vehicle.length:
+            raise ValueError(f"traffic.follow_gap must exceed the car length {vehicle.length} m")
+        self.s = np.zeros(0)
+        """Arc length [m] in [0, L)."""
+        self.n = np.zeros(0)
+        """Lateral offset [m]."""
+        self.v = np.zeros(0)
+        """Arc-length speed ds/dt [m/s]."""
+        self.n_dot = np.zeros(0)
+        """Lateral rate dn/dt [m/s] (0 with the behaviours off)."""
+        self.rel = np.zeros(0)
+        """Unwrapped gap to the ego, s_opp - s_ego [m] (> 0 ahead)."""
+        self.was_ahead = np.zeros(0, bool)
+        self.ids = np.zeros(0, int)
+        """Identity of each car: a respawned car gets a new one."""
+        self.rho = 0.0
+        self.time = 0.0
+        """Time since the reset [s]."""
+        self.clamps = 0
+        """Lateral positions stopped at a hard bound since the reset (a diagnostic; rare)."""
+        self._next_id = 0
+        self._episode: _Episode | None = None
+        self._band: EdgeBand | None = None
+        self._pose_cache: tuple | None = None
+
+    @property
+    def count(self) -> int:
+        return int(self.s.shape[0])
+
+    @property
+    def episode(self) -> _Episode | None:
+        """Per-episode draws (paces, lines, defence state, lifts); None with the behaviours off."""
+        return self._episode
+
+    def reset(self, ego_s: float, rho: float | None = None, n_opponents: int | None = None,
+              rng: np.random.Generator | None = None) -> None:
+        """Place the opponents at their configured gaps ahead of the ego.
+
+        ``rng`` is used only when a behaviour is on (and then required).
+        """
+        cfg = self.config
+        m = cfg.n_opponents if n_opponents is None else int(n_opponents)
+        if m < 0:
+            raise ValueError("n_opponents must be >= 0")
+        self.rho = cfg.rho if rho is None else float(rho)
+        if not (0.0 <= self.rho <= 2.0):
+            raise ValueError(f"rho must lie in [0, 2], got {self.rho}")
+        gaps = np.array([cfg.gap(i) for i in range(m)])
+        self.n = np.array([cfg.offset(i) for i in range(m)])
+        self.s = self.track.wrap(ego_s + gaps) if m else np.zeros(0)
+        self.rel = gaps.astype(float)
+        self.was_ahead = self.rel > 0.0
+        self.n_dot = np.zeros(m)
+        self.ids = np.arange(m)
+        self._next_id = m
+        self.time = 0.0
+        self.clamps = 0
+        self._episode = None
+        if not (cfg.interactive and m):
+            self.v = self._speed(self.s)
+            return
+        if rng is None:
+            raise ValueError("an rng is required when an opponent behaviour is on")
+        ep = self._episode = _Episode(cfg, self.n, self.rho, self.track.length, self.vehicle.length, rng)
+        if self._band is None:
+            p = self.vehicle
+            self._band = EdgeBand(self.track, 0.5 * p.width + cfg.lines.edge_margin, 0.5 * p.width,
+                                  max(p.cg_to_front, p.cg_to_rear))
+        self.v = ep.pace * np.asarray(self.track.speed(self.s), float)
+        for i in range(m):
+            self.n[i] = self._line_start(i)
+
+    def _speed(self, s: np.ndarray) -> np.ndarray:
+        if s.size == 0:
+            return np.zeros(0)
+        return self.rho * np.asarray(self.track.speed(s), float)
+
+    def _line_start(self, i: int) -> float:
+        """Offset of car ``i`` at (re)spawn: its line, inside the soft band ahead."""
+        s = float(self.s[i])
+        n, _ = self._episode.lines.at(i, s)
+        v = float(self.v[i])
+        lines = self.config.lines
+        lo, hi = self._band.envelope(s, v, 0.5 * min(lines.lateral_speed, MAX_HEADING_TAN * v), 0.5 * lines.lateral_accel)
+        return min(max(n, lo), hi)
+
+    # ------------------------------------------------------------------ motion
+    def advance(self, dt: float, ego: tuple[float, float, float] | None = None) -> None:
+        """Move every opponent ``dt`` [s].
+
+        ``ego`` is ``(s, n, v)`` of the ego at the start of the step (arc length [m], lateral
+        offset [m], arc-length speed [m/s]); it is used only when a behaviour is on.
+        """
+        if self.count == 0:
+            self.time += dt
+            return
+        if self._episode is not None:
+            self._advance_interactive(dt, ego)
+            self.time += dt
+            return
+        track, rho = self.track, self.rho
+        # a scalar loop: for a handful of cars the track's scalar paths beat its array paths
+        s_new = []
+        for s in self.s.tolist():
+            v0 = rho * track.speed(s)
+            s_new.append(track.wrap(s + dt * rho * track.speed(s + 0.5 * dt * v0)))
+        self.s = np.array(s_new)
+        self.v = np.array([rho * track.speed(s) for s in s_new])
+        self.time += dt
+
+    def _advance_interactive(self, dt: float, ego) -> None:
+        track, cfg, ep, t = self.track, self.config, self._episode, self.time
+        m = self.count
+        ep.lifts.advance(t + dt)
+        s, n, n_dot, v = self.s.tolist(), self.n.tolist(), self.n_dot.tolist(), self.v.tolist()
+        gap = np.asarray(track.gap(self.s[None, :], self.s[:, None]), float).reshape(m, m)  # [i, j] = s_j - s_i
+        band_width = self.vehicle.width + cfg.traffic.band_margin
+
+        # along the track: nominal pace, then the traffic rules (following, passing, yielding)
+        ds = []
+        for i in range(m):
+            v0 = ep.pace[i] * ep.lifts.factor(i, t) * track.speed(s[i])
+            v_mid = ep.pace[i] * ep.lifts.factor(i, t + 0.5 * dt) * track.speed(track.wrap(s[i] + 0.5 * dt * v0))
+            ds.append(dt * v_mid)
+        capped = limit_advances(ds, s, n, v, gap, dt, self._band, cfg.traffic, band_width,
+                                self.vehicle.length + cfg.defence.alongside_margin)
+        s_new = [track.wrap(s[i] + ds[i]) for i in range(m)]
+        v_new = []
+        for i in range(m):
+            vi = ep.pace[i] * ep.lifts.factor(i, t + dt) * track.speed(s_new[i])
+            v_new.append(min(vi, ds[i] / dt) if capped[i] else vi)
+
+        # across the track
+        n_new, n_dot_new, clamps = steer(dt, ego, (s, n, n_dot, v), gap, s_new, v_new, ep, self._band, cfg,
+                                         self.vehicle)
+        self.clamps += clamps
+        self.s, self.v = np.array(s_new), np.array(v_new)
+        self.n, self.n_dot = np.array(n_new), np.array(n_dot_new)
+
+    # ------------------------------------------------------------------ overtakes
+    def update_overtakes(self, ego_s: float) -> np.ndarray:
+        """Update the gaps after a step; count and respawn overtaken opponents.
+
+        Returns the indices of the opponents overtaken in this step.
+        """
+        if self.count == 0:
+            return np.zeros(0, int)
+        gap = np.asarray(self.track.gap(self.s, ego_s), float)
+        # unwrap: the change of the periodic gap is small between two steps
+        L = self.track.length
+        delta = (gap - self.rel + 0.5 * L) % L - 0.5 * L
+        self.rel = self.rel + delta
+        self.was_ahead |= self.rel > 0.0
+        passed = (self.was_ahead & (self.rel <= -self.config.overtake_threshold)).nonzero()[0]
+        for i in passed:
+            self._respawn(int(i), ego_s)
+        return passed
+
+    def _respawn(self, i: int, ego_s: float) -> None:
+        cfg, ep = self.config, self._episode
+        ahead = cfg.respawn_distance
+        others = [j for j in range(self.count) if j != i and (ep is not None or abs(self.n[j] - self.n[i]) < 2.0)]
+        for _ in range(50):
+            if all(abs(self.rel[j] - ahead) >= cfg.respawn_clearance for j in others):
+                break
+            ahead += cfg.respawn_clearance
+        self.s[i] = self.track.wrap(ego_s + ahead)
+        self.rel[i] = ahead
+        self.was_ahead[i] = True
+        self.ids[i] = self._next_id
+        self._next_id += 1
+        if ep is None:
+            self.v[i] = self._speed(np.array([self.s[i]]))[0]
+            return
+        self.v[i] = ep.pace[i] * ep.lifts.factor(i, self.time) * self.track.speed(float(self.s[i]))
+        self.n[i], self.n_dot[i] = self._line_start(i), 0.0
+        ep.defence.forget(i)
+
+    # ------------------------------------------------------------------ poses
+    def poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Cartesian position and yaw of every opponent: (x, y, psi).
+
+        The yaw is the raceline heading plus the heading of the lateral motion,
+        ``atan2(n_dot, (1 - kappa n) v)`` (exactly the raceline heading when ``n_dot`` is 0).
+        Cached for an unchanged state, since the world asks several times per step; the
+        returned arrays must not be modified.
+        """
+        key = self.s.tobytes() + self.n.tobytes() + self.n_dot.tobytes() + self.v.tobytes()
+        if self._pose_cache is not None and self._pose_cache[0] == key:
+            return self._pose_cache[1]
+        pose = self.track.pose
+        # a scalar loop: the field is small and the track's scalar paths are ~30x faster than its array paths
+        rows = [pose(s, n) for s, n in zip(self.s.tolist(), self.n.tolist())]
+        x, y, psi = (np.array(col, dtype=float) for col in zip(*rows)) if rows else (np.zeros(0) for _ in range(3))
+        moving = self.n_dot != 0.0
+        if moving.any():
+            kappa = np.asarray(self.track.curvature(self.s[moving]), float)
+            along = np.maximum((1.0 - kappa * self.n[moving]) * self.v[moving], 1e-3)
+            psi[moving] += np.arctan2(self.n_dot[moving], along)
+        for a in (x, y, psi):
+            a.setflags(write=False)
+        self._pose_cache = (key, (x, y, psi))
+        return x, y, psi

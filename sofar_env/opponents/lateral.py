@@ -1,0 +1,160 @@
+"""Lateral motion of an opponent: a rate- and acceleration-bounded tracker, edge bands, keep-clear bounds.
+
+Pure math on Python floats and small arrays; the opponent field
+(:mod:`sofar_env.opponents.field`) combines them every step:
+
+* :func:`track_target`: one step of a tracker of a target offset whose lateral speed
+  and acceleration never exceed the given bounds (a braking curve near the target,
+  a first-order approach in its last few decimetres);
+* :class:`EdgeBand`: where the reference point of a car may be across the track:
+  the *soft* band keeps the footprint ``inner`` inside both edges, and its
+  look-ahead envelope also leaves room to get back into the band where the track
+  narrows ahead at a fraction of the lateral speed bound; the *hard* band is the
+  last resort that keeps every corner on the track at the car's current heading;
+* :func:`keep_clear`: bounds that stop a car from closing sideways on another one.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.ndimage import minimum_filter1d
+
+__all__ = ["track_target", "keep_clear", "EdgeBand"]
+
+_APPROACH_TIME = 0.5
+"""Time constant of the first-order approach of the tracker in the last decimetres [s]."""
+
+_CORNER_WINDOW = 5.0
+"""The bands use the smallest width within this arc-length distance [m]: a footprint corner is at
+most half a car length (2.45 m) ahead or behind the reference point."""
+
+_HARD_SLACK = 0.05
+"""Distance the hard band keeps the footprint corners inside the edges [m]."""
+
+_LOOKAHEAD_TIME = 8.0
+"""The soft envelope looks this far ahead at the car's speed (at least 50 m) [s]."""
+
+_LOOKAHEAD_SAMPLES = 33
+"""Points of the look-ahead of the soft envelope."""
+
+_ROOM_SAMPLES = 400
+"""Most points of :meth:`EdgeBand.room` (2 km at the 5 m spacing)."""
+
+
+def track_target(n: float, n_dot: float, target: float, target_rate: float, v_max: float, a_max: float,
+                 dt: float, lo: float = -math.inf, hi: float = math.inf) -> tuple[float, float]:
+    """One step of length ``dt`` of the lateral tracker: the new ``(n, n_dot)``.
+
+    The commanded rate is ``target_rate`` plus a correction toward ``target`` along the braking
+    curve ``sqrt(a_max |e|)`` (half the deceleration bound, so the discrete tracker does not
+    overshoot) or ``|e| / 0.5 s`` near it, clipped to ``+-v_max`` and to the braking curves of the
+    bounds ``lo <= target <= hi`` (so that a target moving toward a bound does not carry the car
+    past it); the rate then moves toward it by at most ``a_max dt``. Hence
+    ``|n_dot_new| <= max(|n_dot|, v_max)`` and ``|n_dot_new - n_dot| <= a_max dt``; ``n``
+    integrates the rate with the trapezoidal rule.
+    """
+    e = target - n
+    mag = min(math.sqrt(a_max * abs(e)), abs(e) / _APPROACH_TIME)
+    r = target_rate + math.copysign(mag, e)
+    up = min(v_max, _stopping_rate(hi - n, a_max))
+    down = min(v_max, _stopping_rate(n - lo, a_max))
+    r = min(max(r, -down), up)
+    step = a_max * dt
+    n_dot_new = n_dot + min(max(r - n_dot, -step), step)
+    return n + 0.5 * (n_dot + n_dot_new) * dt, n_dot_new
+
+
+def _stopping_rate(room: float, a_max: float) -> float:
+    """Largest rate toward a bound ``room`` [m] away that still stops in time (0 at or past it)."""
+    if room <= 0.0:
+        return 0.0
+    return min(math.sqrt(a_max * room), room / _APPROACH_TIME) if room < math.inf else math.inf
+
+
+def keep_clear(n: float, n_other: float, separation: float, share: float = 1.0,
+               left: bool | None = None) -> tuple[float, float]:
+    """Bounds ``(lo, hi)`` on a car's offset that keep it from closing sideways on another car.
+
+    The car stays on its side of ``n_other`` (``left``: ``n >= n_other``; by default the side it
+    is on) and may close to ``separation`` (centre to centre) only by ``share`` of the room left
+    (1: all of it; 0.5 when the other car obeys the same bound, so that both moving at once
+    still keep ``separation``). A car already closer than ``separation`` may not close at all;
+    the bounds always contain ``n``.
+    """
+    if left is None:
+        left = n >= n_other
+    if left:
+        return min(n, n - share * (n - n_other - separation)), math.inf
+    return -math.inf, max(n, n + share * (n_other - separation - n))
+
+
+class EdgeBand:
+    """Bands of admissible offsets of a car's reference point on one track.
+
+    ``inner`` [m] is the distance of the soft band from the edges (half the car width plus a
+    margin); ``half_width`` and ``half_length`` [m] are the footprint's, for the hard band.
+    """
+
+    def __init__(self, track, inner: float, half_width: float, half_length: float):
+        self.track = track
+        self.inner = float(inner)
+        self.half_width = float(half_width)
+        self.half_length = float(half_length)
+        samples = np.asarray(track.s, float)
+        spacing = track.length / len(samples)
+        size = 2 * int(math.ceil(_CORNER_WINDOW / spacing)) + 1
+        wl = minimum_filter1d(np.asarray(track.width_left(samples), float), size, mode="wrap")
+        wr = minimum_filter1d(np.asarray(track.width_right(samples), float), size, mode="wrap")
+        self._knots = np.append(samples, track.length)
+        self._wl = np.append(wl, wl[0])
+        self._wr = np.append(wr, wr[0])
+
+    def widths(self, s) -> tuple[np.ndarray, np.ndarray]:
+        """Smallest left and right widths within the corner window around ``s`` [m]."""
+        s = np.mod(np.asarray(s, float), self.track.length)
+        return np.interp(s, self._knots, self._wl), np.interp(s, self._knots, self._wr)
+
+    @staticmethod
+    def _ordered(lo, hi):
+        mid = 0.5 * (lo + hi)
+        return np.minimum(lo, mid), np.maximum(hi, mid)  # an empty band collapses to its middle
+
+    def soft(self, s) -> tuple[np.ndarray, np.ndarray]:
+        """The soft band ``(lo, hi)`` at ``s``: the footprint ``inner`` inside both edges."""
+        wl, wr = self.widths(s)
+        return self._ordered(self.inner - wr, wl - self.inner)
+
+    def envelope(self, s: float, v: float, lateral_speed: float, lateral_accel: float) -> tuple[float, float]:
+        """The soft band at ``s`` tightened so that a car at speed ``v`` [m/s] that starts moving back
+        from rest (accelerating at ``lateral_accel`` [m/s^2] up to ``lateral_speed`` [m/s]) stays inside
+        it as it narrows ahead (looking 8 s or at least 50 m ahead)."""
+        reach = max(_LOOKAHEAD_TIME * v, 50.0)
+        d = np.linspace(0.0, reach, _LOOKAHEAD_SAMPLES)
+        lo, hi = self.soft(s + d)
+        t = d / max(v, 1e-3)
+        u, a = lateral_speed, max(lateral_accel, 1e-9)
+        t_ramp = u / a
+        back = np.where(t < t_ramp, 0.5 * a * t * t, u * t - 0.5 * u * t_ramp)  # room gained by moving back
+        lo_e, hi_e = float(np.max(lo - back)), float(np.min(hi + back))
+        if lo_e > hi_e:
+            lo_e = hi_e = 0.5 * (lo_e + hi_e)
+        return lo_e, hi_e
+
+    def room(self, s: float, distance: float) -> float:
+        """Narrowest width of the soft band over ``[s, s + distance]`` [m] (sampled every <= 5 m)."""
+        k = min(int(math.ceil(max(distance, 0.0) / 5.0)) + 1, _ROOM_SAMPLES)
+        lo, hi = self.soft(s + np.linspace(0.0, max(distance, 0.0), k))
+        return float(np.min(hi - lo))
+
+    def hard(self, s: float, heading: float) -> tuple[float, float]:
+        """The hard band at ``s`` for a car at ``heading`` [rad] to the raceline: every corner inside
+        (the footprint's reach across the track at that heading, plus its bulge on a curve)."""
+        c, sn = abs(math.cos(heading)), abs(math.sin(heading))
+        # the corners half a length ahead and behind sit kappa l^2 / 2 further out on a curve
+        bend = 0.5 * abs(float(self.track.curvature(float(s)))) * self.half_length ** 2
+        reach = self.half_width * c + self.half_length * sn + bend + _HARD_SLACK
+        wl, wr = self.widths(s)
+        lo, hi = self._ordered(reach - float(wr), float(wl) - reach)
+        return float(lo), float(hi)

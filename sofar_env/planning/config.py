@@ -1,0 +1,81 @@
+"""Parameters of the passing-side MIQP (:class:`MIQPConfig`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["MIQPConfig"]
+
+
+@dataclass(frozen=True)
+class MIQPConfig:
+    """Parameters of the passing-side MIQP."""
+
+    nodes: int = 76
+    """Number of coarse horizon nodes N [-] (node k is at time k * node_dt)."""
+    node_dt: float = 0.15
+    """Time between nodes [s]; the horizon spans (nodes - 1) * node_dt (11.25 s)."""
+    w_dev: float = 1.0
+    """Weight of the deviation (d_k - n_ref_k)^2 [1/m^2]."""
+    w_smooth: float = 100.0
+    """Weight of the smoothness (d_{k+1} - d_k)^2 [1/m^2]."""
+    w_prev: float = 1.0
+    """Weight of the consistency (d_k - d_prev_k)^2 with the previous plan [1/m^2]."""
+    w_switch: float = 500.0
+    """Hysteresis: cost of choosing a side different from the previous decision for
+    the same opponent [-] (per opponent, (b - b_prev)^2 is linear in binary b)."""
+    w_slack: float = 5e4
+    """L1 penalty on the Big-M slack xi [1/m]."""
+    safe_lat: float = 3.75
+    """Lateral clearance from an opponent's centreline when passing it [m]."""
+    safe_lon: float = 8.0
+    """Longitudinal half-window [m]: an opponent's side constraint is active where
+    the ego and its prediction are closer than this along the track. Coverage
+    between nodes is handled separately (both end nodes of every node interval that
+    touches the window are constrained, see :mod:`sofar_env.planning.clearance`), so
+    this is the car length plus a margin, not a node-spacing allowance; the effective
+    window is at most one relative step (relative speed * node_dt) wider on each side."""
+    closing_decel: float = 0.0
+    """Deceleration [m/s^2] that sizes the braking-distance extension of the side-constraint
+    window; 0 disables it (plain box window ``|gap| < safe_lon``). With a value ``a_b > 0``
+    the window grows on the side the cars close in, by ``L = v_close^2 / (2 a_b)`` (the
+    closing speed ``v_close`` from the ego's node speed and the opponent's speed), and the
+    clearance there tapers elliptically: ``safe_lat * sqrt(1 - ((|gap| - safe_lon) / L)^2)``.
+    This is the shape of the MPC's velocity-aware barrier (``a = a0 + v_close^2 / (2
+    a_brake)``), so a plan that keeps it does not cross an opponent's lane inside its
+    braking distance, which the barrier would forbid; the stack sets it to the barrier's
+    ``a_brake``."""
+    closing_stride: int = 3
+    """In the braking-distance extension of the window (beyond ``safe_lon``), the
+    clearance is imposed at every this-many-th node only, counted from the box window
+    (the clearance decreases away from the box, so a kept node requires at least what
+    the dropped nodes beyond it would): the extension spans up to ~20 nodes at high
+    closing speed, and every pair adds two rows to the MIQP (solve time grows with
+    them). The box window keeps every node; 1 keeps every node of the extension too."""
+    track_margin: float = 1.2
+    """Distance kept from each track edge [m]."""
+    continuity: float = 0.3
+    """Maximum |d_0 - ego_n| [m] (ego_n clipped into the corridor first, so the
+    constraint can never be infeasible)."""
+    cluster_gap: float = 10.0
+    """Opponents closer than this to each other along the track [m], at a node where
+    the ego overlaps either of them, share one side decision (no threading between
+    them); linking is transitive."""
+    solver: str = "daqp"
+    """"daqp" (DAQP branch-and-bound) or "enumerate" (one QP per side pattern)."""
+
+    def __post_init__(self) -> None:
+        if self.nodes < 2:
+            raise ValueError("nodes must be >= 2")
+        if not self.node_dt > 0.0:
+            raise ValueError("node_dt must be > 0")
+        if not self.w_dev > 0.0:
+            raise ValueError("w_dev must be > 0 (it makes the Hessian positive definite)")
+        for name in ("w_smooth", "w_prev", "w_switch", "w_slack", "safe_lat",
+                     "safe_lon", "closing_decel", "track_margin", "continuity", "cluster_gap"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name} must be >= 0")
+        if int(self.closing_stride) != self.closing_stride or self.closing_stride < 1:
+            raise ValueError("closing_stride must be an integer >= 1")
+        if self.solver not in ("daqp", "enumerate"):
+            raise ValueError(f"unknown solver {self.solver!r} (use 'daqp' or 'enumerate')")

@@ -1,0 +1,159 @@
+"""The two exact solver routes of the passing-side MIQP, both on DAQP.
+
+``solve_branch_and_bound`` uses DAQP's built-in branch-and-bound: the binaries are
+simple bounds ``0 <= b <= 1`` flagged binary (``sense`` 16); the general rows are the
+corridor and the two Big-M rows of every active pair::
+
+    d_k <= n_i - w_ik + Ma_ik * b + xi_ik
+    d_k >= n_i + w_ik - Mb_ik * (1 - b) - xi_ik
+
+with the tightest valid constants ``Ma_ik = max(0, hi_k - n_i + w_ik)`` and ``Mb_ik =
+max(0, n_i + w_ik - lo_k)`` (each is the smallest value that makes the relaxed row
+redundant inside the corridor ``[lo_k, hi_k]``). They are at most the track width plus
+the clearance, instead of a fixed large constant such as 2000, which keeps the
+relaxations tight and the problem well conditioned. ``solve_enumeration`` solves one
+QP per side pattern (``2^C``, C <= 4 in practice) and keeps the best. Both return
+``(d, b)`` or None when DAQP fails.
+
+Numerics. The solvers work in ``u = R d`` (``H_d = R'R``, see
+:func:`sofar_env.planning.problem.cost_factors`): DAQP then sees a *diagonal*
+Hessian, for which its set-up is O(n) instead of a dense factorisation; ``d = R^-1
+u`` enters through fixed rows. DAQP needs a strictly positive-definite Hessian, so
+binaries get curvature ``_Q_BIN`` (cancelled exactly at 0/1 by a linear term, so the
+relaxation stays a valid lower bound) and slacks a small curvature ``_Q_SLACK`` (a
+perturbation of order 1e-7 of the objective when slack is used, none otherwise).
+Slacks start in DAQP's working set at their bound (warm start), which saves one
+active-set iteration per pair.
+
+Per-call cost. The diagonal Hessian, the constraint types, the index arrays and the
+constant parts of the bounds of the branch-and-bound depend only on ``(C, P)`` and
+are kept in a cache owned by the caller (the planner).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from .problem import SideProblem
+
+try:  # DAQP is a hard dependency, but the planner must never raise because of it.
+    import daqp
+except ImportError:  # pragma: no cover - exercised only in broken installs
+    daqp = None
+
+__all__ = ["solve_branch_and_bound", "solve_enumeration"]
+
+logger = logging.getLogger(__name__)
+
+_INF = 1e30          # DAQP's notion of an infinite bound
+_Q_BIN = 1.0         # curvature added to each binary; cancelled at 0/1 by a linear term
+_Q_SLACK = 1e-2      # curvature added to each slack [1/m^2] (DAQP needs H > 0)
+_DAQP_OK = (1, 2)    # DAQP exit flags that mean "optimal" (2: optimal with soft constraints)
+_SENSE_BINARY = 16
+_SENSE_ACTIVE_LOWER = 3   # DAQP: ACTIVE (1) | LOWER (2): start with this bound in the working set
+
+
+def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tuple[np.ndarray, np.ndarray] | None:
+    """DAQP branch-and-bound over x = [b (C), xi (P), u (N)], d = Rinv u.
+
+    Simple bounds: b in [0, 1] (binary), xi >= 0. General rows: the corridor
+    lo <= Rinv u <= hi, then the two Big-M rows of every active pair.
+    """
+    if daqp is None:
+        return None
+    C, N, P = prob.n_clusters, prob.lo.size, prob.pair_k.size
+    nv = C + P + N
+    sl = prob.pair_w
+    lo_k, hi_k = prob.lo[prob.pair_k], prob.hi[prob.pair_k]
+    Ma = np.maximum(0.0, hi_k - prob.pair_n + sl)
+    Mb = np.maximum(0.0, prob.pair_n + sl - lo_k)
+
+    key = (C, P)
+    cached = cache.get(key)
+    if cached is None:
+        Hv = np.empty(nv)
+        Hv[:C] = _Q_BIN
+        Hv[C:C + P] = _Q_SLACK
+        Hv[C + P:] = 1.0
+        sense = np.zeros(C + P + N + 2 * P, dtype=np.int32)
+        sense[:C] = _SENSE_BINARY
+        # Slacks start at their bound xi = 0: without this warm start the active set
+        # needs one iteration per pair just to add the xi >= 0 bounds.
+        sense[C:C + P] = _SENSE_ACTIVE_LOWER
+        r2 = np.arange(2 * P)
+        slack_col = C + np.concatenate([np.arange(P), np.arange(P)])
+        slack_val = np.concatenate([-np.ones(P), np.ones(P)])
+        # the constant parts of the bounds (the others are written per call)
+        bupper = np.empty(C + P + N + 2 * P)
+        bupper[:C] = 1.0
+        bupper[C:C + P] = _INF
+        bupper[C + 2 * P + N:] = _INF
+        blower = np.empty(C + P + N + 2 * P)
+        blower[:C + P] = 0.0
+        blower[C + P + N:C + 2 * P + N] = -_INF
+        cached = (np.diag(Hv), sense, N + r2, slack_col, slack_val, bupper, blower)
+        if len(cache) > 64:
+            cache.clear()
+        cache[key] = cached
+    H, sense, rows2, slack_col, slack_val, bupper, blower = cached
+    f = np.empty(nv)
+    f[:C] = prob.f_b - 0.5 * _Q_BIN
+    f[C:C + P] = w_slack
+    f[C + P:] = prob.RinvT @ prob.f_d
+    A = np.zeros((N + 2 * P, nv))
+    A[:N, C + P:] = prob.Rinv
+    pk2 = np.concatenate([prob.pair_k, prob.pair_k])
+    A[N:, C + P:] = prob.Rinv[pk2]
+    A[rows2, np.concatenate([prob.pair_c, prob.pair_c])] = -np.concatenate([Ma, Mb])
+    A[rows2, slack_col] = slack_val
+    bupper = bupper.copy()
+    bupper[C + P:C + P + N] = prob.hi
+    bupper[C + P + N:C + 2 * P + N] = prob.pair_n - sl
+    blower = blower.copy()
+    blower[C + P:C + P + N] = prob.lo
+    blower[C + 2 * P + N:] = prob.pair_n + sl - Mb
+    x, _, flag, _ = daqp.solve(H, f, A, bupper, blower, sense.copy(), presolve=0)
+    if flag not in _DAQP_OK:
+        logger.debug("DAQP branch-and-bound exit flag %d", flag)
+        return None
+    x = np.asarray(x)
+    return prob.Rinv @ x[C + P:], x[:C].round()
+
+
+def solve_enumeration(prob: SideProblem, w_slack: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """One QP over x = [xi (P), u (N)] per side pattern (2^C of them)."""
+    if daqp is None:
+        return None
+    C, N, P = prob.n_clusters, prob.lo.size, prob.pair_k.size
+    nv = P + N
+    sl = prob.pair_w
+    H = np.diag(np.concatenate([np.full(P, _Q_SLACK), np.ones(N)]))
+    f = np.concatenate([np.full(P, w_slack), prob.RinvT @ prob.f_d])
+    r = np.arange(P)
+    A = np.zeros((N + P, nv))
+    A[:N, P:] = prob.Rinv
+    A[N:, P:] = prob.Rinv[prob.pair_k]
+    bup = np.concatenate([np.full(P, _INF), prob.hi, np.empty(P)])
+    blo = np.concatenate([np.zeros(P), prob.lo, np.empty(P)])
+    sense = np.zeros(P + N + P, dtype=np.int32)
+    sense[:P] = _SENSE_ACTIVE_LOWER  # warm start: slacks at zero
+    best = None
+    best_cost = np.inf
+    for pattern in range(1 << C):
+        b = np.array([(pattern >> c) & 1 for c in range(C)], dtype=float)
+        left = b[prob.pair_c] > 0.5
+        # left: d_k + xi >= n + sl;  right: d_k - xi <= n - sl
+        A[N + r, r] = np.where(left, 1.0, -1.0)
+        bup[P + N:] = np.where(left, _INF, prob.pair_n - sl)
+        blo[P + N:] = np.where(left, prob.pair_n + sl, -_INF)
+        x, fval, flag, _ = daqp.solve(H, f, A, bup, blo, sense)
+        if flag not in _DAQP_OK:
+            logger.debug("DAQP exit flag %d for side pattern %d", flag, pattern)
+            return None
+        cost = fval + float(prob.f_b @ b)
+        if cost < best_cost:
+            best_cost = cost
+            best = (prob.Rinv @ np.asarray(x)[P:], b)
+    return best

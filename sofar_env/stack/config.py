@@ -1,0 +1,149 @@
+"""Configuration of the overtaking stack, and its two named presets.
+
+:class:`StackConfig` holds every setting of the hierarchical controller: the speed
+reference, the MIQP schedule, the opponents' window, the pass-or-follow decision
+(:mod:`sofar_env.stack.follow`), the opponent prediction (:mod:`sofar_env.stack.prediction`),
+the footprint-aware track edges (:mod:`sofar_env.stack.edges`) and the two planners'
+own configurations. :func:`stack_preset` names the two controllers the evaluation
+compares: ``"sofar"`` (these defaults) and ``"paper"`` (Algorithm 1 as written).
+
+The default MIQP configuration also closes a gap between the two planners
+(*consistent clearances*): the MIQP's side-constraint window is extended by the
+braking distance of the closing speed (``MIQPConfig.closing_decel`` = the barrier's
+``a_brake``), the shape of the MPC's barrier ellipse, so that a plan crossing an
+opponent's lane inside its braking distance, which the barrier then forbids, is no
+longer produced.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from ..control.barrier import BarrierParams
+from ..control.mpc import MPCConfig
+from ..planning.miqp import MIQPConfig
+
+__all__ = ["StackConfig", "STACK_PRESETS", "stack_preset"]
+
+
+@dataclass(frozen=True)
+class StackConfig:
+    """Configuration of the hierarchical controller."""
+
+    speed_factor: float = 0.8
+    """Ego speed reference = speed_factor x the circuit's speed profile [-]."""
+    use_miqp: bool = True
+    """Run the passing-side MIQP; when False the MPC tracks the raceline (n_ref = 0)."""
+    miqp_interval: int = 2
+    """Run the MIQP every this many control steps (1 = every step)."""
+    look_behind: float = 30.0
+    """Opponents up to this far behind the ego are passed to the planners [m]."""
+    look_ahead: float = 400.0
+    """Opponents up to this far ahead of the ego are passed to the planners [m]."""
+    follow: bool = True
+    """Follow an opponent that cannot be passed instead of forcing the pass (:mod:`sofar_env.stack.follow`)."""
+    follow_slack: float = 0.5
+    """A passing plan that violates the clearance of an opponent ahead by more than this is
+    not attempted: the ego follows that opponent [m]. With 0.5 m a pass is planned with at
+    least 3.25 m lateral clearance (safe_lat 3.75 m), 0.55 m more than the barrier's lateral
+    semi-axis b = 2.7 m: a pass planned at about b stalls alongside the opponent (the barrier
+    is near 0 there and, for small gamma, may only decay slowly), and a looser 0.8 m led to
+    exactly that, and a collision, on Kentucky at rho = 0.1, gamma = 0.05."""
+    follow_release_slack: float = 0.1
+    """Hysteresis of the follow decision [m]: while following, an opponent ahead stays blocked
+    until the passing plan violates its clearance by at most this (entering takes
+    ``follow_slack``). Without it the decision can flicker every MIQP call near the threshold,
+    and each flicker trades braking for a pass attempt (Laguna Seca, last corner)."""
+    follow_recheck: int = 2
+    """While following, the passing plan is re-examined at every this-many-th MIQP call (1: at
+    every call). In between, only the follow plan is re-solved, for the same followed cars
+    (matched by their predicted positions); a follow plan that then violates the clearance of a
+    car it passes by more than ``follow_slack``, or a followed car that is no longer found, falls
+    back to the full pass-or-follow decision. It halves the second MIQP solve of most calls while
+    following; resuming a pass waits at most ``(follow_recheck - 1) miqp_interval`` more steps."""
+    follow_gap: float = 12.0
+    """Arc-length distance kept behind a followed opponent [m] (the barrier's a0 = 7 m plus 5 m)."""
+    follow_decel: float = 5.0
+    """Deceleration planned when following [m/s^2]: the speed reference is capped at
+    sqrt(v_o^2 + 2 follow_decel (gap - follow_gap)), the speed from which the ego reaches the
+    opponent's speed ``follow_gap`` behind it, and the MIQP node positions brake at this rate."""
+    follow_reach_decel: float = 8.0
+    """Deceleration [m/s^2] that decides whether the ego can still stay behind an opponent
+    (:meth:`~sofar_env.stack.follow.PassOrFollow.can_stay_behind`); if not, the pass is not abandoned."""
+    follow_alongside: bool = True
+    """Also follow a blocking car the ego is alongside or less than the barrier's a0 behind,
+    when braking at ``follow_reach_decel`` drops the ego behind it (else such a pass is held)."""
+    pace_prediction: bool = True
+    """Predict the opponents along the speed profile at their current pace ratio
+    (:class:`~sofar_env.stack.prediction.OpponentPredictor`) instead of at constant speed: the MIQP gets
+    the predicted positions, the MPC (constant-speed opponents) the mean speed over its horizon."""
+    footprint_edges: bool = True
+    """Give the planners the narrowest edge within the car's length, and tighten the MPC's by
+    the heading error (:mod:`sofar_env.stack.edges`)."""
+    mpc: MPCConfig = field(default_factory=MPCConfig)
+    """The low-level MPC-DCBF."""
+    miqp: MIQPConfig = field(default_factory=lambda: MIQPConfig(closing_decel=BarrierParams().a_brake))
+    """The passing-side planner (its closing-speed window sized by the barrier's a_brake: the
+    consistent clearances of this module's docstring)."""
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.speed_factor <= 1.5):
+            raise ValueError(f"speed_factor must lie in (0, 1.5], got {self.speed_factor}")
+        if self.miqp_interval < 1:
+            raise ValueError("miqp_interval must be >= 1")
+        if int(self.follow_recheck) != self.follow_recheck or self.follow_recheck < 1:
+            raise ValueError("follow_recheck must be an integer >= 1")
+        if not 0.0 <= self.follow_release_slack <= self.follow_slack:
+            raise ValueError("follow_release_slack must lie in [0, follow_slack]")
+        for name in ("follow_slack", "follow_gap"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name} must be >= 0")
+        for name in ("follow_decel", "follow_reach_decel"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0")
+
+
+STACK_PRESETS: tuple[str, ...] = ("sofar", "paper")
+"""Names accepted by :func:`stack_preset` (and by the environments' ``stack=`` key)."""
+
+
+def stack_preset(name: str) -> StackConfig:
+    """The controller of a named preset.
+
+    ``"sofar"`` (the default of every environment) is :class:`StackConfig` as it is:
+    the paper's Algorithm 1 plus the additions described in :mod:`sofar_env.stack`.
+
+    ``"paper"`` is the paper's Algorithm 1 as written, every addition of ours off:
+
+    * ``follow=False``: no pass-or-follow decision; the MIQP always plans a pass of
+      every opponent it sees (the paper has no following mode);
+    * ``pace_prediction=False``: opponents are predicted at constant speed along the
+      track, the paper's constant-velocity model;
+    * ``footprint_edges=False``: the planners' track edges are the edges at the
+      predicted reference point, not the narrowest within the car's length, and the MPC's
+      are not tightened by the heading error;
+    * ``miqp.closing_decel=0``: the MIQP's side constraints use the plain longitudinal
+      window ``|gap| < safe_lon``, as in the paper's eq. (8), without the braking-distance
+      extension.
+
+    Where the paper leaves a choice open, both presets make the same one (so the
+    difference between them is only the list above): the MIQP runs every second control
+    step over 76 nodes 0.15 s apart; its side windows are ``safe_lon`` = 8 m and
+    ``safe_lat`` = 3.75 m; it keeps the previous decision with a switching cost (500) and
+    links opponents closer than 10 m along the track into one side decision; the MPC is
+    solved as one SQP real-time iteration per step with the DCBF imposed at every stage
+    (the paper's "at each prediction step", including the first transition), soft track
+    and barrier constraints with L1 + L2 slack, and the velocity-aware barrier ellipse
+    ``a = a0 + max(0, v - v_i)^2 / (2 a_brake)``. Episodes, the plant and the opponents are
+    those of the world, not of the controller.
+    """
+    if isinstance(name, str):
+        key = name.strip().lower()
+        if key == "sofar":
+            return StackConfig()
+        if key == "paper":
+            base = StackConfig()
+            return dataclasses.replace(base, follow=False, pace_prediction=False, footprint_edges=False,
+                                       miqp=dataclasses.replace(base.miqp, closing_decel=0.0))
+    raise ValueError(f"unknown stack preset {name!r}; valid presets: {', '.join(STACK_PRESETS)}")

@@ -1,0 +1,172 @@
+"""The control step of Algorithm 1: :class:`OvertakingStack` and its :class:`StackOutput`.
+
+One step: the opponents relative to the ego (:mod:`~sofar_env.stack.prediction`), every
+``miqp_interval``-th step the passing-side plan or a follow plan
+(:mod:`~sofar_env.stack.follow`), the MPC's per-stage references and track bounds
+(:mod:`~sofar_env.stack.edges`), and the MPC-DCBF solve with the caller's ``gamma``.
+The stack never raises on numerical trouble: the planners return fallbacks, which are
+counted (:attr:`OvertakingStack.counters`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..control.mpc import MPCDCBF, MPCResult, MPCStageData
+from ..planning.miqp import PassingSidePlanner, PlanResult
+from ..vehicle import AV21, VehicleParams
+from .config import StackConfig
+from .edges import TrackEdges
+from .follow import PassOrFollow
+from .prediction import OpponentPredictor, ego_node_positions, relative_opponents
+
+__all__ = ["StackOutput", "OvertakingStack"]
+
+
+@dataclass(frozen=True)
+class StackOutput:
+    """Result of one controller step."""
+
+    u: np.ndarray
+    """Control (a [m/s^2], delta_dot [rad/s]) to apply now."""
+    gamma: float
+    """Barrier decay used."""
+    mpc: MPCResult
+    """The MPC result (prediction, status, slacks, solve time)."""
+    plan: PlanResult | None
+    """The MIQP plan in force (None with the MIQP off or before the first plan)."""
+    miqp_ran: bool
+    """Whether the MIQP was solved in this step."""
+    opponents_rel: np.ndarray
+    """Rows (gap, n, v) of the opponents the planners saw."""
+    mpc_time: float
+    """Wall time of the MPC solve [s]."""
+    miqp_time: float
+    """Wall time of the MIQP solve in this step (0 when it did not run) [s]."""
+    ego_s: float = 0.0
+    """Arc length of the ego at this step [m]: the s of ``mpc.x_pred`` is relative to it."""
+    plan_s: float = 0.0
+    """Arc length of the ego when ``plan`` was computed [m]: ``plan.s`` is relative to it."""
+    following: bool = False
+    """Whether the plan in force follows an opponent that cannot be passed."""
+
+
+class OvertakingStack:
+    """MIQP passing-side planner + MPC-DCBF on one track (Algorithm 1)."""
+
+    def __init__(self, track, config: StackConfig | None = None, vehicle: VehicleParams = AV21):
+        self.track = track
+        self.config = config or StackConfig()
+        self.vehicle = vehicle
+        cfg = self.config
+        self.mpc = MPCDCBF(cfg.mpc, vehicle)
+        self.planner = PassingSidePlanner(cfg.miqp)
+        self.predict = OpponentPredictor(track, pace_ratio=cfg.pace_prediction)
+        self.edges = TrackEdges(track, vehicle, footprint_aware=cfg.footprint_edges)
+        self.pass_or_follow = PassOrFollow(cfg, self.planner, track, self.predict, self.edges)
+        self._node_t = np.arange(cfg.miqp.nodes) * cfg.miqp.node_dt
+        self._mpc_t = cfg.mpc.time_grid()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget warm starts, the last plan, the followed opponents and the counters."""
+        self.mpc.reset()
+        self.planner.reset()
+        self.pass_or_follow.reset()
+        self._plan: PlanResult | None = None
+        self._plan_s: float = 0.0
+        self._last_plan_call_s: float | None = None
+        self._step = 0
+        self._last_pred: np.ndarray | None = None  # previous MPC prediction (for the heading error)
+        self.counters = {"steps": 0, "mpc_failures": 0, "miqp_failures": 0, "miqp_solves": 0,
+                         "follow_steps": 0}
+
+    @property
+    def following(self) -> bool:
+        """Whether the plan in force follows an opponent that cannot be passed."""
+        return self.pass_or_follow.target is not None and self.config.use_miqp
+
+    def _plan_lateral(self, ego_s: float, ego_n: float, ego_v: float, opp_rel: np.ndarray) -> float:
+        """Solve the MIQP (pass or follow) at the ego's (s, n, v); returns its wall time [s]."""
+        cfg = self.config
+        s_nodes = ego_node_positions(self.track, ego_s, ego_v, self._node_t, cfg.miqp.node_dt,
+                                     cfg.speed_factor, self.vehicle)
+        opp_s = self.predict(ego_s, opp_rel, self._node_t)
+        progress = 0.0 if self._last_plan_call_s is None else float(self.track.gap(ego_s, self._last_plan_call_s))
+        t0 = time.perf_counter()
+        plan = self.pass_or_follow.plan(ego_s, ego_n, ego_v, s_nodes, opp_rel, opp_s, progress, self._step)
+        elapsed = time.perf_counter() - t0
+        self._last_plan_call_s = ego_s
+        self.counters["miqp_solves"] += 1
+        if not plan.success:
+            self.counters["miqp_failures"] += 1
+        self._plan = plan
+        self._plan_s = ego_s
+        return elapsed
+
+    def stage_data(self, ego_s: float) -> MPCStageData:
+        """Per-stage data of the MPC at the s of its warm start."""
+        cfg = self.config
+        s_rel = np.asarray(self.mpc.predicted_s(), float)
+        s_abs = ego_s + s_rel
+        if self._plan is not None and cfg.use_miqp:
+            shift = float(self.track.gap(ego_s, self._plan_s))
+            n_ref = np.asarray(self._plan.lateral_at(s_rel + shift), float)
+        else:
+            n_ref = np.zeros_like(s_rel)
+        v_ref = cfg.speed_factor * np.asarray(self.track.speed(s_abs), float)
+        if cfg.use_miqp:
+            cap = self.pass_or_follow.speed_cap(ego_s, s_rel, self._mpc_t, self._step)
+            if cap is not None:
+                v_ref = np.minimum(v_ref, cap)
+        n_min, n_max = self.edges.for_mpc(s_abs, self._last_pred, self._mpc_t, cfg.mpc.control_dt)
+        return MPCStageData(
+            kappa=np.asarray(self.track.curvature(s_abs), float),
+            n_ref=n_ref,
+            v_ref=v_ref,
+            n_min=n_min,
+            n_max=n_max,
+        )
+
+    def step(self, ego_frenet, opponents, gamma: float) -> StackOutput:
+        """One control step.
+
+        ``ego_frenet`` = (s, n, e, v, delta) of the ego; ``opponents`` = rows (s, n, v) with absolute
+        arc length [m] and arc-length speed [m/s]; ``gamma`` in (0, 1] the barrier decay.
+        """
+        gamma = float(gamma)
+        if not math.isfinite(gamma) or not (0.0 < gamma <= 1.0):
+            raise ValueError(f"gamma must be a finite number in (0, 1], got {gamma!r}")
+        cfg = self.config
+        s, n, e, v, delta = np.asarray(ego_frenet, float).tolist()
+        opp_rel = relative_opponents(self.track, s, opponents, cfg.look_behind, cfg.look_ahead)
+        miqp_ran = False
+        miqp_time = 0.0
+        if cfg.use_miqp and (self._plan is None or self._step % cfg.miqp_interval == 0):
+            miqp_time = self._plan_lateral(s, n, v, opp_rel)
+            miqp_ran = True
+        stage = self.stage_data(s)
+        opp_mpc = opp_rel
+        if cfg.pace_prediction and len(opp_rel):
+            # the MPC predicts opponents at constant speed: give it their mean speed over its horizon
+            t_end = float(self._mpc_t[-1])
+            s_end = self.predict(s, opp_rel, np.array([t_end]))[:, 0]
+            opp_mpc = opp_rel.copy()
+            opp_mpc[:, 2] = (s_end - opp_rel[:, 0]) / t_end
+        result = self.mpc.solve(np.array([0.0, n, e, v, delta]), stage, opp_mpc, gamma)
+        if not result.success:
+            self.counters["mpc_failures"] += 1
+        self._last_pred = result.x_pred if result.status == "solved" else None
+        following = self.following
+        self.counters["follow_steps"] += int(following)
+        self._step += 1
+        self.counters["steps"] += 1
+        return StackOutput(
+            u=result.u, gamma=gamma, mpc=result, plan=self._plan if cfg.use_miqp else None,
+            miqp_ran=miqp_ran, opponents_rel=opp_rel, mpc_time=result.solve_time, miqp_time=miqp_time,
+            ego_s=s, plan_s=self._plan_s, following=following,
+        )

@@ -1,0 +1,199 @@
+"""Pass or follow: the passing-side MIQP, and following an opponent that cannot be passed.
+
+An addition to the paper's algorithm. The MIQP plans lateral offsets only, with the
+ego's progress taken from its speed reference. When no passing side of an opponent
+ahead is clear (the plan violates that opponent's clearance by more than
+``follow_slack``, e.g. the raceline runs to the edge on the passing side at the next
+corner, or the track is too narrow), attempting the pass ends alongside the opponent
+with the corridor closing. The stack then *follows* instead: it re-plans with the ego's
+node positions held ``follow_gap`` behind the blocking opponent(s) (no slower than
+braking at ``follow_decel`` allows) and caps the MPC speed reference at
+``sqrt(v_o^2 + 2 follow_decel (gap - follow_gap))``, the speed from which braking at
+``follow_decel`` ends at the opponent's speed ``follow_gap`` behind it.
+
+* An opponent behind which the ego can no longer stay (braking at ``follow_reach_decel``
+  the gap would shrink below ``min(gap, a0)``, or not reach the barrier's ``a0`` within
+  the horizon) is not followed.
+* A car the ego is already alongside is followed when braking drops the ego behind it
+  (the follow plan keeps the ego's side of it until the ego is ``a0`` behind): holding
+  such a pass is what squeezes the ego between that car and a closing edge at a corner
+  entry.
+* While following, the pass is re-examined at every ``follow_recheck``-th MIQP call (in
+  between only the follow plan is re-solved), with hysteresis: a pass is resumed only
+  once its clearance violation has fallen to ``follow_release_slack``.
+
+With ``follow=False`` (the paper's algorithm) every call plans a pass of every opponent.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..planning.miqp import PassingSidePlanner, PlanResult
+from .config import StackConfig
+from .edges import TrackEdges
+from .prediction import OpponentPredictor, braking_positions
+
+__all__ = ["FollowTarget", "PassOrFollow"]
+
+
+@dataclass(frozen=True, eq=False)
+class FollowTarget:
+    """The opponents followed by the plan in force."""
+
+    rows: np.ndarray
+    """Rows (gap, n, v) of the followed opponents when the plan was made, relative to the ego then."""
+    ego_s: float
+    """Arc length of the ego when the plan was made [m]."""
+    step: int
+    """Control step at which the plan was made."""
+
+
+class PassOrFollow:
+    """Solves the passing-side MIQP and decides between passing and following (module docstring).
+
+    ``target`` is the :class:`FollowTarget` of the plan last returned (None: a passing plan).
+    """
+
+    def __init__(self, config: StackConfig, planner: PassingSidePlanner, track, predict: OpponentPredictor,
+                 edges: TrackEdges):
+        self.config = config
+        self.planner = planner
+        self.track = track
+        self.predict = predict
+        self.edges = edges
+        self._node_t = np.arange(config.miqp.nodes) * config.miqp.node_dt
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the followed opponents."""
+        self.target: FollowTarget | None = None
+        self._calls = 0  # MIQP calls since the pass was last examined while following
+
+    def plan(self, ego_s: float, ego_n: float, ego_v: float, s_nodes: np.ndarray, opp_rel: np.ndarray,
+             opp_s: np.ndarray, progress: float, step: int) -> PlanResult:
+        """The plan of this control step ``step``: a pass, or (``target`` set) a follow plan.
+
+        ``s_nodes`` [m] are the ego's node positions and ``opp_s`` [m] the predicted opponents
+        ``opp_rel`` at the node times, relative to the ego at ``ego_s``; ``progress`` [m] is how far
+        the ego has advanced since the previous call (for the planner's warm start).
+        """
+        cfg = self.config
+        n_min, n_max = self.edges(ego_s + s_nodes)
+        n_ref = np.zeros_like(s_nodes)
+        memory = self.planner.memory()
+        was_following, self.target = self.target, None
+        plan = None
+        if was_following is not None and self._calls + 1 < cfg.follow_recheck:
+            # between two examinations of the pass: re-solve only the follow plan, same followed cars
+            blocked = self._followed_rows(ego_s, opp_rel, was_following, step)
+            if blocked is not None and self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s)[blocked].all():
+                follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked, progress)
+                if follow is not None and follow.max_slack <= cfg.follow_slack:
+                    plan = follow
+                    self.target = FollowTarget(opp_rel[blocked].copy(), ego_s, step)
+                    self._calls += 1
+                else:
+                    self.planner.restore_memory(memory)
+        if plan is None:
+            self._calls = 0
+            plan = self.planner.plan(s_nodes, n_ref, n_min, n_max, ego_n, opp_rel, progress=progress,
+                                     opponent_s=opp_s)
+            if cfg.follow and plan.success and plan.opponent_slack is not None and len(opp_rel):
+                # an opponent ahead whose clearance the best passing plan violates, and behind which the
+                # ego can stay or drop (can_stay_behind): follow it
+                # hysteresis: while following, a pass is only resumed once it is (nearly) clear
+                threshold = cfg.follow_release_slack if was_following is not None else cfg.follow_slack
+                blocked = ((plan.opponent_slack > threshold) & (opp_rel[:, 0] > 0.0)
+                           & self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s))
+                if blocked.any():
+                    passing_memory = self.planner.memory()
+                    self.planner.restore_memory(memory)
+                    follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked,
+                                               progress)
+                    if follow is not None and follow.max_slack < plan.max_slack:
+                        plan = follow
+                        self.target = FollowTarget(opp_rel[blocked].copy(), ego_s, step)
+                    else:
+                        self.planner.restore_memory(passing_memory)
+        return plan
+
+    def can_stay_behind(self, ego_v: float, gap: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
+        """Whether the ego, braking at ``follow_reach_decel``, can stay (or get) behind each opponent.
+
+        ``gap`` [m] are the current gaps (opponent minus ego), ``opp_s`` [m] the predicted
+        opponent positions at the node times. With ``follow_alongside`` the gap under hard
+        braking must never shrink below ``min(gap, a0)`` and must reach ``a0`` by the end of
+        the horizon, so a car the ego is already alongside is followable when braking drops
+        the ego behind it. Without it the gap must stay at least ``a0`` throughout.
+        """
+        a0 = self.config.mpc.barrier.a0
+        room = opp_s - braking_positions(self._node_t, ego_v, self.config.follow_reach_decel)[None, :]
+        if not self.config.follow_alongside:
+            return room.min(axis=1) >= a0
+        return (room.min(axis=1) >= np.minimum(gap, a0) - 1e-6) & (room[:, -1] >= a0)
+
+    def speed_cap(self, ego_s: float, s_rel: np.ndarray, t: np.ndarray, step: int) -> np.ndarray | None:
+        """Cap [m/s] on the MPC speed reference at the times ``t`` [s] of control step ``step``
+        (ego at ``ego_s`` now, at ``s_rel`` [m] relative to that along the horizon): the speed from
+        which braking at ``follow_decel`` ends at each followed car's speed ``follow_gap`` behind
+        it. None when no car is followed."""
+        if self.target is None:
+            return None
+        cfg = self.config
+        rows, plan_s = self.target.rows, self.target.ego_s
+        elapsed = (step - self.target.step) * cfg.mpc.control_dt
+        pred = self.predict(plan_s, rows, elapsed + t)  # relative to the ego at plan time
+        gap = pred.T - float(self.track.gap(ego_s, plan_s)) - s_rel[:, None]
+        v_o = np.gradient(pred, t, axis=1).T if len(t) > 1 else rows[None, :, 2]
+        v_cap2 = v_o ** 2 + 2.0 * cfg.follow_decel * (gap - cfg.follow_gap)
+        return np.sqrt(np.maximum(v_cap2.min(axis=1), 0.0))
+
+    def _follow_plan(self, ego_s: float, ego_n: float, ego_v: float, s_nodes: np.ndarray, n_ref: np.ndarray,
+                     opp_rel: np.ndarray, opp_s: np.ndarray, blocked: np.ndarray,
+                     progress: float) -> PlanResult | None:
+        """The plan that follows the ``blocked`` opponents (None if it fails), sides per input row.
+
+        Followed opponents are kept behind longitudinally (speed cap, barrier), not passed: the
+        lateral plan leaves them out, except those the ego is still alongside (less than a0
+        behind), whose side it must keep until braking has dropped it behind. The ego's node
+        positions stay ``follow_gap`` behind the followed cars, no slower than braking at
+        ``follow_decel`` allows.
+        """
+        cfg = self.config
+        s_brake = braking_positions(self._node_t, ego_v, cfg.follow_decel)
+        cap = (opp_s[blocked] - cfg.follow_gap).min(axis=0)
+        s_follow = np.maximum.accumulate(np.maximum(s_brake, np.minimum(s_nodes, cap)))
+        n_min_f, n_max_f = self.edges(ego_s + s_follow)
+        planned = ~blocked | (opp_rel[:, 0] < cfg.mpc.barrier.a0)
+        plan = self.planner.plan(s_follow, n_ref, n_min_f, n_max_f, ego_n, opp_rel[planned],
+                                 progress=progress, opponent_s=opp_s[planned])
+        if not plan.success:
+            return None
+        sides = np.zeros(len(opp_rel), dtype=int)
+        sides[planned] = plan.sides
+        slack = np.zeros(len(opp_rel))
+        slack[planned] = plan.opponent_slack
+        return dataclasses.replace(plan, sides=sides, opponent_slack=slack)
+
+    def _followed_rows(self, ego_s: float, opp_rel: np.ndarray, target: FollowTarget,
+                       step: int) -> np.ndarray | None:
+        """Mask of the rows of ``opp_rel`` that are the followed opponents of ``target``, matched to
+        their predicted positions (within 3 m along and 1.5 m across the track); None when one of
+        them is not found (overtaken, respawned, or out of the planners' window)."""
+        rows = target.rows
+        if len(opp_rel) == 0:
+            return None
+        elapsed = (step - target.step) * self.config.mpc.control_dt
+        pred = (self.predict(target.ego_s, rows, np.array([elapsed]))[:, 0]
+                - float(self.track.gap(ego_s, target.ego_s)))
+        dist = ((opp_rel[None, :, 0] - pred[:, None]) / 3.0) ** 2 + ((opp_rel[None, :, 1] - rows[:, 1:2]) / 1.5) ** 2
+        nearest = dist.argmin(axis=1)
+        if (dist[np.arange(len(rows)), nearest] > 1.0).any():
+            return None
+        mask = np.zeros(len(opp_rel), dtype=bool)
+        mask[nearest] = True
+        return mask

@@ -1,0 +1,96 @@
+"""Where the cars are and will be along the track, as the planners see them.
+
+* :func:`relative_opponents`: step 1 of Algorithm 1, the opponents as rows
+  ``(gap, n, v)`` with the signed periodic gap to the ego, within the planners' window;
+* :class:`OpponentPredictor`: step 2, the opponents' arc lengths over the horizon. The
+  paper predicts them at constant speed. With ``pace_prediction`` (an addition of ours)
+  each opponent keeps its current pace ratio to the circuit's speed profile instead: cars
+  slow down for corners, which a constant-speed prediction misses by several metres over
+  a second at a corner entry;
+* :func:`ego_node_positions` and :func:`braking_positions`: the ego's arc length at the
+  MIQP nodes, following its speed reference within the acceleration limits, or braking.
+
+All arc lengths returned are relative to the ego at the time of the call [m].
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..vehicle import VehicleParams
+
+__all__ = ["relative_opponents", "OpponentPredictor", "ego_node_positions", "braking_positions"]
+
+
+def relative_opponents(track, ego_s: float, opponents: np.ndarray, look_behind: float,
+                       look_ahead: float) -> np.ndarray:
+    """Rows (gap, n, v) of the opponents from ``look_behind`` [m] behind to ``look_ahead`` [m]
+    ahead of the ego at arc length ``ego_s``, nearest first; ``opponents`` are rows (s, n, v)."""
+    opp = np.asarray(opponents, float).reshape(-1, 3)
+    if opp.shape[0] == 0:
+        return np.zeros((0, 3))
+    gap = np.asarray(track.gap(opp[:, 0], ego_s), float).reshape(-1)
+    keep = (gap >= -look_behind) & (gap <= look_ahead)
+    rel = opp[keep]  # a copy (boolean indexing)
+    rel[:, 0] = gap[keep]
+    return rel[np.argsort(np.abs(rel[:, 0]))]
+
+
+class OpponentPredictor:
+    """Opponent arc lengths over a horizon: at constant speed, or at their pace ratio.
+
+    With ``pace_ratio`` each opponent follows ``ds/dt = rho_i v_profile(s)`` with
+    ``rho_i = v_i / v_profile(s_i)``, integrated exactly through the travel time of the
+    speed profile tabulated over two laps.
+    """
+
+    def __init__(self, track, pace_ratio: bool = True):
+        self.track = track
+        self.pace_ratio = bool(pace_ratio)
+        samples = np.asarray(track.s, float)
+        L = float(track.length)
+        grid = np.concatenate([samples, samples + L, [2.0 * L]])
+        v_prof = np.maximum(np.asarray(track.speed(grid), float), 0.1)
+        self._s = grid  # arc length over two laps [m]
+        self._t = np.concatenate([[0.0], np.cumsum(2.0 * np.diff(grid) / (v_prof[1:] + v_prof[:-1]))])  # [s]
+
+    def __call__(self, ego_s: float, opp_rel: np.ndarray, times: np.ndarray) -> np.ndarray:
+        """(M, len(times)) arc lengths [m] at ``times`` [s] of the opponents ``opp_rel`` (rows
+        (gap, n, v) relative to the ego at ``ego_s``), relative to the ego at ``ego_s``."""
+        opp_rel = np.asarray(opp_rel, float).reshape(-1, 3)
+        times = np.asarray(times, float)
+        if opp_rel.shape[0] == 0:
+            return np.zeros((0, times.size))
+        if not self.pace_ratio:
+            return opp_rel[:, :1] + opp_rel[:, 2:3] * times[None, :]
+        s_abs = np.asarray(self.track.wrap(ego_s + opp_rel[:, 0]), float)
+        rho = np.maximum(opp_rel[:, 2], 0.0) / np.maximum(np.asarray(self.track.speed(s_abs), float), 0.1)
+        t0 = np.interp(s_abs, self._s, self._t)
+        s_pred = np.interp(t0[:, None] + rho[:, None] * times[None, :], self._t, self._s)
+        return opp_rel[:, :1] + (s_pred - s_abs[:, None])
+
+
+def ego_node_positions(track, ego_s: float, ego_v: float, node_t: np.ndarray, node_dt: float,
+                       speed_factor: float, vehicle: VehicleParams) -> np.ndarray:
+    """Ego arc length [m] at the node times ``node_t`` = 0, ``node_dt``, 2 ``node_dt``, ... [s] when
+    it tracks ``speed_factor`` x the speed profile within the vehicle's acceleration limits."""
+    dt = node_dt
+    v0 = max(ego_v, 0.0)
+    dv_min, dv_max = vehicle.a_min * dt, vehicle.a_max * dt
+    s = v0 * node_t  # first guess: constant speed
+    for _ in range(2):  # two fixed-point passes: speed reference at the guessed positions
+        v_ref = speed_factor * np.asarray(track.speed(ego_s + s), float)
+        v = [v0]
+        for vr in v_ref[:-1].tolist():
+            v.append(min(max(vr, v[-1] + dv_min), v[-1] + dv_max))
+        v = np.array(v)
+        s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+    return s
+
+
+def braking_positions(node_t: np.ndarray, ego_v: float, decel: float) -> np.ndarray:
+    """Ego arc length [m] at the node times ``node_t`` [s] when braking at ``decel`` [m/s^2]
+    from ``ego_v`` [m/s] until standstill."""
+    v0 = max(ego_v, 0.0)
+    tt = np.minimum(node_t, v0 / decel)
+    return v0 * tt - 0.5 * decel * tt * tt

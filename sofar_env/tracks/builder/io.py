@@ -1,0 +1,143 @@
+"""The builder's files: the input CSV formats and the circuit folder it writes.
+
+Inputs: an edges file ``left_x, left_y, right_x, right_y`` (the two edges need
+not be paired row by row) or a centreline file ``x_m, y_m, w_tr_right_m,
+w_tr_left_m``; both are turned into two closed edges. Output: the circuit
+folder read by :meth:`sofar_env.tracks.Track.load` (``raceline.csv``, the two
+edge files, ``centerline.csv`` and ``meta.json``; see ``tracks/README.md``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..track import (
+    EDGE_COLUMNS,
+    LEFT_EDGE_FILE,
+    META_FILE,
+    RACELINE_COLUMNS,
+    RACELINE_FILE,
+    RIGHT_EDGE_FILE,
+    Track,
+    TrackFormatError,
+)
+from .polyline import clean_closed, tangent_normal
+
+__all__ = [
+    "CENTERLINE_FILE",
+    "CENTERLINE_COLUMNS",
+    "BuiltCircuit",
+    "read_edges_csv",
+    "read_centerline_csv",
+    "sha256",
+    "write_circuit",
+]
+
+CENTERLINE_FILE = "centerline.csv"
+CENTERLINE_COLUMNS = ("s_m", "x_m", "y_m", "w_left_m", "w_right_m")
+
+
+@dataclass
+class BuiltCircuit:
+    """Arrays and metadata of a built circuit (what is written to disk)."""
+
+    raceline: np.ndarray  # (K, 8) columns RACELINE_COLUMNS
+    left_edge: np.ndarray
+    right_edge: np.ndarray
+    centerline: np.ndarray  # (C, 5) columns CENTERLINE_COLUMNS
+    meta: dict
+
+    def to_track(self) -> Track:
+        return Track(self.meta["name"], self.meta["length_m"], self.raceline, self.left_edge, self.right_edge, self.meta)
+
+
+# ---------------------------------------------------------------- input files
+
+
+def sha256(path: Path) -> str:
+    """Hex SHA-256 digest of a file (recorded in ``meta.json`` as the input's fingerprint)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 16), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _read_numeric_csv(path: Path, ncols: int) -> np.ndarray:
+    """Numeric rows of a CSV; '#' comment lines and one non-numeric header line are skipped."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise TrackFormatError(f"{path}: file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TrackFormatError(f"{path}: cannot read ({exc})") from None
+    rows = []
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        fields = [f.strip() for f in line.split(",")]
+        try:
+            values = [float(f) if f else math.nan for f in fields]
+        except ValueError:
+            if not rows:  # a header line
+                continue
+            raise TrackFormatError(f"{path}: line {lineno}: non-numeric value") from None
+        if len(values) != ncols:
+            raise TrackFormatError(f"{path}: line {lineno} has {len(values)} fields, expected {ncols}")
+        rows.append(values)
+    if not rows:
+        raise TrackFormatError(f"{path}: no data rows")
+    return np.array(rows, dtype=float)
+
+
+def read_edges_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Edges file ``left_x, left_y, right_x, right_y`` -> (left, right) point arrays.
+
+    Rows need not be paired; an edge may be padded with empty/NaN fields.
+    """
+    path = Path(path)
+    data = _read_numeric_csv(path, 4)
+    return clean_closed(data[:, :2], f"{path} (left edge)"), clean_closed(data[:, 2:], f"{path} (right edge)")
+
+
+def read_centerline_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Centreline file ``x_m, y_m, w_tr_right_m, w_tr_left_m`` -> (left, right) edges."""
+    path = Path(path)
+    data = _read_numeric_csv(path, 4)
+    data = data[np.all(np.isfinite(data), axis=1)]
+    center = clean_closed(data[:, :2], str(path))
+    # widths of the rows that survived the cleaning (matched by position)
+    tree = cKDTree(data[:, :2])
+    _, idx = tree.query(center)
+    w_right, w_left = data[idx, 2], data[idx, 3]
+    if np.any(w_right <= 0) or np.any(w_left <= 0):
+        raise TrackFormatError(f"{path}: track widths must be positive")
+    _, normal = tangent_normal(center)
+    return center + w_left[:, None] * normal, center - w_right[:, None] * normal
+
+
+# ---------------------------------------------------------------- output folder
+
+
+def write_circuit(folder: str | os.PathLike, built: BuiltCircuit) -> Path:
+    """Write the circuit files into ``folder`` (created if needed)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    fmt_race = ["%.6f", "%.6f", "%.6f", "%.9f", "%.12g", "%.6f", "%.6f", "%.12g"]
+    np.savetxt(folder / RACELINE_FILE, built.raceline, delimiter=",", fmt=fmt_race,
+               header=",".join(RACELINE_COLUMNS), comments="")
+    for edge, fname in ((built.left_edge, LEFT_EDGE_FILE), (built.right_edge, RIGHT_EDGE_FILE)):
+        np.savetxt(folder / fname, edge, delimiter=",", fmt="%.6f", header=",".join(EDGE_COLUMNS), comments="")
+    np.savetxt(folder / CENTERLINE_FILE, built.centerline, delimiter=",", fmt="%.6f",
+               header=",".join(CENTERLINE_COLUMNS), comments="")
+    (folder / META_FILE).write_text(json.dumps(built.meta, indent=2) + "\n", encoding="utf-8")
+    return folder

@@ -1,0 +1,20 @@
+"""sofar_agents.evaluation.figures: Fig. 5 PNGs from a per-step trace."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sofar_agents import evaluation as ev
+
+
+def test_gamma_figures_written(tmp_path):
+    rng = np.random.default_rng(0)
+    d = np.concatenate([rng.uniform(0.0, 150.0, 500), [np.inf, np.nan]])  # beyond range / no opponent: left out
+    trace = {"gamma": np.clip(0.2 + d / 200.0, 0.05, 1.0), "nearest_opponent_m": d}
+    paths = ev.plot_gamma_figures(trace, tmp_path / "fig", max_distance=100.0, title="test")
+    assert [p.name for p in paths] == ["gamma_hist.png", "distance_vs_gamma.png"]
+    for p in paths:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # too few points for the binned mean: still both figures
+    few = {"gamma": np.array([0.5, 0.6]), "nearest_opponent_m": np.array([10.0, 20.0])}
+    assert all(p.exists() for p in ev.plot_gamma_figures(few, tmp_path / "few"))

@@ -1,0 +1,120 @@
+"""sofar_agents.evaluation.results: episode/trace CSV files, older formats, torn lines and resume keys."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from sofar_agents import evaluation as ev
+from sofar_agents.evaluation.results import _AppendingCSV, _row_key
+
+OLD_COLUMNS = [c for c in ev.EPISODE_COLUMNS if c not in ("stack", "n_opponents")]
+
+
+def _task(**kw) -> ev.EpisodeTask:
+    args = dict(track="Monza", strategy=ev.Strategy.fixed(0.5), rho=0.3, episode=1, seed=42)
+    args.update(kw)
+    return ev.EpisodeTask(**args)
+
+
+def _result(task: ev.EpisodeTask, **kw) -> ev.EpisodeResult:
+    fields = dict(track=task.track, strategy=task.strategy.name, rho=task.rho, seed=task.seed, success=True,
+                  sim_time=200.0, laps=1.25, overtakes=3, collision=False, off_track=False, slack_steps=7,
+                  steps=2000, mean_gamma=0.5, mpc_failures=0, miqp_failures=1, wall_time=12.5,
+                  episode=task.episode, use_miqp=task.use_miqp, duration=task.duration,
+                  policy_id=task.strategy.policy_id, stack=task.stack,
+                  n_opponents="" if task.n_opponents is None else task.n_opponents)
+    fields.update(kw)
+    return ev.EpisodeResult(**fields)
+
+
+def _write(path, rows, columns=ev.EPISODE_COLUMNS) -> None:
+    out = _AppendingCSV(path, columns)
+    try:
+        for r in rows:
+            out.write(r)
+    finally:
+        out.close()
+
+
+def test_round_trip_types_and_resume_keys(tmp_path):
+    path = tmp_path / "episodes.csv"
+    tasks = [_task(), _task(stack="paper"), _task(n_opponents=2), _task(use_miqp=False, duration=20.0)]
+    _write(path, [_result(t).to_row() for t in tasks])
+    rows = ev.read_episode_csv(path)
+    assert len(rows) == 4
+    r = rows[0]
+    assert r["success"] is True and r["use_miqp"] is True and r["collision"] is False
+    assert r["seed"] == 42 and r["overtakes"] == 3 and r["rho"] == 0.3 and r["laps"] == 1.25
+    assert [_row_key(r) for r in rows] == [t.key for t in tasks]  # the row of a task resumes that task
+    assert rows[1]["stack"] == "paper" and rows[2]["n_opponents"] == "2" and rows[0]["n_opponents"] == ""
+    # select_rows: only the given tasks, each once
+    _write(path, [_result(tasks[0], sim_time=1.0).to_row()])
+    picked = ev.select_rows(ev.read_episode_csv(path), tasks[:2])
+    assert [p["stack"] for p in picked] == ["sofar", "paper"] and picked[0]["sim_time"] == 200.0
+
+
+def test_older_format_is_read_and_migrated_on_append(tmp_path):
+    path = tmp_path / "episodes.csv"
+    old = _result(_task()).to_row()
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=OLD_COLUMNS, extrasaction="ignore")
+        w.writeheader()
+        w.writerow({k: int(v) if isinstance(v, bool) else v for k, v in old.items()})
+    _write(path, [_result(_task(n_opponents=3)).to_row()])
+    with open(path, newline="") as f:
+        header = next(csv.reader(f))
+    assert header == list(ev.EPISODE_COLUMNS)
+    rows = ev.read_episode_csv(path)
+    # rows of older files stand for the sofar controller and the default opponent count
+    assert [(r["stack"], r["n_opponents"]) for r in rows] == [("sofar", ""), ("sofar", "3")]
+    assert [_row_key(r) for r in rows] == [_task().key, _task(n_opponents=3).key]
+
+
+def test_torn_last_line_is_dropped_and_appending_starts_a_new_line(tmp_path):
+    path = tmp_path / "episodes.csv"
+    _write(path, [_result(_task(seed=s)).to_row() for s in (1, 2)])
+    text = path.read_text()
+    path.write_text(text[: text.rindex("\n", 0, len(text) - 1) + 1] + "Monza,gamma=0.50,0.3,2,1,20")  # killed mid-row
+    assert [r["seed"] for r in ev.read_episode_csv(path)] == [1]
+    _write(path, [_result(_task(seed=3)).to_row()])
+    assert [r["seed"] for r in ev.read_episode_csv(path)] == [1, 3]
+
+
+def test_foreign_csv_is_refused(tmp_path):
+    path = tmp_path / "other.csv"
+    path.write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="not a SOfAR episode CSV"):
+        ev.read_episode_csv(path)
+    with pytest.raises(ValueError, match="expected"):
+        _AppendingCSV(path, ev.EPISODE_COLUMNS)
+    assert ev.read_episode_csv(tmp_path / "missing.csv") == []
+
+
+def test_trace_csv_round_trip(tmp_path):
+    path = tmp_path / "trace.csv"
+    out = _AppendingCSV(path, ev.TRACE_COLUMNS)
+    out.write_many([("Monza", "adaptive", "0.3", 1, 1, 0.1, 0.25, 12.5, 0.75),
+                    ("Monza", "adaptive", "0.3", 1, 2, 0.2, 0.5, float("nan"), 0.5),
+                    ("Monza", "gamma=0.50", "0.3", 1, 1, 0.1, 0.5, 30.0, 1.0)])
+    out.close()
+    tr = ev.read_trace_csv(path, strategy="adaptive")
+    np.testing.assert_array_equal(tr["gamma"], [0.25, 0.5])
+    assert tr["nearest_opponent_m"][0] == 12.5 and np.isnan(tr["nearest_opponent_m"][1])
+    np.testing.assert_array_equal(tr["min_barrier"], [0.75, 0.5])
+    assert ev.read_trace_csv(path)["gamma"].size == 3
+
+
+def test_older_format_rows_resume_before_any_append(tmp_path):
+    """An old file is read as it is: its rows count as done (no episode is re-run)."""
+    path = tmp_path / "episodes.csv"
+    old = _result(_task()).to_row()
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=OLD_COLUMNS, extrasaction="ignore")
+        w.writeheader()
+        w.writerow({k: int(v) if isinstance(v, bool) else v for k, v in old.items()})
+    rows = ev.read_episode_csv(path)
+    assert len(rows) == 1 and rows[0]["stack"] == "sofar"
+    assert _row_key(rows[0]) == _task().key

@@ -1,0 +1,52 @@
+"""StackConfig validation and the named presets (sofar_env.stack.config)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from sofar_env.stack import STACK_PRESETS, StackConfig, stack_preset
+
+
+def test_follow_release_slack_is_validated():
+    with pytest.raises(ValueError, match="follow_release_slack"):
+        StackConfig(follow_release_slack=0.6)
+    with pytest.raises(ValueError, match="follow_recheck"):
+        StackConfig(follow_recheck=0)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"speed_factor": 0.0}, "speed_factor"), ({"speed_factor": 1.6}, "speed_factor"),
+    ({"miqp_interval": 0}, "miqp_interval"), ({"follow_recheck": 1.5}, "follow_recheck"),
+    ({"follow_gap": -1.0}, "follow_gap"), ({"follow_slack": -0.1}, "follow_slack"),
+    ({"follow_decel": 0.0}, "follow_decel"), ({"follow_reach_decel": -1.0}, "follow_reach_decel"),
+])
+def test_invalid_settings_are_rejected(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        StackConfig(**kwargs)
+
+
+def test_the_miqp_side_windows_use_the_barrier_braking_distance():
+    cfg = StackConfig()
+    assert cfg.miqp.closing_decel == cfg.mpc.barrier.a_brake > 0.0
+
+
+def test_sofar_preset_is_the_default():
+    assert STACK_PRESETS == ("sofar", "paper")
+    assert stack_preset("sofar") == StackConfig()
+    assert stack_preset(" SoFAR ") == StackConfig()
+
+
+def test_paper_preset_switches_off_exactly_the_additions():
+    sofar, paper = stack_preset("sofar"), stack_preset("paper")
+    changed = {f.name for f in dataclasses.fields(StackConfig) if getattr(sofar, f.name) != getattr(paper, f.name)}
+    assert changed == {"follow", "pace_prediction", "footprint_edges", "miqp"}
+    assert not paper.follow and not paper.pace_prediction and not paper.footprint_edges
+    assert paper.miqp == dataclasses.replace(sofar.miqp, closing_decel=0.0)
+
+
+@pytest.mark.parametrize("name", ["Paper2026", "", None, 3])
+def test_unknown_presets_list_the_valid_ones(name):
+    with pytest.raises(ValueError, match="valid presets: sofar, paper"):
+        stack_preset(name)
