@@ -29,11 +29,18 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--out", default="results/figures", help="output folder")
     p.add_argument("--policy", default=None, help="policy checkpoint (default: the shipped one)")
     p.add_argument("--track", default="LagunaSeca")
+    p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
+                   help="controller preset (and which shipped policy is the default)")
     p.add_argument("--episodes", type=int, default=3, help="episodes per rho")
     p.add_argument("--rhos", nargs="+", type=float, default=[0.3])
     p.add_argument("--duration", type=float, default=ev.DEFAULT_DURATION, help="episode horizon [s]")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=None)
+    p.add_argument("--backend", default="local", choices=("local", "ray"),
+                   help="local: a process pool on this machine; ray: Ray actors (pip install \"sofar[ray]\")")
+    p.add_argument("--address", default=None,
+                   help="with --backend ray: 'auto' or HOST:6379 joins a running Ray cluster (the package must be "
+                        "installed on every node); default: start a local Ray instance with --workers CPUs")
     p.add_argument("--max-distance", type=float, default=100.0, help="x range of the distance plot [m]")
     p.add_argument("--log-level", default="WARNING")
     return p.parse_args(argv)
@@ -46,15 +53,20 @@ def main(argv=None) -> int:
     if args.trace:
         trace_path = Path(args.trace)
     else:
-        policy = ev.resolve_policy_path(args.policy)
+        policy = ev.resolve_policy_path(args.policy, stack=args.stack)
         if policy is None:
             print("error: no adaptive policy to record (train one or pass --policy PATH)", file=sys.stderr)
             return 2
         strategies = [ev.Strategy.adaptive(policy)]
         tasks = ev.table1_tasks(strategies, [args.track], args.rhos, args.episodes, args.seed, args.duration,
-                                trace=True)
+                                trace=True, stack=args.stack)
         trace_path = out / "trace.csv"
-        stats = ev.run_sweep(tasks, out / "episodes.csv", workers=args.workers, trace_path=trace_path)
+        try:
+            stats = ev.run_sweep(tasks, out / "episodes.csv", workers=args.workers, trace_path=trace_path,
+                                 backend=args.backend, address=args.address)
+        except ImportError as exc:  # --backend ray without Ray
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
         if stats.failed:
             print(f"warning: {stats.failed} episodes failed", file=sys.stderr)
     trace = ev.read_trace_csv(trace_path, strategy=args.strategy)

@@ -4,6 +4,7 @@
     python eval/table.py --quick                 # smoke test: 2 circuits, 1 rho, 1 episode, 10 s
     python eval/table.py --miqp-ablation         # Table II: Laguna Seca with / without the MIQP layer
     python eval/table.py --sb3 runs/ppo/model.zip --workers 2 --out results/
+    python eval/table.py --backend ray [--address auto]   # episodes on Ray (local instance or a cluster)
 
 Results (per-episode CSV, Markdown table) go to --out; rerunning the same command
 skips the episodes already in the CSV. The logic lives in sofar_agents.evaluation
@@ -24,6 +25,11 @@ def parse_args(argv=None) -> argparse.Namespace:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default=None, help="output folder (default results/, or results/quick with --quick)")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: os.cpu_count())")
+    p.add_argument("--backend", default="local", choices=("local", "ray"),
+                   help="local: a process pool on this machine; ray: Ray actors (pip install \"sofar[ray]\")")
+    p.add_argument("--address", default=None,
+                   help="with --backend ray: 'auto' or HOST:6379 joins a running Ray cluster (the package must be "
+                        "installed on every node); default: start a local Ray instance with --workers CPUs")
     p.add_argument("--quick", action="store_true",
                    help="smoke test: LagunaSeca + Monza, rho 0.5, 1 episode, 10 s, Adaptive + gamma 0.5 "
                         "(gamma 0.3 + 0.5 without a policy); explicit options override")
@@ -38,6 +44,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help=f"fixed gammas (default {' '.join(f'{g:.2f}' for g in ev.FIXED_GAMMAS)}; Table II: 0.5)")
     p.add_argument("--duration", type=float, default=None,
                    help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
+    p.add_argument("--scenario", default="paper", choices=("paper", "interactive"),
+                   help="world: paper (default) or interactive (opponents that race back, noisy sensing)")
     p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
                    help="controller preset: sofar (default) or paper (the paper's Algorithm 1 as written)")
     p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")
@@ -54,7 +62,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
-    policy = None if args.no_adaptive else ev.resolve_policy_path(args.policy)
+    policy = None if args.no_adaptive else ev.resolve_policy_path(args.policy, stack=args.stack, scenario=args.scenario)
     if args.miqp_ablation:
         gammas = args.gammas or [0.5]
         episodes = args.episodes or (1 if args.quick else 10)
@@ -67,8 +75,8 @@ def main(argv=None) -> int:
     duration = args.duration or (10.0 if args.quick else ev.DEFAULT_DURATION)
     out = args.out or ("results/quick" if args.quick else "results")
     strategies = ev.build_strategies(gammas, policy=policy, sb3=args.sb3, adaptive=policy is not None)
-    common = dict(stack=args.stack, base_seed=args.seed, duration=duration, workers=args.workers,
-                  progress=not args.no_progress)
+    common = dict(stack=args.stack, scenario=args.scenario, base_seed=args.seed, duration=duration, workers=args.workers,
+                  progress=not args.no_progress, backend=args.backend, address=args.address)
     try:
         if args.miqp_ablation:
             report = ev.run_miqp_ablation(strategies, out, episodes=episodes, rhos=rhos, **common)
@@ -78,6 +86,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished episodes are in {out}; rerun the same command to resume", file=sys.stderr)
         return 130
+    except ImportError as exc:  # --backend ray without Ray
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     print(report.markdown)
     st = report.stats
     if st.completed:

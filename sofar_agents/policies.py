@@ -61,6 +61,7 @@ class PASTAPolicy:
                  objective_names: Any = None) -> None:
         self.obs_dim = int(obs_dim)
         self.path = Path(path) if path is not None else None
+        self._where = f"{self.path}: " if self.path is not None else ""
         w0, b0 = layers[0]
         self.n_objectives = w0.shape[1] - self.obs_dim
         self.objective_names = tuple(objective_names) if objective_names is not None else None
@@ -71,14 +72,24 @@ class PASTAPolicy:
                       for w, b in layers[1:]]
         self.action_low = np.asarray(action_low, dtype=np.float32)
         self.action_high = np.asarray(action_high, dtype=np.float32)
+        if not (np.all(np.isfinite(self.action_low)) and np.all(np.isfinite(self.action_high))
+                and np.all(self.action_low < self.action_high)):
+            raise ValueError(f"{self._where}action_low {action_low} and action_high {action_high} must be finite "
+                             "with action_low < action_high")
         self._scale = self.action_high - self.action_low
         self.set_preference(preference)
 
     def set_preference(self, preference: Any) -> None:
         """Change the preference w (normalised to sum 1) and refresh the cached bias."""
-        w = np.asarray(preference, dtype=np.float64).reshape(-1)
-        if w.shape != (self.n_objectives,) or np.any(w < 0) or w.sum() <= 0:
-            raise ValueError(f"preference must be {self.n_objectives} non-negative weights, got {preference}")
+        try:
+            w = np.asarray(preference, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{self._where}preference must be {self.n_objectives} numbers, "
+                             f"got {preference!r}") from err
+        if (w.shape != (self.n_objectives,) or not np.all(np.isfinite(w)) or np.any(w < 0)
+                or not (np.isfinite(w.sum()) and w.sum() > 0)):
+            raise ValueError(f"{self._where}preference must be {self.n_objectives} finite non-negative weights "
+                             f"with a positive sum, got {preference}")
         self.preference = (w / w.sum()).astype(np.float32)
         self._b0_eff = (self._b0 + self._w0_pref @ self.preference).astype(np.float32)
 
@@ -111,8 +122,10 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
 
     Raises:
         FileNotFoundError: a checkpoint file is missing.
-        ValueError: wrong format version, observation size or tensor shapes (the
-            message names the file and the mismatch).
+        ValueError: wrong format version, observation size or tensor shapes, NaN/inf
+            weights, non-finite or inverted action bounds, a preference of the wrong
+            length or without a positive finite sum (the message names the file and
+            the field).
     """
     meta, json_path, pt_path = read_checkpoint_metadata(path)
     if obs_dim is not None and meta["obs_dim"] != obs_dim:
@@ -124,20 +137,35 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
                        objective_names=meta.get("objective_names"))
 
 
-def default_policy_path() -> Path:
-    """Path of the PASTA policy shipped with the package (trained on Laguna Seca).
+SHIPPED_POLICIES: dict[tuple[str, str], str] = {
+    ("sofar", "paper"): "pasta_lagunaseca.json",
+    ("paper", "paper"): "pasta_lagunaseca_paper.json",
+}
+"""The shipped PASTA policies, by (controller preset, world scenario): all trained on Laguna Seca only."""
 
-    Raises ``FileNotFoundError`` (with instructions) when it has not been trained yet.
+
+def default_policy_path(stack: str = "sofar", scenario: str = "paper") -> Path:
+    """Path of the PASTA policy shipped for a controller preset and a world (trained on Laguna Seca).
+
+    ``stack="sofar"`` (default): trained with the default controller; ``stack="paper"``: trained with
+    the paper's Algorithm 1 as written (``gym.make(..., stack="paper")``). Raises ``ValueError`` for a
+    combination without a shipped policy and ``FileNotFoundError`` (with instructions) when its files
+    are missing.
     """
     from importlib.resources import files
 
-    path = Path(str(files("sofar_agents") / "checkpoints" / "pasta_lagunaseca.json"))
+    key = (str(stack).lower(), str(scenario).lower())
+    if key not in SHIPPED_POLICIES:
+        have = ", ".join(f"stack={a!r}, scenario={b!r}" for a, b in SHIPPED_POLICIES)
+        raise ValueError(f"no shipped PASTA policy for stack={stack!r}, scenario={scenario!r}; shipped: {have}")
+    name = SHIPPED_POLICIES[key]
+    path = Path(str(files("sofar_agents") / "checkpoints" / name))
     if not path.is_file():
         raise FileNotFoundError(
             f"no packaged PASTA policy at {path}. Train one with "
             "`python train/pasta.py --out runs/pasta` and copy runs/pasta/pasta_final.json and "
-            "runs/pasta/pasta_final.pt to sofar_agents/checkpoints/ as pasta_lagunaseca.json and "
-            "pasta_lagunaseca.pt (keep the 'weights_file' entry of the JSON in step), or use "
+            f"runs/pasta/pasta_final.pt to sofar_agents/checkpoints/ as {name} and "
+            f"{name[:-5]}.pt (keep the 'weights_file' entry of the JSON in step), or use "
             "FixedGammaPolicy(0.5) for a fixed-gamma controller"
         )
     return path

@@ -9,6 +9,8 @@ mapping into one, validating as it goes:
 * top-level keys are the fields of :class:`EnvConfig` plus the shortcuts
   ``n_opponents``, ``offsets``, ``rho`` (into ``race.opponents``) and
   ``speed_factor``, ``use_miqp`` (into ``stack``);
+* ``scenario`` names the world, ``"paper"`` (default) or ``"interactive"`` (see
+  :mod:`sofar_env.scenarios`); its overrides apply first, the other keys on top;
 * ``stack`` may also name a controller preset, ``"sofar"`` (the default) or
   ``"paper"`` (the paper's Algorithm 1 as written; see
   :func:`~sofar_env.stack.stack_preset`); the other keys apply on top of it;
@@ -101,6 +103,9 @@ def _default_stack_config():
 class EnvConfig:
     """Everything a SOfAR environment is built from."""
 
+    scenario: str = "paper"
+    """The world (:mod:`sofar_env.scenarios`): ``"paper"`` or ``"interactive"``. Set through the ``scenario``
+    key, which applies the scenario's overrides before the other keys."""
     track: str = "LagunaSeca"
     """Circuit name (``LagunaSeca``, ``Monza``, ``Indianapolis``, ``Kentucky``, or an alias / folder path)."""
     decision_interval: int = 1
@@ -203,6 +208,15 @@ def make_env_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwarg
     else:
         raise ConfigError(f"config must be an EnvConfig or a mapping, got {type(config).__name__}")
     items.update(kwargs)
+    if "scenario" in items:
+        from .scenarios import scenario_overrides
+
+        name = items.pop("scenario")
+        try:
+            overrides = scenario_overrides(name)
+        except ValueError as exc:
+            raise ConfigError(f"scenario: {exc}") from None
+        base = apply_overrides(base, {**overrides, "scenario": name.strip().lower()})
     if isinstance(items.get("stack"), str):
         from .stack import stack_preset
 

@@ -189,6 +189,12 @@ class ControlledRace:
         self.outputs: list = [None] * self.n_cars
         """Each car's controller output of its last control step (MPC prediction, MIQP plan), for rendering."""
         self._opponents: list[np.ndarray] = [np.zeros((0, 3))] * self.n_cars
+        self._sensed: list[np.ndarray] = self._opponents
+        """What each car's controller and observation see of its opponents (without a sensor: the same list
+        as the true rows)."""
+        self._sensed_ids: list[np.ndarray] = [np.zeros(0, int)] * self.n_cars
+        self.sensors: list | None = None
+        """One :class:`~sofar_env.sensing.Sensor` per car when ``race.sensor.enabled``."""
 
     # ------------------------------------------------------------------ building
     def build(self) -> None:
@@ -205,6 +211,11 @@ class ControlledRace:
         else:
             configs = [apply_overrides(cfg.stack, {"speed_factor": sf}) for sf in self.speed_factors]
         self.stacks = [OvertakingStack(self.track, c, vehicle=cfg.race.vehicle) for c in configs]
+        if cfg.race.sensor.enabled:
+            from .sensing import Sensor
+
+            self.sensors = [Sensor(cfg.race.sensor, self.track.length, cfg.race.dt) for _ in range(self.n_cars)]
+            self._sensed = [np.zeros((0, 3)) for _ in range(self.n_cars)]
 
     @property
     def built(self) -> bool:
@@ -223,6 +234,9 @@ class ControlledRace:
         self.race.reset(rng, **race_options)
         for stack in self.stacks:
             stack.reset()
+        if self.sensors is not None:
+            for sensor in self.sensors:
+                sensor.reset(rng)
         self.live = list(range(self.n_cars))
         self.previous_gamma[:] = self.config.initial_gamma
         self.outputs = [None] * self.n_cars
@@ -230,11 +244,12 @@ class ControlledRace:
         out = {}
         for i in self.live:
             opp = self._opponents[i] = self.race.opponent_frenet(i)
+            self._sense(i)
             tally = DecisionTally()
             tally.min_h = min_barrier(self.track, self.race.frenet[i], opp, bp)
             tally.gamma = self.previous_gamma[i]
             tally.nearest = self.race.nearest_distance(i)
-            out[i] = CarStep(observe(self.race, i, opp), None, False, False, self._info(tally, i))
+            out[i] = CarStep(observe(self.race, i, self._sensed[i]), None, False, False, self._info(tally, i))
         return out
 
     def step(self, gammas: dict[int, float]) -> dict[int, CarStep]:
@@ -251,12 +266,13 @@ class ControlledRace:
             for i in running:
                 gamma = gammas[i]
                 assert GAMMA_MIN <= gamma <= GAMMA_MAX, "gamma is validated by parse_gamma at the API boundary"
-                outs[i] = self.stacks[i].step(race.frenet[i], self._opponents[i], gamma)
+                outs[i] = self.stacks[i].step(race.frenet[i], self._sensed[i], gamma)
                 controls[i] = outs[i].u
             profile = {i: track.speed(float(race.frenet[i, 0])) for i in running}
             events = race.step(controls)
             for i in range(self.n_cars):
                 self._opponents[i] = race.opponent_frenet(i)
+                self._sense(i)
             for i in running:
                 tallies[i].add(race, i, outs[i], events[i], self._opponents[i], profile[i],
                                self.previous_gamma[i], bp)
@@ -270,6 +286,7 @@ class ControlledRace:
             if crashed and self.remove_crashed:  # the others no longer see the crashed cars
                 for i in range(self.n_cars):
                     self._opponents[i] = race.opponent_frenet(i)
+                    self._sense(i, again=True)
             if not running or race.truncated:
                 break
         truncate_all = race.truncated
@@ -281,12 +298,32 @@ class ControlledRace:
             info = self._info(tally, i)
             if terminated or truncated:
                 info["is_success"] = not terminated
-            out[i] = CarStep(observe(race, i, self._opponents[i]), self._reward(tally.vector), terminated,
+            out[i] = CarStep(observe(race, i, self._sensed[i]), self._reward(tally.vector), terminated,
                              truncated, info)
         self.live = [i for i in live if not (out[i].terminated or out[i].truncated)]
         return out
 
     # ------------------------------------------------------------------ per car
+    def _sense(self, car: int, again: bool = False) -> None:
+        """Update what car ``car`` sees of its opponents: the sensor's (s, n, v) estimates of the true rows.
+
+        Without a sensor the seen rows are the true rows (the same list), and this does nothing.
+        Collisions, track limits, overtakes and the barrier-margin reward are always judged on the
+        true state. ``again``: the field changed within the same control step (a car left the race);
+        the sensor is not advanced a second time, the rows of the cars that left are dropped.
+        """
+        if self.sensors is None:
+            return
+        if again:
+            keep = np.isin(self._sensed_ids[car], self.race.opponent_ids(car))
+            self._sensed[car] = self._sensed[car][keep]
+            self._sensed_ids[car] = self._sensed_ids[car][keep]
+            return
+        ids = self.race.opponent_ids(car)
+        rows = self.sensors[car].measure(self._opponents[car], ids)
+        self._sensed[car] = np.ascontiguousarray(rows[:, :3])
+        self._sensed_ids[car] = ids
+
     def _reward(self, vector: np.ndarray):
         if self.config.reward_mode == "vector":
             return vector.astype(np.float32)

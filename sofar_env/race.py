@@ -31,8 +31,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.ndimage import minimum_filter1d
 
+from .dynamics import AV21_DYNAMIC, DynamicParams, DynamicPlant
 from .geometry import footprint_corner_list, footprint_corners, footprint_radius, rectangles_intersect
 from .opponents import OpponentConfig, Opponents
+from .sensing import SensorConfig
 from .vehicle import AV21, Plant, VehicleParams
 
 __all__ = ["RaceConfig", "CarEvents", "Race"]
@@ -42,6 +44,10 @@ _EDGE_WINDOW = 15.0
 (within ~2.6 m of the reference point) projects within it unless 1 - kappa n < 0.2."""
 
 
+PLANTS = ("kinematic", "dynamic")
+"""Plant models of :attr:`RaceConfig.plant`."""
+START_EDGE_MARGIN = 0.5
+"""Distance kept between a controlled car's footprint and the track edge at the start [m]."""
 MAX_START_SPEED_FACTOR = 1.1
 """A start speed may exceed the circuit's fastest speed-profile value by at most this factor."""
 
@@ -74,6 +80,14 @@ class RaceConfig:
     """Parameters of every car."""
     opponents: OpponentConfig = field(default_factory=OpponentConfig)
     """The scripted opponent field."""
+    plant: str = "kinematic"
+    """``"kinematic"``: the bicycle with slip of :mod:`sofar_env.vehicle` (the MPC's own model, the paper's
+    world); ``"dynamic"``: the single-track model with Pacejka tyres and actuator lags of
+    :mod:`sofar_env.dynamics`, with a friction coefficient mu drawn per episode in ``dynamic.mu_range``."""
+    dynamic: DynamicParams = AV21_DYNAMIC
+    """Parameters of the dynamic plant (used with ``plant="dynamic"``)."""
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    """How the controllers and the observation see the opponents (off: perfect sensing)."""
 
     def __post_init__(self) -> None:
         for name in ("dt", "duration"):
@@ -94,6 +108,8 @@ class RaceConfig:
                              f"speed profile), got {self.start_speed_fraction!r}")
         if not (_is_real(self.car_spacing) and math.isfinite(self.car_spacing) and self.car_spacing > 0):
             raise ValueError(f"race.car_spacing must be a finite number > 0 [m], got {self.car_spacing!r}")
+        if self.plant not in PLANTS:
+            raise ValueError(f"race.plant must be one of {PLANTS}, got {self.plant!r}")
         if not self.car_offsets or not all(_is_real(o) and math.isfinite(o) for o in self.car_offsets):
             raise ValueError(f"race.car_offsets must be finite numbers [m], got {self.car_offsets!r}")
 
@@ -122,8 +138,16 @@ class Race:
         if n_cars < 1:
             raise ValueError("n_cars must be >= 1")
         self.n_cars = int(n_cars)
-        self.plant = Plant(self.config.vehicle, self.config.dt, self.config.plant_substeps)
-        self.opponents = Opponents(track, self.config.opponents)
+        self.dynamic = self.config.plant == "dynamic"
+        if self.dynamic:
+            self.plant = DynamicPlant(self.config.dynamic, self.config.vehicle, self.config.dt)
+        else:
+            self.plant = Plant(self.config.vehicle, self.config.dt, self.config.plant_substeps)
+        self.plant_states = np.zeros((self.n_cars, self.plant.state_size if self.dynamic else 5))
+        """Full plant state of each car (the dynamic plant has 9 states; the kinematic one is ``states``)."""
+        self.mu = 1.0
+        """Friction coefficient of the episode (dynamic plant) [-]."""
+        self.opponents = Opponents(track, self.config.opponents, self.config.vehicle)
         self.states = np.zeros((self.n_cars, 5))
         """Cartesian state (x, y, psi, v, delta) of each controlled car."""
         self.frenet = np.zeros((self.n_cars, 5))
@@ -224,7 +248,7 @@ class Race:
         self.overtakes[:] = 0
         for k in range(self.n_cars):
             s_k = float(self.track.wrap(start_s - k * cfg.car_spacing))
-            n_k = 0.0 if k == 0 else float(cfg.car_offsets[(k - 1) % len(cfg.car_offsets)])
+            n_k = 0.0 if k == 0 else self._start_offset(s_k, float(cfg.car_offsets[(k - 1) % len(cfg.car_offsets)]))
             v_k = float(start_speed) if start_speed is not None else frac * float(self.track.speed(s_k))
             if not math.isfinite(v_k) or v_k < 0:
                 raise ValueError(f"start speed must be finite and >= 0, got {v_k}")
@@ -232,12 +256,29 @@ class Race:
             psi = float(self.track.heading(s_k))
             self.states[k] = (float(x), float(y), psi, v_k, 0.0)
             self.frenet[k] = (s_k, n_k, 0.0, v_k, 0.0)
+            if self.dynamic:
+                self.plant_states[k] = self.plant.initial_state(float(x), float(y), psi, v_k, 0.0)
         if n_opponents and self.n_cars > 1:
             raise ValueError("scripted opponents are supported in single-car races only")
-        self.opponents.reset(self.frenet[0, 0], rho=rho, n_opponents=0 if self.n_cars > 1 else n_opponents)
+        if self.dynamic:  # drawn only in this world: the paper world's random stream is unchanged
+            self.mu = float(rng.uniform(*self.config.dynamic.mu_range))
+        self.opponents.reset(self.frenet[0, 0], rho=rho, n_opponents=0 if self.n_cars > 1 else n_opponents,
+                             rng=rng if self.config.opponents.interactive else None)
         gaps = self.track.gap(self.frenet[None, :, 0], self.frenet[:, None, 0])  # [i, j] = s_j - s_i
         self._car_rel = np.asarray(gaps, float).reshape(self.n_cars, self.n_cars)
         self._car_ahead = self._car_rel > 0.0
+
+    def _start_offset(self, s: float, n: float) -> float:
+        """A controlled car's lateral start offset ``n`` moved inside the edges where needed [m].
+
+        The footprint (aligned with the raceline) keeps ``START_EDGE_MARGIN`` from the narrowest edge
+        within +-15 m of ``s``, so no car starts off the track, whatever the start arc length.
+        """
+        i = bisect.bisect_right(self._samples, s) - 1
+        half = 0.5 * self.config.vehicle.width + START_EDGE_MARGIN
+        hi = max(self._wl_min[i] - half, 0.0)
+        lo = min(half - self._wr_min[i], 0.0)
+        return min(max(n, lo), hi)
 
     # ------------------------------------------------------------------ queries
     def opponent_frenet(self, car: int = 0) -> np.ndarray:
@@ -259,6 +300,15 @@ class Race:
         if len(rows) == 1:
             return rows[0]
         return np.concatenate(rows) if rows else np.zeros((0, 3))
+
+    def opponent_ids(self, car: int = 0) -> np.ndarray:
+        """Stable identities of the rows of :meth:`opponent_frenet` (scripted opponents >= 0, whose id
+        changes at a respawn; controlled car j: -1 - j)."""
+        ids = [np.asarray(self.opponents.ids, int)] if self.opponents.count else []
+        others = [j for j in range(self.n_cars) if j != car and self.active[j]]
+        if others:
+            ids.append(-1 - np.asarray(others, int))
+        return np.concatenate(ids) if ids else np.zeros(0, int)
 
     def obstacle_poses(self, car: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Reference-point positions and yaws (x, y, psi) of everything car ``car`` can collide with."""
@@ -302,9 +352,18 @@ class Race:
         if not all(math.isfinite(a) and math.isfinite(dd) for a, dd in (rows[k] for k in active)):
             raise ValueError(f"non-finite control {rows}")
         dt = self.config.dt
-        for k in active:
-            self.states[k] = self.plant.step(self.states[k], u[k])
-        self.opponents.advance(dt)
+        if self.dynamic:
+            for k in active:
+                self.plant_states[k] = self.plant.step(self.plant_states[k], u[k], self.mu)
+                self.states[k] = self.plant.kinematic_view(self.plant_states[k])
+        else:
+            for k in active:
+                self.states[k] = self.plant.step(self.states[k], u[k])
+        if self.config.opponents.interactive and self.n_cars == 1:
+            s0, n0, e0, v0, _ = self.frenet[0].tolist()  # the ego at the start of the step
+            self.opponents.advance(dt, (s0, n0, v0 * math.cos(e0) / (1.0 - float(self.track.curvature(s0)) * n0)))
+        else:
+            self.opponents.advance(dt)
         self.time += dt
         self.steps += 1
         events = [CarEvents() for _ in range(self.n_cars)]

@@ -3,6 +3,8 @@
 Usage (from the repository root, with the package installed)::
 
     python train/pasta.py                                   # Laguna Seca, defaults
+    python train/pasta.py --stack paper                     # with the paper's Algorithm 1 as controller
+    python train/pasta.py --scenario interactive            # in the interactive world
     python train/pasta.py --n-envs 2 --total-steps 800000 --out runs/pasta_ls
     python train/pasta.py --resume runs/pasta_ls/pasta_final.json --total-steps 1200000
     tensorboard --logdir runs
@@ -55,6 +57,10 @@ class Args:
     """Gymnasium id of the training environment (``module:id`` imports ``module`` first)."""
     env_kwargs: str = "{}"
     """Extra keyword arguments of ``gymnasium.make`` as a JSON object."""
+    stack: str | None = None
+    """Controller preset, ``sofar`` or ``paper`` (the paper's Algorithm 1); passed as the ``stack`` key."""
+    scenario: str | None = None
+    """World, ``paper`` or ``interactive``; passed as the ``scenario`` key."""
     decision_interval: int | None = None
     """If set, passed to the environment as ``decision_interval`` (simulator steps per action)."""
     total_steps: int = 1_000_000
@@ -159,10 +165,19 @@ def make_env(env_id: str, env_kwargs: dict[str, Any], args: Args) -> Any:
     return thunk
 
 
-def make_vec_env(args: Args) -> gym.vector.VectorEnv:
+def env_kwargs_of(args: Args) -> dict[str, Any]:
+    """The keyword arguments of ``gymnasium.make``: ``--env-kwargs`` plus ``--stack`` / ``--scenario``."""
     env_kwargs = json.loads(args.env_kwargs)
     if not isinstance(env_kwargs, dict):
         raise SystemExit("--env-kwargs must be a JSON object")
+    for key in ("stack", "scenario"):
+        if getattr(args, key) is not None:
+            env_kwargs[key] = getattr(args, key)
+    return env_kwargs
+
+
+def make_vec_env(args: Args) -> gym.vector.VectorEnv:
+    env_kwargs = env_kwargs_of(args)
     if args.decision_interval is not None:
         env_kwargs["decision_interval"] = args.decision_interval
     fns = [make_env(args.env_id, env_kwargs, args) for _ in range(args.n_envs)]
@@ -272,7 +287,7 @@ def main(argv: list[str] | None = None) -> Path:
         "code_commit": _code_commit(),
         "seed": args.seed,
         "env_id": args.env_id,
-        "env_kwargs": json.loads(args.env_kwargs),
+        "env_kwargs": env_kwargs_of(args),
         "decision_interval": args.decision_interval,
         "n_envs": args.n_envs,
         "rho": args.rho_values if args.rho_values is not None else [args.rho_min, args.rho_max],

@@ -9,6 +9,8 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
   ``run_episode``);
 * :mod:`~sofar_agents.evaluation.sweep`: many episodes over a process pool, resumed from
   the CSV (``run_sweep``);
+* :mod:`~sofar_agents.evaluation.ray_backend`: the same episodes on Ray actors, locally or on
+  a cluster (``run_sweep(..., backend="ray", address=...)``; needs ``pip install "sofar[ray]"``);
 * :mod:`~sofar_agents.evaluation.results`: the episode record and the episode/trace CSV
   files (columns, reading, appending, resume keys);
 * :mod:`~sofar_agents.evaluation.tables`: totals per group and the Markdown of Tables I/II;

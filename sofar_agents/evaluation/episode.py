@@ -86,13 +86,14 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
         mean_gamma=gamma_sum / max(steps, 1), mpc_failures=int(_info_scalar(info, "mpc_failures")),
         miqp_failures=int(_info_scalar(info, "miqp_failures")), wall_time=time.perf_counter() - t0,
         episode=int(task.episode), use_miqp=bool(task.use_miqp), duration=float(task.duration),
-        policy_id=task.strategy.policy_id, stack=task.stack,
+        policy_id=task.strategy.policy_id, stack=task.stack, scenario=task.scenario,
         n_opponents="" if task.n_opponents is None else int(task.n_opponents),
     )
     return result, trace
 
 
 def make_env(track: str, use_miqp: bool = True, duration: float = DEFAULT_DURATION, stack: str = "sofar",
+             scenario: str = "paper",
              **kwargs):
     """``gymnasium.make("SOfAR-<track>-v0")`` with the MIQP setting, the controller preset and the horizon."""
     import gymnasium as gym
@@ -104,4 +105,5 @@ def make_env(track: str, use_miqp: bool = True, duration: float = DEFAULT_DURATI
     # the registered ids cap episodes at 2000 steps (200 s); follow the requested horizon instead
     steps = int(math.ceil(float(duration) / RaceConfig().dt - 1e-9)) + 1
     return gym.make(f"SOfAR-{track}-v0", max_episode_steps=steps, use_miqp=bool(use_miqp),
-                    config={"race": {"duration": float(duration)}, "stack": stack}, **kwargs)
+                    config={"race": {"duration": float(duration)}, "stack": stack, "scenario": scenario},
+                    **kwargs)

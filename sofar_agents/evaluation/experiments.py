@@ -44,22 +44,26 @@ def _stats_text(stats: SweepStats) -> str:
 def run_table1(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "results", *,
                tracks: Sequence[str] = TRACKS, rhos: Sequence[float] = RHOS, episodes: int = 5, base_seed: int = 0,
                duration: float = DEFAULT_DURATION, workers: int | None = None, trace: bool = False,
-               progress: bool = True, prefix: str = "table1", stack: str = "sofar") -> TableReport:
+               progress: bool = True, prefix: str = "table1", stack: str = "sofar", scenario: str = "paper",
+               backend: str = "local",
+               address: str | None = None) -> TableReport:
     """Table I: run (or resume) the sweep into ``out_dir/<prefix>_episodes.csv``, write ``<prefix>.md``.
 
+    ``workers``, ``backend`` and ``address`` go to :func:`~sofar_agents.evaluation.sweep.run_sweep`.
     With ``trace``, the per-step trace of the non-fixed strategies goes to ``<prefix>_trace.csv``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     tasks = table1_tasks(strategies, tracks, rhos, episodes, base_seed, duration,
-                         trace=(lambda s: s.kind != "fixed") if trace else False, stack=stack)
+                         trace=(lambda s: s.kind != "fixed") if trace else False, stack=stack,
+                         scenario=scenario)
     csv_path = out / f"{prefix}_episodes.csv"
     stats = run_sweep(tasks, csv_path, workers=workers, progress=progress,
-                      trace_path=out / f"{prefix}_trace.csv" if trace else None)
+                      trace_path=out / f"{prefix}_trace.csv" if trace else None, backend=backend, address=address)
     rows = select_rows(read_episode_csv(csv_path), tasks)
     settings = {"tracks": ", ".join(tracks), "rho": ", ".join(_fmt_float(r) for r in rhos),
                 "episodes per (track, rho)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed,
-                "controller": stack}
+                "controller": stack, "world": scenario}
     parts = [_run_header("Table I: performance per circuit", settings),
              "Per circuit and metric, **bold** is the best and <u>underlined</u> the second best "
              "(success rate, simulated time, laps, overtakes: higher is better). Slack: percentage of control "
@@ -82,17 +86,23 @@ def run_table1(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "res
 def run_miqp_ablation(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "results", *,
                       episodes: int = 10, rhos: Sequence[float] = RHOS, track: str = "LagunaSeca",
                       base_seed: int = 0, duration: float = DEFAULT_DURATION, workers: int | None = None,
-                      progress: bool = True, prefix: str = "table2", stack: str = "sofar") -> TableReport:
-    """Table II: ``track`` with and without the MIQP layer, into ``out_dir/<prefix>_episodes.csv`` and ``.md``."""
+                      progress: bool = True, prefix: str = "table2", stack: str = "sofar",
+                      scenario: str = "paper", backend: str = "local",
+                      address: str | None = None) -> TableReport:
+    """Table II: ``track`` with and without the MIQP layer, into ``out_dir/<prefix>_episodes.csv`` and ``.md``.
+
+    ``workers``, ``backend`` and ``address`` go to :func:`~sofar_agents.evaluation.sweep.run_sweep`.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    tasks = miqp_ablation_tasks(strategies, episodes, rhos, track, base_seed, duration, stack=stack)
+    tasks = miqp_ablation_tasks(strategies, episodes, rhos, track, base_seed, duration, stack=stack,
+                                scenario=scenario)
     csv_path = out / f"{prefix}_episodes.csv"
-    stats = run_sweep(tasks, csv_path, workers=workers, progress=progress)
+    stats = run_sweep(tasks, csv_path, workers=workers, progress=progress, backend=backend, address=address)
     rows = select_rows(read_episode_csv(csv_path), tasks)
     settings = {"track": track, "rho cycled over": ", ".join(_fmt_float(r) for r in rhos),
                 "episodes per (setting, strategy)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed,
-                "controller": stack}
+                "controller": stack, "world": scenario}
     parts = [_run_header("Table II: with and without the MIQP layer", settings),
              "**Bold** is the best and <u>underlined</u> the second best over the four rows (as in the paper).\n",
              format_table2(rows, strategies)]

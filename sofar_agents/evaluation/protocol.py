@@ -146,25 +146,27 @@ class EpisodeTask:
     """Opponent count (None: the environment's default, 4)."""
     stack: str = "sofar"
     """Controller preset (``"sofar"`` or ``"paper"``, see :func:`sofar_env.stack.stack_preset`)."""
+    scenario: str = "paper"
+    """World (``"paper"`` or ``"interactive"``, see :mod:`sofar_env.scenarios`)."""
     trace: bool = False
     """Record a per-step trace (gamma, nearest opponent, smallest barrier value)."""
 
     @property
     def key(self) -> tuple:
         return _key(self.track, self.strategy.name, self.strategy.policy_id, self.rho, self.seed, self.use_miqp,
-                    self.duration, self.stack, self.n_opponents)
+                    self.duration, self.stack, self.n_opponents, self.scenario)
 
     @property
     def env_key(self) -> tuple:
-        return (self.track, bool(self.use_miqp), float(self.duration), self.stack)
+        return (self.track, bool(self.use_miqp), float(self.duration), self.stack, self.scenario)
 
 
-def _key(track, strategy, policy_id, rho, seed, use_miqp, duration, stack, n_opponents) -> tuple:
+def _key(track, strategy, policy_id, rho, seed, use_miqp, duration, stack, n_opponents, scenario="paper") -> tuple:
     """The resume key: every setting that changes an episode (rows of older files: stack "sofar", the
     default opponent count)."""
     n_opp = "" if n_opponents in (None, "") else str(int(float(n_opponents)))
     return (str(track), str(strategy), str(policy_id or ""), _fmt_float(rho), int(seed), bool(use_miqp),
-            _fmt_float(duration), str(stack or "sofar"), n_opp)
+            _fmt_float(duration), str(stack or "sofar"), n_opp, str(scenario or "paper"))
 
 
 def episode_seed(base_seed: int, track: str, rho: float, episode: int) -> int:
@@ -180,8 +182,9 @@ def episode_seed(base_seed: int, track: str, rho: float, episode: int) -> int:
 
 
 def resolve_policy_path(path: str | os.PathLike | None = None,
-                        fallback: str = "the Adaptive row is skipped") -> Path | None:
-    """``path`` if given (must exist), else the shipped policy if it exists, else None.
+                        fallback: str = "the Adaptive row is skipped", stack: str = "sofar",
+                        scenario: str = "paper") -> Path | None:
+    """``path`` if given (must exist), else the policy shipped for ``stack`` / ``scenario`` if it exists, else None.
 
     A missing shipped policy gives a warning that ends with ``fallback`` (what happens instead).
     """
@@ -193,7 +196,7 @@ def resolve_policy_path(path: str | os.PathLike | None = None,
     try:
         from sofar_agents import default_policy_path
 
-        p = default_policy_path()
+        p = default_policy_path(stack=stack, scenario=scenario)
     except Exception as exc:  # missing checkpoint may raise
         warnings.warn(f"no shipped adaptive policy: {exc}. So {fallback}.", stacklevel=2)
         return None
@@ -225,7 +228,8 @@ def build_strategies(gammas: Sequence[float] = FIXED_GAMMAS, policy: str | os.Pa
 
 def table1_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS, rhos: Sequence[float] = RHOS,
                  episodes: int = 5, base_seed: int = 0, duration: float = DEFAULT_DURATION,
-                 trace: bool | Callable[[Strategy], bool] = False, stack: str = "sofar") -> list[EpisodeTask]:
+                 trace: bool | Callable[[Strategy], bool] = False, stack: str = "sofar",
+                 scenario: str = "paper") -> list[EpisodeTask]:
     """Every (track, rho, episode, strategy) of Table I, grouped by track so workers reuse environments."""
     tasks = []
     for track in tracks:
@@ -235,13 +239,15 @@ def table1_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS,
                 for strat in strategies:
                     tr = trace(strat) if callable(trace) else bool(trace)
                     tasks.append(EpisodeTask(track, strat, float(rho), e, seed, True, float(duration), stack=stack,
+                                             scenario=scenario,
                                              trace=tr))
     return tasks
 
 
 def miqp_ablation_tasks(strategies: Sequence[Strategy], episodes: int = 10, rhos: Sequence[float] = RHOS,
                         track: str = "LagunaSeca", base_seed: int = 0,
-                        duration: float = DEFAULT_DURATION, stack: str = "sofar") -> list[EpisodeTask]:
+                        duration: float = DEFAULT_DURATION, stack: str = "sofar",
+                        scenario: str = "paper") -> list[EpisodeTask]:
     """Table II: ``episodes`` episodes per (MIQP setting, strategy), rho cycling over ``rhos``.
 
     Episode ``k`` runs at ``rhos[k % len(rhos)]`` with the seed of episode ``k // len(rhos)``
@@ -254,7 +260,8 @@ def miqp_ablation_tasks(strategies: Sequence[Strategy], episodes: int = 10, rhos
             e = k // len(rhos)
             seed = episode_seed(base_seed, track, rho, e)
             for strat in strategies:
-                tasks.append(EpisodeTask(track, strat, rho, e, seed, use_miqp, float(duration), stack=stack))
+                tasks.append(EpisodeTask(track, strat, rho, e, seed, use_miqp, float(duration), stack=stack,
+                                         scenario=scenario))
     return tasks
 
 

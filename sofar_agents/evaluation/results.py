@@ -4,6 +4,11 @@ A sweep appends one row of :data:`EPISODE_COLUMNS` per finished episode (and, wh
 traced, rows of :data:`TRACE_COLUMNS` per control step). Files of an older format
 (without the ``stack`` and ``n_opponents`` columns) are migrated in place on the next
 append; their rows stand for the ``sofar`` controller and the default opponent count.
+A row counts only once its line is complete: the writer ends every row with a newline
+(flushed together with it), so a last line without one was torn by a run killed
+mid-write (a duration ``60`` cut to ``6``, a policy id cut short) and is ignored by
+:func:`read_episode_csv` and dropped when the file is next appended to or migrated;
+the episode is then run again. Files of every format end their rows this way.
 A row's resume key (:func:`_row_key`) equals :attr:`EpisodeTask.key` of the task that
 produced it, so a rerun skips the episodes already in the file.
 """
@@ -11,6 +16,7 @@ produced it, so a rerun skips the episodes already in the file.
 from __future__ import annotations
 
 import csv
+import io
 import logging
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -27,7 +33,7 @@ logger = logging.getLogger(__name__)
 EPISODE_COLUMNS: tuple[str, ...] = (
     "track", "strategy", "rho", "seed", "success", "sim_time", "laps", "overtakes", "collision", "off_track",
     "slack_steps", "steps", "mean_gamma", "mpc_failures", "miqp_failures", "wall_time",
-    "episode", "use_miqp", "duration", "policy_id", "stack", "n_opponents",
+    "episode", "use_miqp", "duration", "policy_id", "stack", "n_opponents", "scenario",
 )
 """Columns of the per-episode CSV (one row per episode)."""
 TRACE_COLUMNS: tuple[str, ...] = (
@@ -61,6 +67,7 @@ class EpisodeResult:
     duration: float = DEFAULT_DURATION
     policy_id: str = ""
     stack: str = "sofar"
+    scenario: str = "paper"
     n_opponents: int | str = ""
     """Opponent count of the episode ("" for the environment's default)."""
 
@@ -100,13 +107,27 @@ def _csv_value(v: Any) -> Any:
     return v
 
 
+def _complete_lines(path: Path) -> str:
+    """The text of ``path`` up to its last newline: a last line without one was torn mid-write."""
+    with open(path, newline="") as f:
+        text = f.read()
+    end = max(text.rfind("\n"), text.rfind("\r")) + 1
+    if end < len(text):
+        logger.warning("%s: ignoring a torn last line (no newline): %r", path, text[end:])
+    return text[:end]
+
+
 def read_episode_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
-    """The rows of a per-episode CSV, typed; incomplete rows (a run killed mid-write) are dropped."""
+    """The rows of a per-episode CSV, typed.
+
+    Incomplete rows (a run killed mid-write) are dropped: a last line without its
+    newline, and rows with missing values.
+    """
     p = Path(path)
     if not p.exists() or p.stat().st_size == 0:
         return []
     rows = []
-    with open(p, newline="") as f:
+    with io.StringIO(_complete_lines(p), newline="") as f:
         reader = csv.DictReader(f)
         missing = [c for c in EPISODE_COLUMNS if c not in (reader.fieldnames or []) and c not in _ADDED_COLUMNS]
         if missing:
@@ -124,7 +145,7 @@ def read_episode_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
     return rows
 
 
-_ADDED_COLUMNS = {"stack": "sofar", "n_opponents": ""}
+_ADDED_COLUMNS = {"stack": "sofar", "n_opponents": "", "scenario": "paper"}
 """Columns added after the first format, with the value that rows of older files stand for."""
 _MAY_BE_EMPTY = {"policy_id", "n_opponents"}
 
@@ -135,7 +156,7 @@ def _is_older_header(header: Sequence[str], columns: Sequence[str]) -> bool:
 
 def _migrate_csv(path: Path, header: Sequence[str], columns: Sequence[str]) -> None:
     """Rewrite an episode CSV of an older format with the current columns (atomically)."""
-    with open(path, newline="") as f:
+    with io.StringIO(_complete_lines(path), newline="") as f:
         rows = [r for r in csv.DictReader(f)]
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", newline="") as f:
@@ -149,6 +170,16 @@ def _migrate_csv(path: Path, header: Sequence[str], columns: Sequence[str]) -> N
     logger.info("%s: added the columns %s (older format)", path, [c for c in columns if c not in header])
 
 
+def _drop_torn_line(path: Path) -> None:
+    """Cut a last line without its newline (a run killed mid-write) off ``path``, in place."""
+    with open(path, "rb+") as f:
+        data = f.read()
+        end = max(data.rfind(b"\n"), data.rfind(b"\r")) + 1
+        if end < len(data):
+            logger.warning("%s: dropping a torn last line (no newline): %r", path, data[end:])
+            f.truncate(end)
+
+
 class _AppendingCSV:
     """A CSV opened for appending: header when new, one flushed row per write."""
 
@@ -157,19 +188,15 @@ class _AppendingCSV:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         new = not self.path.exists() or self.path.stat().st_size == 0
         if not new:
-            with open(self.path, "rb") as f:  # a run killed mid-line leaves no newline: start a fresh line
-                f.seek(-1, os.SEEK_END)
-                needs_newline = f.read(1) not in (b"\n", b"\r")
             with open(self.path, newline="") as f:
                 header = next(csv.reader(f), [])
             if list(header) != list(columns) and _is_older_header(header, columns):
                 _migrate_csv(self.path, header, columns)
-                needs_newline = False
             elif list(header) != list(columns):
                 raise ValueError(f"{self.path} has columns {header}, expected {list(columns)}; use another --out")
+            else:
+                _drop_torn_line(self.path)
         self._f = open(self.path, "a", newline="")
-        if not new and needs_newline:
-            self._f.write("\n")
         self._w = csv.writer(self._f)
         self.columns = tuple(columns)
         if new:
@@ -192,7 +219,7 @@ class _AppendingCSV:
 def _row_key(row: Mapping[str, Any]) -> tuple:
     return _key(row["track"], row["strategy"], row.get("policy_id", ""), row["rho"], row["seed"],
                 _as_bool(row.get("use_miqp", True)), row.get("duration", DEFAULT_DURATION),
-                row.get("stack") or "sofar", row.get("n_opponents"))
+                row.get("stack") or "sofar", row.get("n_opponents"), row.get("scenario") or "paper")
 
 
 def select_rows(rows: Iterable[Mapping[str, Any]], tasks: Sequence[EpisodeTask]) -> list[dict[str, Any]]:
@@ -208,9 +235,12 @@ def select_rows(rows: Iterable[Mapping[str, Any]], tasks: Sequence[EpisodeTask])
 
 
 def read_trace_csv(path: str | os.PathLike, strategy: str | None = None) -> dict[str, np.ndarray]:
-    """gamma and nearest-opponent distance from a trace CSV (optionally one strategy only)."""
+    """gamma and nearest-opponent distance from a trace CSV (optionally one strategy only).
+
+    A torn last line (no newline) is ignored, as in :func:`read_episode_csv`.
+    """
     gam, dist, barrier = [], [], []
-    with open(path, newline="") as f:
+    with io.StringIO(_complete_lines(Path(path)), newline="") as f:
         for row in csv.DictReader(f):
             if strategy is not None and row.get("strategy") != strategy:
                 continue

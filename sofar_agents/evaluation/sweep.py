@@ -1,9 +1,11 @@
-"""Sweeps: run a list of episodes over a process pool, appending each result to a CSV.
+"""Sweeps: run a list of episodes over a process pool (or Ray), appending each result to a CSV.
 
 Workers (spawn context) pull tasks from a queue, build their environments and
 policies lazily and keep them for later episodes of the same track/configuration.
 Each finished episode is appended to the CSV (flushed), and episodes already in the
-CSV are skipped, so an interrupted sweep resumes where it stopped.
+CSV are skipped, so an interrupted sweep resumes where it stopped. With
+``backend="ray"`` the episodes run in Ray actors instead (``ray_backend``); the CSV is
+written here, by the driver, in the same way.
 """
 
 from __future__ import annotations
@@ -73,7 +75,8 @@ class _EpisodeRunner:
     def run(self, task: EpisodeTask) -> tuple[EpisodeResult, list[tuple]]:
         env = self.envs.get(task.env_key)
         if env is None:
-            env = self.envs[task.env_key] = make_env(task.track, task.use_miqp, task.duration, task.stack)
+            env = self.envs[task.env_key] = make_env(task.track, task.use_miqp, task.duration, task.stack,
+                                                                     task.scenario)
         policy = self.policies.get(task.strategy)
         if policy is None:
             policy = self.policies[task.strategy] = task.strategy.build()
@@ -111,12 +114,24 @@ def _worker_loop(tasks, results) -> int:
 
 
 def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, workers: int | None = None,
-              trace_path: str | os.PathLike | None = None, progress: bool = True) -> SweepStats:
+              trace_path: str | os.PathLike | None = None, progress: bool = True, backend: str = "local",
+              address: str | None = None) -> SweepStats:
     """Run every task not yet in ``csv_path``, appending one row per finished episode.
 
-    ``workers`` processes (default ``os.cpu_count()``; 1 runs in this process). A failed episode
-    is logged and left out of the CSV, so the next run retries it.
+    ``backend="local"``: ``workers`` processes (default ``os.cpu_count()``; 1 runs in this
+    process). ``backend="ray"``: ``workers`` Ray actors (default: the CPUs of the Ray instance)
+    on a local Ray instance, or on the cluster at ``address`` (``"auto"`` or ``"HOST:6379"``);
+    see :mod:`~sofar_agents.evaluation.ray_backend`. Either way only this process writes the
+    CSV. A failed episode is logged and left out of the CSV, so the next run retries it.
     """
+    if backend not in ("local", "ray"):
+        raise ValueError(f"unknown sweep backend {backend!r} (expected 'local' or 'ray')")
+    if address is not None and backend != "ray":
+        raise ValueError("address (a Ray cluster) needs backend='ray'")
+    if backend == "ray":
+        from sofar_agents.evaluation import ray_backend
+
+        ray_backend.require_ray()  # fail before reading anything if Ray is missing
     t_start = time.perf_counter()
     done = {_row_key(r) for r in read_episode_csv(csv_path)}
     pending, seen = [], set()
@@ -130,7 +145,7 @@ def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, work
         return stats
     pending.sort(key=lambda t: (t.env_key, t.strategy.name))
     n_workers = max(1, min(int(workers or os.cpu_count() or 1), len(pending)))
-    stats.workers = n_workers
+    stats.workers = n_workers  # the Ray backend replaces it with its number of actors
     out = _AppendingCSV(csv_path, EPISODE_COLUMNS)
     trace_out = _AppendingCSV(trace_path, TRACE_COLUMNS) if trace_path is not None else None
     bar = _progress_bar(len(pending), progress)
@@ -145,7 +160,7 @@ def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, work
             stats.steps += int(payload["steps"])
             stats.episode_wall_time += float(payload["wall_time"])
             rate = stats.steps / stats.episode_wall_time if stats.episode_wall_time > 0 else 0.0
-            bar.set_postfix(steps_per_s=f"{rate * n_workers:.0f}", failed=stats.failed, refresh=False)
+            bar.set_postfix(steps_per_s=f"{rate * max(stats.workers, 1):.0f}", failed=stats.failed, refresh=False)
         else:
             stats.failed += 1
             stats.errors.append(payload)
@@ -154,7 +169,9 @@ def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, work
         bar.update(1)
 
     try:
-        if n_workers == 1:
+        if backend == "ray":
+            stats.workers = ray_backend.run_ray(pending, handle, workers=workers, address=address)
+        elif n_workers == 1:
             runner = _EpisodeRunner()
             try:
                 for i, t in enumerate(pending):

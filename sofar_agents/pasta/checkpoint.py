@@ -12,6 +12,13 @@ A checkpoint is a pair of files with a common stem (format_version 1):
   ``critic``, ``optimizer``, the return normaliser statistics, the utopia), read with
   ``torch.load(weights_only=True)``; never pickled Python objects.
 
+Reading checks everything before anything is built: a file that is not a checkpoint
+(random bytes, JSON of another kind, a truncated or foreign tensor file, missing keys or
+tensors), NaN/inf in any tensor or in the preference and action bounds, action bounds
+with ``action_low >= action_high``, and a preference of the wrong length, with a negative
+entry or without a positive finite sum all raise ``ValueError`` naming the file and the
+field.
+
 :func:`save_agent` / :func:`load_agent` back :meth:`PASTA.save` / :meth:`PASTA.load`;
 :func:`read_checkpoint_metadata` and :func:`read_actor_layers` back the numpy policy
 of :func:`sofar_agents.policies.load_policy`. torch is imported only inside the
@@ -26,6 +33,7 @@ import json
 import re
 import time
 from pathlib import Path
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -71,8 +79,8 @@ def read_checkpoint_metadata(path: str | Path) -> tuple[dict[str, Any], Path, Pa
     if not json_path.is_file():
         raise FileNotFoundError(f"checkpoint metadata {json_path} not found")
     try:
-        meta = json.loads(json_path.read_text())
-    except json.JSONDecodeError as err:
+        meta = json.loads(json_path.read_bytes())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise ValueError(f"{json_path}: not a valid JSON checkpoint ({err})") from err
     if not isinstance(meta, dict):
         raise ValueError(f"{json_path}: expected a JSON object")
@@ -84,13 +92,28 @@ def read_checkpoint_metadata(path: str | Path) -> tuple[dict[str, Any], Path, Pa
             f"{json_path}: checkpoint format_version {meta['format_version']!r} is not supported "
             f"(this version of sofar_agents reads format_version {FORMAT_VERSION})"
         )
+    for key in ("obs_dim", "n_objectives"):
+        if not isinstance(meta[key], int) or isinstance(meta[key], bool) or meta[key] < 1:
+            raise ValueError(f"{json_path}: {key} must be a positive integer, got {meta[key]!r}")
+    if not isinstance(meta["config"], dict):
+        raise ValueError(f"{json_path}: config must be a JSON object, got {type(meta['config']).__name__}")
     k = meta["n_objectives"]
-    if len(meta["preference"]) != k:
-        raise ValueError(f"{json_path}: preference has {len(meta['preference'])} entries for {k} objectives")
+    preference = _finite_vector(meta, "preference", json_path)
+    if len(preference) != k:
+        raise ValueError(f"{json_path}: preference has {len(preference)} entries for {k} objectives")
+    if np.any(preference < 0):
+        raise ValueError(f"{json_path}: preference must be non-negative, got {meta['preference']}")
+    if not (np.isfinite(preference.sum()) and preference.sum() > 0):
+        raise ValueError(f"{json_path}: preference must sum to a positive finite value, got {meta['preference']}")
     if "objective_names" in meta and len(meta["objective_names"]) != k:
         raise ValueError(f"{json_path}: {len(meta['objective_names'])} objective names for {k} objectives")
-    if len(meta["action_low"]) != len(meta["action_high"]):
-        raise ValueError(f"{json_path}: action_low and action_high differ in length")
+    low = _finite_vector(meta, "action_low", json_path)
+    high = _finite_vector(meta, "action_high", json_path)
+    if len(low) != len(high) or len(low) == 0:
+        raise ValueError(f"{json_path}: action_low and action_high differ in length or are empty")
+    if np.any(low >= high):
+        raise ValueError(f"{json_path}: action_low {meta['action_low']} must lie below action_high "
+                         f"{meta['action_high']} in every component")
     if meta.get("action_squashing", "sigmoid") != "sigmoid" or meta.get("activation", "tanh") != "tanh":
         raise ValueError(f"{json_path}: unsupported squashing/activation "
                          f"{meta.get('action_squashing')!r}/{meta.get('activation')!r}")
@@ -99,6 +122,18 @@ def read_checkpoint_metadata(path: str | Path) -> tuple[dict[str, Any], Path, Pa
     if not pt_path.is_file():
         raise FileNotFoundError(f"checkpoint weights {pt_path} (referenced by {json_path}) not found")
     return meta, json_path, pt_path
+
+
+def _finite_vector(meta: dict[str, Any], key: str, json_path: Path) -> np.ndarray:
+    """``meta[key]`` as a 1-D float array; ``ValueError`` naming the file and the field unless finite."""
+    value = meta[key]
+    if not isinstance(value, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                              for v in value):
+        raise ValueError(f"{json_path}: {key} must be a list of numbers, got {value!r}")
+    arr = np.asarray(value, dtype=np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{json_path}: {key} must be finite, got {value}")
+    return arr
 
 
 def _actor_layers(actor_state: dict[str, np.ndarray], pt_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -149,9 +184,26 @@ def read_tensors(pt_path: Path) -> dict[str, Any]:
         state = torch.load(pt_path, map_location="cpu", weights_only=True)
     except Exception as err:  # noqa: BLE001 - re-raised with the file name
         raise ValueError(f"{pt_path}: cannot read the tensor file ({err})") from err
-    if not isinstance(state, dict) or "actor" not in state:
+    if not isinstance(state, dict) or not isinstance(state.get("actor"), dict):
         raise ValueError(f"{pt_path}: expected a dict with an 'actor' state dict")
+    for name, tensor in _tensors(state):
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            raise ValueError(f"{pt_path}: tensor {name} is not finite (NaN or inf)")
     return state
+
+
+def _tensors(obj: Any, prefix: str = "") -> Iterator[tuple[str, Any]]:
+    """``(dotted name, tensor)`` for every tensor in the nested dicts/lists of a tensor file."""
+    import torch
+
+    if isinstance(obj, torch.Tensor):
+        yield prefix, obj
+    elif isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _tensors(v, f"{prefix}.{k}" if prefix else str(k))
+    elif isinstance(obj, (list, tuple)):
+        for i, v in enumerate(obj):
+            yield from _tensors(v, f"{prefix}.{i}")
 
 
 def _actor_arrays(state: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -236,37 +288,53 @@ def save_agent(agent: PASTA, path: str | Path, metadata: dict[str, Any] | None =
     return json_path
 
 
+_AGENT_TENSORS = ("actor", "critic", "return_rms_mean", "return_rms_var", "return_rms_count")
+"""Entries of the tensor file that :func:`load_agent` needs (``optimizer`` and ``utopia`` are optional)."""
+
+
 def load_agent(cls: type[PASTA], path: str | Path) -> PASTA:
     """Rebuild an agent of class ``cls`` from a checkpoint written by :func:`save_agent`.
 
     Raises ``FileNotFoundError`` for a missing file and ``ValueError`` (naming the
-    file) for a wrong format version or weights that do not match the metadata.
+    file and the field) for a wrong format version, non-finite or inconsistent
+    metadata, a tensor file that cannot be read, holds NaN/inf or lacks an entry,
+    and weights that do not match the metadata. Every part is read and checked
+    before the agent is returned, so a failed load hands back nothing half-built.
     """
     meta, json_path, pt_path = read_checkpoint_metadata(path)
-    config = PASTAConfig.from_dict(meta["config"])
-    agent = cls(
-        meta["obs_dim"], meta["n_objectives"], meta["action_low"], meta["action_high"], config,
-        preference=meta["preference"], seed=meta.get("seed", 0), objective_names=meta["objective_names"],
-    )
+    try:
+        config = PASTAConfig.from_dict(meta["config"])
+    except (TypeError, ValueError, KeyError) as err:
+        raise ValueError(f"{json_path}: invalid config ({err})") from err
     state = read_tensors(pt_path)
+    missing = [key for key in _AGENT_TENSORS if key not in state]
+    if missing:
+        raise ValueError(f"{pt_path}: tensor file is missing {missing}")
     validate_actor_state(_actor_arrays(state), meta, pt_path)
     try:
+        agent = cls(
+            meta["obs_dim"], meta["n_objectives"], meta["action_low"], meta["action_high"], config,
+            preference=meta["preference"], seed=meta.get("seed", 0),
+            objective_names=meta.get("objective_names"),
+        )
         agent.actor.load_state_dict(state["actor"])
         agent.critic.load_state_dict(state["critic"])
-    except RuntimeError as err:
+        if "optimizer" in state:
+            agent.optimizer.load_state_dict(state["optimizer"])
+        rms_mean = state["return_rms_mean"].numpy().astype(np.float64)
+        rms_var = state["return_rms_var"].numpy().astype(np.float64)
+        rms_count = float(state["return_rms_count"])
+        utopia = state["utopia"].numpy().astype(np.float64) if "utopia" in state else None
+        st = meta.get("state", {})
+        counters = (int(st.get("num_timesteps", 0)), int(st.get("num_updates", 0)),
+                    float(st.get("mu", config.mu_max)), float(st.get("last_conflict", 0.0)),
+                    float(st.get("train_time_s", 0.0)))
+    except (RuntimeError, TypeError, ValueError, KeyError, AttributeError) as err:
         raise ValueError(f"{pt_path}: weights do not match the configuration in {json_path}: {err}") from err
-    if "optimizer" in state:
-        agent.optimizer.load_state_dict(state["optimizer"])
-    agent.return_rms.mean = state["return_rms_mean"].numpy().astype(np.float64)
-    agent.return_rms.var = state["return_rms_var"].numpy().astype(np.float64)
-    agent.return_rms.count = float(state["return_rms_count"])
-    if "utopia" in state:
-        agent.utopia = state["utopia"].numpy().astype(np.float64)
-    st = meta.get("state", {})
-    agent.num_timesteps = int(st.get("num_timesteps", 0))
-    agent.num_updates = int(st.get("num_updates", 0))
-    agent.mu_controller.mu = float(st.get("mu", config.mu_max))
-    agent.last_conflict = float(st.get("last_conflict", 0.0))
-    agent.train_time = float(st.get("train_time_s", 0.0))
+    agent.return_rms.mean, agent.return_rms.var, agent.return_rms.count = rms_mean, rms_var, rms_count
+    if utopia is not None:
+        agent.utopia = utopia
+    (agent.num_timesteps, agent.num_updates, agent.mu_controller.mu, agent.last_conflict,
+     agent.train_time) = counters
     agent.metadata = copy.deepcopy(meta.get("training", {}))
     return agent

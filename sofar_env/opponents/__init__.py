@@ -10,8 +10,11 @@ defending against the ego with racing etiquette.
 * :mod:`~sofar_env.opponents.field`: :class:`Opponents`, the state of the field
   (motion, overtakes and respawn, poses);
 * :mod:`~sofar_env.opponents.pace`, :mod:`~sofar_env.opponents.lines`,
-  :mod:`~sofar_env.opponents.defence`, :mod:`~sofar_env.opponents.lateral`: the
-  behaviours and the lateral motion, as pure functions and small state classes.
+  :mod:`~sofar_env.opponents.defence`: the behaviours (pure functions and small
+  per-car state);
+* :mod:`~sofar_env.opponents.traffic` and :mod:`~sofar_env.opponents.steering`:
+  one step along and across the track of an interactive field, built on the
+  lateral tracker and edge bands of :mod:`~sofar_env.opponents.lateral`.
 """
 
 from .config import DefenceConfig, LineConfig, OpponentConfig, PaceConfig, TrafficConfig

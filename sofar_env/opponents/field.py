@@ -20,7 +20,8 @@ step moves each car
 
 All random numbers come from two generators seeded from the ``rng`` given to
 :meth:`Opponents.reset` (one for the per-episode parameters, one for the lift
-times), in a fixed order, so a seed gives the same field whichever behaviours are on.
+times), in a fixed order: a seed draws the same paces, lines and aggressiveness whichever
+behaviours are on.
 
 Overtakes. For every opponent the signed gap to the ego, ``s_opp - s_ego`` [m],
 is tracked *unwrapped* (increments of the periodic gap are accumulated), so a
@@ -33,8 +34,6 @@ same side; any other opponent when a behaviour is on), with a new identity
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -91,6 +90,7 @@ class Opponents:
         """Lateral positions stopped at a hard bound since the reset (a diagnostic; rare)."""
         self._next_id = 0
         self._episode: _Episode | None = None
+        self._squeezed: list[bool] = []
         self._band: EdgeBand | None = None
         self._pose_cache: tuple | None = None
 
@@ -127,6 +127,7 @@ class Opponents:
         self.time = 0.0
         self.clamps = 0
         self._episode = None
+        self._squeezed = [False] * m
         if not (cfg.interactive and m):
             self.v = self._speed(self.s)
             return
@@ -152,7 +153,8 @@ class Opponents:
         n, _ = self._episode.lines.at(i, s)
         v = float(self.v[i])
         lines = self.config.lines
-        lo, hi = self._band.envelope(s, v, 0.5 * min(lines.lateral_speed, MAX_HEADING_TAN * v), 0.5 * lines.lateral_accel)
+        speed = min(lines.lateral_speed, MAX_HEADING_TAN * v)
+        lo, hi = self._band.envelope(s, v, 0.5 * speed, 0.5 * lines.lateral_accel)
         return min(max(n, lo), hi)
 
     # ------------------------------------------------------------------ motion
@@ -186,24 +188,25 @@ class Opponents:
         s, n, n_dot, v = self.s.tolist(), self.n.tolist(), self.n_dot.tolist(), self.v.tolist()
         gap = np.asarray(track.gap(self.s[None, :], self.s[:, None]), float).reshape(m, m)  # [i, j] = s_j - s_i
         band_width = self.vehicle.width + cfg.traffic.band_margin
+        pace = ep.pace.tolist()  # Python floats keep the track on its fast scalar paths
 
         # along the track: nominal pace, then the traffic rules (following, passing, yielding)
         ds = []
         for i in range(m):
-            v0 = ep.pace[i] * ep.lifts.factor(i, t) * track.speed(s[i])
-            v_mid = ep.pace[i] * ep.lifts.factor(i, t + 0.5 * dt) * track.speed(track.wrap(s[i] + 0.5 * dt * v0))
+            v0 = pace[i] * ep.lifts.factor(i, t) * track.speed(s[i])
+            v_mid = pace[i] * ep.lifts.factor(i, t + 0.5 * dt) * track.speed(track.wrap(s[i] + 0.5 * dt * v0))
             ds.append(dt * v_mid)
         capped = limit_advances(ds, s, n, v, gap, dt, self._band, cfg.traffic, band_width,
-                                self.vehicle.length + cfg.defence.alongside_margin)
+                                self.vehicle.length + cfg.defence.alongside_margin, self._squeezed)
         s_new = [track.wrap(s[i] + ds[i]) for i in range(m)]
         v_new = []
         for i in range(m):
-            vi = ep.pace[i] * ep.lifts.factor(i, t + dt) * track.speed(s_new[i])
+            vi = pace[i] * ep.lifts.factor(i, t + dt) * track.speed(s_new[i])
             v_new.append(min(vi, ds[i] / dt) if capped[i] else vi)
 
         # across the track
-        n_new, n_dot_new, clamps = steer(dt, ego, (s, n, n_dot, v), gap, s_new, v_new, ep, self._band, cfg,
-                                         self.vehicle)
+        n_new, n_dot_new, clamps, self._squeezed = steer(dt, ego, (s, n, n_dot, v), gap, s_new, v_new, ep,
+                                                         self._band, cfg, self.vehicle)
         self.clamps += clamps
         self.s, self.v = np.array(s_new), np.array(v_new)
         self.n, self.n_dot = np.array(n_new), np.array(n_dot_new)
@@ -245,6 +248,7 @@ class Opponents:
             return
         self.v[i] = ep.pace[i] * ep.lifts.factor(i, self.time) * self.track.speed(float(self.s[i]))
         self.n[i], self.n_dot[i] = self._line_start(i), 0.0
+        self._squeezed[i] = False
         ep.defence.forget(i)
 
     # ------------------------------------------------------------------ poses

@@ -1,11 +1,12 @@
 """Lateral motion of an opponent: a rate- and acceleration-bounded tracker, edge bands, keep-clear bounds.
 
-Pure math on Python floats and small arrays; the opponent field
-(:mod:`sofar_env.opponents.field`) combines them every step:
+Pure math on Python floats and small arrays; the lateral step of the field
+(:mod:`sofar_env.opponents.steering`) combines them:
 
 * :func:`track_target`: one step of a tracker of a target offset whose lateral speed
-  and acceleration never exceed the given bounds (a braking curve near the target,
-  a first-order approach in its last few decimetres);
+  and acceleration never exceed the given bounds (a braking curve near the target
+  and near the bounds of the target, a first-order approach in its last few
+  decimetres);
 * :class:`EdgeBand`: where the reference point of a car may be across the track:
   the *soft* band keeps the footprint ``inner`` inside both edges, and its
   look-ahead envelope also leaves room to get back into the band where the track
@@ -16,6 +17,7 @@ Pure math on Python floats and small arrays; the opponent field
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -36,8 +38,8 @@ _HARD_SLACK = 0.05
 _LOOKAHEAD_TIME = 8.0
 """The soft envelope looks this far ahead at the car's speed (at least 50 m) [s]."""
 
-_LOOKAHEAD_SAMPLES = 33
-"""Points of the look-ahead of the soft envelope."""
+_LOOKAHEAD = np.linspace(0.0, 1.0, 33)
+"""Points of the look-ahead of the soft envelope, as fractions of its reach."""
 
 _ROOM_SAMPLES = 400
 """Most points of :meth:`EdgeBand.room` (2 km at the 5 m spacing)."""
@@ -108,30 +110,31 @@ class EdgeBand:
         wl = minimum_filter1d(np.asarray(track.width_left(samples), float), size, mode="wrap")
         wr = minimum_filter1d(np.asarray(track.width_right(samples), float), size, mode="wrap")
         self._knots = np.append(samples, track.length)
-        self._wl = np.append(wl, wl[0])
-        self._wr = np.append(wr, wr[0])
-
-    def widths(self, s) -> tuple[np.ndarray, np.ndarray]:
-        """Smallest left and right widths within the corner window around ``s`` [m]."""
-        s = np.mod(np.asarray(s, float), self.track.length)
-        return np.interp(s, self._knots, self._wl), np.interp(s, self._knots, self._wr)
-
-    @staticmethod
-    def _ordered(lo, hi):
+        wl, wr = np.append(wl, wl[0]), np.append(wr, wr[0])
+        self._lists = (self._knots.tolist(), wl.tolist(), wr.tolist())
+        lo, hi = self.inner - wr, wl - self.inner
         mid = 0.5 * (lo + hi)
-        return np.minimum(lo, mid), np.maximum(hi, mid)  # an empty band collapses to its middle
+        self._soft = (np.minimum(lo, mid), np.maximum(hi, mid))  # an empty band collapses to its middle
+
+    def widths(self, s: float) -> tuple[float, float]:
+        """Smallest left and right widths within the corner window around ``s`` [m] (Python floats)."""
+        knots, wl, wr = self._lists
+        s = s % self.track.length
+        k = min(max(bisect.bisect_right(knots, s) - 1, 0), len(knots) - 2)
+        w = (s - knots[k]) / (knots[k + 1] - knots[k])
+        return wl[k] + w * (wl[k + 1] - wl[k]), wr[k] + w * (wr[k + 1] - wr[k])
 
     def soft(self, s) -> tuple[np.ndarray, np.ndarray]:
-        """The soft band ``(lo, hi)`` at ``s``: the footprint ``inner`` inside both edges."""
-        wl, wr = self.widths(s)
-        return self._ordered(self.inner - wr, wl - self.inner)
+        """The soft band ``(lo, hi)`` at ``s`` (an array): the footprint ``inner`` inside both edges."""
+        s = np.mod(np.asarray(s, float), self.track.length)
+        return np.interp(s, self._knots, self._soft[0]), np.interp(s, self._knots, self._soft[1])
 
     def envelope(self, s: float, v: float, lateral_speed: float, lateral_accel: float) -> tuple[float, float]:
         """The soft band at ``s`` tightened so that a car at speed ``v`` [m/s] that starts moving back
         from rest (accelerating at ``lateral_accel`` [m/s^2] up to ``lateral_speed`` [m/s]) stays inside
         it as it narrows ahead (looking 8 s or at least 50 m ahead)."""
         reach = max(_LOOKAHEAD_TIME * v, 50.0)
-        d = np.linspace(0.0, reach, _LOOKAHEAD_SAMPLES)
+        d = reach * _LOOKAHEAD
         lo, hi = self.soft(s + d)
         t = d / max(v, 1e-3)
         u, a = lateral_speed, max(lateral_accel, 1e-9)
@@ -155,6 +158,6 @@ class EdgeBand:
         # the corners half a length ahead and behind sit kappa l^2 / 2 further out on a curve
         bend = 0.5 * abs(float(self.track.curvature(float(s)))) * self.half_length ** 2
         reach = self.half_width * c + self.half_length * sn + bend + _HARD_SLACK
-        wl, wr = self.widths(s)
-        lo, hi = self._ordered(reach - float(wr), float(wl) - reach)
-        return float(lo), float(hi)
+        wl, wr = self.widths(float(s))
+        lo, hi = reach - wr, wl - reach
+        return (lo, hi) if lo <= hi else (0.5 * (lo + hi),) * 2

@@ -64,4 +64,4 @@ class LiftSchedule:
 
     def factor(self, i: int, t: float) -> float:
         """Pace multiplier of car ``i`` at time ``t`` [s]."""
-        return lift_factor(t - self.start[i], self.cfg)
+        return lift_factor(t - float(self.start[i]), self.cfg)

@@ -6,7 +6,8 @@ lengths and speeds:
 1. its *intent*: the defence target with the defence bounds while it defends
    (:class:`~sofar_env.opponents.defence.Defence`, whose state machine advances
    here), else its line with its feed-forward rate and the line bounds; the lateral
-   speed bound is also at most ``v tan(0.1 rad)`` (a slow car does not crab);
+   speed is also at most ``v tan(0.1 rad)`` at all times (a slow car does not crab,
+   a car braking hard loses its lateral speed with it);
 2. its soft envelope (the edge band with look-ahead), tightened so that a car
    beside it has room on its far side: a car pressed toward a neighbour by the
    edge pushes the neighbour's envelope away;
@@ -15,7 +16,8 @@ lengths and speeds:
    within ``side_window``, and ``clearance`` from the ego while the ego is alongside
    or about to be (within ``guard_time``), both ``BRAKE_LEAD`` earlier at the
    relative speed, so that the tracker brakes in time; when they conflict with the
-   envelope, the target is the point of the keep-clear bounds nearest to it;
+   envelope, the target is the point of the keep-clear bounds nearest to it, and the
+   car is *squeezed* (the traffic rules make it drop back in the next step);
 4. the tracker step toward the target, then the bounds on the position: every
    corner on the track first, then ``HARD_GAP`` side to side from each opponent
    within ``side_window`` and ``clearance`` from the ego within ``guard_time``; a
@@ -49,8 +51,9 @@ bounds keep ``band_margin``)."""
 
 
 def steer(dt: float, ego, state: tuple[list, list, list, list], gap: np.ndarray, s_new: list, v_new: list,
-          episode, band: EdgeBand, cfg: OpponentConfig, vehicle) -> tuple[list[float], list[float], int]:
-    """New offsets and lateral rates of every car, and the number of clamps.
+          episode, band: EdgeBand, cfg: OpponentConfig, vehicle) -> tuple[list[float], list[float], int, list[bool]]:
+    """New offsets and lateral rates of every car, the number of clamps, and which cars are squeezed
+    (their envelope and keep-clear bounds conflict: they will not fit beside the car or ego next to them).
 
     ``state``: the start-of-step ``(s, n, n_dot, v)`` lists; ``gap[i, j] = s_j - s_i``; ``s_new``,
     ``v_new``: the new arc lengths and speeds; ``ego``: ``(s, n, v)`` or None.
@@ -84,7 +87,7 @@ def steer(dt: float, ego, state: tuple[list, list, list, list], gap: np.ndarray,
             target, slope = lines.at(i, s_new[i])
             rate = slope * v_new[i]
             v_max, a_max = cfg.lines.lateral_speed, cfg.lines.lateral_accel
-        intents.append((target, rate, min(v_max, MAX_HEADING_TAN * max(v[i], 0.0)), a_max))
+        intents.append((target, rate, min(v_max, MAX_HEADING_TAN * max(min(v[i], v_new[i]), 0.0)), a_max))
 
     # 2. envelopes, pushed apart by the cars alongside
     env = [band.envelope(s_new[i], v_new[i], 0.5 * intents[i][2], 0.5 * intents[i][3]) for i in range(m)]
@@ -97,7 +100,7 @@ def steer(dt: float, ego, state: tuple[list, list, list, list], gap: np.ndarray,
                 pushed[i][1] = min(pushed[i][1], env[j][1] - sep_soft)
 
     # 3.-4. keep-clear bounds, tracker, hard bounds
-    n_out, nd_out, clamps = list(n), list(n_dot), 0
+    n_out, nd_out, clamps, squeezed = list(n), list(n_dot), 0, [False] * m
     for i in range(m):
         lo_k, hi_k = _clear_of(i, soft_near[i], n, sep_soft)
         lo_p, hi_p = _clear_of(i, hard_near[i], n, sep_hard)
@@ -109,6 +112,7 @@ def steer(dt: float, ego, state: tuple[list, list, list, list], gap: np.ndarray,
         lo_e, hi_e = pushed[i] if pushed[i][0] <= pushed[i][1] else env[i]
         lo_t, hi_t = max(lo_e, lo_k), min(hi_e, hi_k)
         if lo_t > hi_t:  # the keep-clear bounds win, as close to the envelope as they allow
+            squeezed[i] = True
             lo_t = hi_t = min(max(min(max(target, lo_e), hi_e), lo_k), hi_k)
         clipped = min(max(target, lo_t), hi_t)
         if clipped != target or (target <= lo_t and rate < 0.0) or (target >= hi_t and rate > 0.0):
@@ -118,6 +122,10 @@ def steer(dt: float, ego, state: tuple[list, list, list, list], gap: np.ndarray,
                 ahead = band.envelope(s_new[i] + v_new[i] * dt, v_new[i], 0.5 * v_max, 0.5 * a_max)
                 rate = (ahead[0 if clipped == env[i][0] else 1] - clipped) / dt
         n_i, nd_i = track_target(n[i], n_dot[i], clipped, rate, v_max, a_max, dt, min(lo_t, n[i]), max(hi_t, n[i]))
+        crab = MAX_HEADING_TAN * max(v_new[i], 0.0)
+        if abs(nd_i) > crab:  # a car that brakes hard cannot keep its lateral speed
+            nd_i = math.copysign(crab, nd_i)
+            n_i = n[i] + 0.5 * (n_dot[i] + nd_i) * dt
         along = max(v_new[i] * (1.0 - band.track.curvature(s_new[i]) * n_i), 1e-3)
         lo_h, hi_h = band.hard(s_new[i], math.atan2(abs(nd_i), along))
         lo, hi = max(lo_h, lo_p), min(hi_h, hi_p)
@@ -127,7 +135,7 @@ def steer(dt: float, ego, state: tuple[list, list, list, list], gap: np.ndarray,
             n_i, nd_i = min(max(n_i, lo), hi), 0.0
             clamps += 1
         n_out[i], nd_out[i] = n_i, nd_i
-    return n_out, nd_out, clamps
+    return n_out, nd_out, clamps, squeezed
 
 
 def _left_of(i: int, j: int, n: list) -> bool:

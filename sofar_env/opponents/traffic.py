@@ -11,7 +11,9 @@ For every pair with car ``i`` behind car ``j`` (``0 < g = s_j - s_i``, or ``g = 
   enough for both cars over the distance the pass takes at half the current closing
   speed; otherwise it follows as in the same band;
 * alongside in different bands, and the track ahead (2 s) too narrow for two cars:
-  ``i`` yields, braking at ``YIELD_DECEL``.
+  ``i`` yields, braking at ``YIELD_DECEL``;
+* a car *squeezed* in the last lateral step (no room beside a neighbour or the ego,
+  :mod:`~sofar_env.opponents.steering`) brakes at ``YIELD_DECEL`` as well.
 
 The limits only decrease the advances, so the sweep over the pairs is repeated to a
 fixed point (at most ``m`` sweeps).
@@ -43,18 +45,23 @@ _MAX_PASS_DISTANCE = 2000.0
 
 
 def limit_advances(ds: list[float], s: list[float], n: list[float], v: list[float], gap: np.ndarray, dt: float,
-                   band: EdgeBand, cfg: TrafficConfig, band_width: float, alongside: float) -> list[bool]:
+                   band: EdgeBand, cfg: TrafficConfig, band_width: float, alongside: float,
+                   squeezed: list[bool] | None = None) -> list[bool]:
     """Limit the advances ``ds`` [m] of one step in place; returns which were limited.
 
     ``s, n, v``: start-of-step arc length, offset and arc-length speed of every car;
     ``gap[i, j] = s_j - s_i`` (periodic); ``band_width``: centre-to-centre offset below which two cars
-    are in the same band [m]; ``alongside``: gap below which two cars are alongside [m].
+    are in the same band [m]; ``alongside``: gap below which two cars are alongside [m]; ``squeezed``:
+    the cars that found no room beside a neighbour in the last lateral step (they yield).
     """
     m = len(ds)
     follow = cfg.follow_gap
     need = band_width + _PASS_ROOM_MARGIN
     rules = []  # (i, j, g) follow rules; yields are applied at once
     capped = [False] * m
+    for i in range(m):
+        if squeezed is not None and squeezed[i]:
+            _brake(ds, capped, i, v[i], dt)
     for i in range(m):
         for j in range(m):
             g = float(gap[i, j])
@@ -72,9 +79,7 @@ def limit_advances(ds: list[float], s: list[float], n: list[float], v: list[floa
                 if band.room(s[i], distance) < need:
                     rules.append((i, j, g))
             elif band.room(s[i], v[i] * _SQUEEZE_TIME + alongside) < need:
-                cap = dt * max(v[i] - YIELD_DECEL * dt, 0.0)
-                if ds[i] > cap:
-                    ds[i], capped[i] = cap, True
+                _brake(ds, capped, i, v[i], dt)
     for _ in range(m):  # the caps only decrease: a fixed point within m sweeps
         changed = False
         for i, j, g in rules:
@@ -84,3 +89,10 @@ def limit_advances(ds: list[float], s: list[float], n: list[float], v: list[floa
         if not changed:
             break
     return capped
+
+
+def _brake(ds: list[float], capped: list[bool], i: int, v: float, dt: float) -> None:
+    """Limit the advance of car ``i`` to braking at ``YIELD_DECEL`` from its speed ``v``."""
+    cap = dt * max(v - YIELD_DECEL * dt, 0.0)
+    if ds[i] > cap:
+        ds[i], capped[i] = cap, True

@@ -6,6 +6,8 @@ circuit folder.
 """
 
 from .builder import BuildConfig, build_track
-from .track import TRACK_NAMES, Track, TrackFormatError
+from .format import TrackFormatError
+from .names import TRACK_NAMES
+from .track import Track
 
 __all__ = ["Track", "TrackFormatError", "build_track", "BuildConfig", "TRACK_NAMES"]

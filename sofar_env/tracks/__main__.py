@@ -16,6 +16,7 @@ import sys
 import numpy as np
 
 from .builder import BuildConfig, build_track
+from .format import TrackFormatError
 from .track import Track
 
 
@@ -59,7 +60,25 @@ def _summary(track: Track) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    """Run the command line; returns the exit status (2 for bad input, reported on stderr)."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    try:
+        return _run(args)
+    except TrackFormatError as exc:
+        sys.stderr.write(f"error: {exc}\n")
+        return 2
+    except ValueError as exc:  # an invalid option value or an unknown circuit name
+        if isinstance(exc, _UserError):
+            parser.error(str(exc))  # prints usage and "error: ...", exits with status 2
+        raise
+
+
+class _UserError(ValueError):
+    """An option value or circuit name given on the command line is invalid."""
+
+
+def _run(args: argparse.Namespace) -> int:
     if args.command == "build":
         logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
         config = BuildConfig(
@@ -72,11 +91,21 @@ def main(argv: list[str] | None = None) -> int:
             qp_spacing=args.qp_spacing,
             qp_iterations=args.qp_iterations,
         )
+        try:
+            config.validate()
+        except ValueError as exc:
+            raise _UserError(str(exc)) from None
         track = build_track(args.source, args.name, args.out, source_format=args.format, config=config)
         sys.stdout.write(f"wrote {args.out}\n{_summary(track)}\n")
         return 0
     for name in args.tracks:
-        sys.stdout.write(_summary(Track.load(name)) + "\n")
+        try:
+            track = Track.load(name)
+        except TrackFormatError:
+            raise
+        except ValueError as exc:
+            raise _UserError(str(exc)) from None
+        sys.stdout.write(_summary(track) + "\n")
     return 0
 
 

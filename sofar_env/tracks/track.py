@@ -1,11 +1,6 @@
-"""The :class:`Track` class and the on-disk circuit format.
+"""The :class:`Track` class: a closed circuit with a Frenet frame along its raceline.
 
-A circuit folder holds four files (see ``tracks/README.md`` for the details)::
-
-    raceline.csv     s_m, x_m, y_m, psi_rad, kappa_radpm, w_left_m, w_right_m, v_mps
-    left_edge.csv    x_m, y_m   (closed polyline, first point not repeated)
-    right_edge.csv   x_m, y_m
-    meta.json        {"format_version": 1, "name": ..., "length_m": ..., ...}
+:meth:`Track.load` reads a circuit folder (the format is in :mod:`.format`).
 
 Conventions: the Frenet frame follows the raceline, s is the arc length in
 [0, L) and periodic, n > 0 to the left of the driving direction, curvature
@@ -17,249 +12,39 @@ widths and speed are interpolated linearly (periodically) between samples.
 from __future__ import annotations
 
 import bisect
-import json
 import math
 import os
 from importlib import resources
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
-
-from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
-from ..constants import CIRCUITS
+from .curve import PeriodicCurve
+from .format import (
+    EDGE_COLUMNS,
+    LEFT_EDGE_FILE,
+    META_FILE,
+    RACELINE_COLUMNS,
+    RACELINE_FILE,
+    RIGHT_EDGE_FILE,
+    TrackFormatError,
+    check_raceline_samples,
+    describe,
+    parse_csv_table,
+    parse_meta,
+    read_text,
+)
+from .names import ALIASES, unknown_name_error
 
-__all__ = [
-    "FORMAT_VERSION",
-    "RACELINE_COLUMNS",
-    "EDGE_COLUMNS",
-    "TRACK_NAMES",
-    "Track",
-    "TrackFormatError",
-    "resolve_track_name",
-]
-
-FORMAT_VERSION = 1
-"""Version of the on-disk circuit format written by the builder."""
-
-RACELINE_FILE = "raceline.csv"
-LEFT_EDGE_FILE = "left_edge.csv"
-RIGHT_EDGE_FILE = "right_edge.csv"
-META_FILE = "meta.json"
-
-RACELINE_COLUMNS = ("s_m", "x_m", "y_m", "psi_rad", "kappa_radpm", "w_left_m", "w_right_m", "v_mps")
-EDGE_COLUMNS = ("x_m", "y_m")
-
-TRACK_NAMES = CIRCUITS
-"""Circuits shipped with the package (folders of ``sofar_env.track_data``)."""
-
-_ALIASES = {"ls": "LagunaSeca", "ims": "Indianapolis", "ks": "Kentucky"}
-_ALIASES.update({name.lower(): name for name in TRACK_NAMES})
+__all__ = ["Track"]
 
 _MIN_RACELINE_ROWS = 16
 _MIN_EDGE_ROWS = 8
 _NEWTON_MAX_ITER = 25
 _NEWTON_TOL = 1e-10  # [m] step size at which the projection is converged
 _HINT_WINDOW = 40.0  # [m] half width of the local search window around s_hint
-
-
-class TrackFormatError(ValueError):
-    """A circuit file is missing or malformed; the message names the file."""
-
-
-def resolve_track_name(name: str) -> str:
-    """Canonical circuit name for a (case-insensitive) name or alias.
-
-    Raises ValueError listing the valid names when ``name`` is unknown.
-    """
-    key = str(name).strip().lower()
-    if key in _ALIASES:
-        return _ALIASES[key]
-    raise _unknown_name(name)
-
-
-def _unknown_name(name: Any) -> ValueError:
-    valid = ", ".join(TRACK_NAMES) + " (aliases: LS, IMS, KS)"
-    return ValueError(f"unknown track {name!r}; valid names: {valid}")
-
-
-# --------------------------------------------------------------------------- I/O
-
-
-def parse_csv_table(text: str, filename: str, columns: Sequence[str], min_rows: int) -> np.ndarray:
-    """Parse a comma-separated table with one header line naming ``columns``.
-
-    Returns a float array of shape (rows, len(columns)).  Raises TrackFormatError
-    naming ``filename`` on a wrong header, a wrong number of fields, a
-    non-numeric or non-finite value, or fewer than ``min_rows`` rows.
-    """
-    lines = [ln.strip() for ln in text.splitlines()]
-    lines = [ln for ln in lines if ln]
-    if not lines:
-        raise TrackFormatError(f"{filename}: file is empty")
-    header = [h.strip() for h in lines[0].lstrip("#").split(",")]
-    if tuple(header) != tuple(columns):
-        raise TrackFormatError(
-            f"{filename}: wrong columns {header}; expected header line {','.join(columns)}"
-        )
-    data = lines[1:]
-    ncol = len(columns)
-    if len(data) < min_rows:
-        raise TrackFormatError(f"{filename}: {len(data)} data rows, at least {min_rows} required")
-    counts = {ln.count(",") for ln in data}
-    if counts != {ncol - 1}:
-        for k, ln in enumerate(data):
-            if ln.count(",") != ncol - 1:
-                raise TrackFormatError(
-                    f"{filename}: line {k + 2} has {ln.count(',') + 1} fields, expected {ncol}"
-                )
-    try:
-        values = np.array(",".join(data).split(","), dtype=float)
-    except ValueError:
-        for k, ln in enumerate(data):
-            for field in ln.split(","):
-                try:
-                    float(field)
-                except ValueError:
-                    raise TrackFormatError(
-                        f"{filename}: line {k + 2}: non-numeric value {field.strip()!r}"
-                    ) from None
-        raise TrackFormatError(f"{filename}: non-numeric value") from None
-    values = values.reshape(len(data), ncol)
-    bad = ~np.isfinite(values)
-    if bad.any():
-        row, col = np.argwhere(bad)[0]
-        raise TrackFormatError(
-            f"{filename}: line {row + 2}: non-finite value in column {columns[col]}"
-        )
-    return values
-
-
-def _read_text(folder: Any, filename: str) -> str:
-    """Read ``folder/filename`` (a Path or an importlib Traversable)."""
-    entry = folder / filename
-    try:
-        return entry.read_text(encoding="utf-8")
-    except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
-        raise TrackFormatError(f"{_describe(folder, filename)}: file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise TrackFormatError(f"{_describe(folder, filename)}: cannot read ({exc})") from None
-
-
-def _describe(folder: Any, filename: str) -> str:
-    return os.fspath(folder / filename) if isinstance(folder, os.PathLike) else str(folder / filename)
-
-
-def _parse_meta(text: str, where: str) -> dict:
-    try:
-        meta = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise TrackFormatError(f"{where}: invalid JSON ({exc})") from None
-    if not isinstance(meta, dict):
-        raise TrackFormatError(f"{where}: expected a JSON object")
-    version = meta.get("format_version")
-    if version != FORMAT_VERSION:
-        raise TrackFormatError(
-            f"{where}: unsupported format_version {version!r}, expected {FORMAT_VERSION}"
-        )
-    length = meta.get("length_m")
-    if not isinstance(length, (int, float)) or not math.isfinite(length) or length <= 0:
-        raise TrackFormatError(f"{where}: length_m must be a positive number, got {length!r}")
-    if not isinstance(meta.get("name"), str):
-        raise TrackFormatError(f"{where}: missing string field 'name'")
-    return meta
-
-
-# ------------------------------------------------------------------ spline core
-
-
-class PeriodicCurve:
-    """Closed planar curve: periodic C2 cubic spline through (s_k, x_k, y_k).
-
-    ``s`` must start at 0, increase strictly and stay below ``length``; the
-    curve closes from the last sample back to the first at s = length.
-    """
-
-    def __init__(self, s: np.ndarray, xy: np.ndarray, length: float):
-        s = np.asarray(s, dtype=float)
-        xy = np.asarray(xy, dtype=float)
-        self.length = float(length)
-        self.knots = np.append(s, self.length)
-        sx = CubicSpline(self.knots, np.append(xy[:, 0], xy[0, 0]), bc_type="periodic")
-        sy = CubicSpline(self.knots, np.append(xy[:, 1], xy[0, 1]), bc_type="periodic")
-        self.cx = np.ascontiguousarray(sx.c)  # (4, K): c0 t^3 + c1 t^2 + c2 t + c3
-        self.cy = np.ascontiguousarray(sy.c)
-        self._knots_list = self.knots.tolist()
-        self._coef_list = np.vstack([self.cx, self.cy]).T.tolist()  # K rows of 8 floats
-        self._last = len(s) - 1
-
-    # vectorised -------------------------------------------------------------
-    def wrap(self, s: np.ndarray) -> np.ndarray:
-        r = np.mod(s, self.length)
-        return np.where(r >= self.length, 0.0, r)
-
-    def locate(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Segment index and local parameter for wrapped ``s``."""
-        i = np.searchsorted(self.knots, s, side="right") - 1
-        i = np.clip(i, 0, self._last)
-        return i, s - self.knots[i]
-
-    def eval(self, s: np.ndarray, order: int = 1) -> list[np.ndarray]:
-        """[x, y, x', y'(, x'', y'')] at wrapped ``s`` (order 0, 1 or 2)."""
-        i, t = self.locate(s)
-        out = []
-        for c in (self.cx, self.cy):
-            a, b, cc, d = c[0, i], c[1, i], c[2, i], c[3, i]
-            out.append(((a * t + b) * t + cc) * t + d)
-        if order >= 1:
-            for c in (self.cx, self.cy):
-                a, b, cc = c[0, i], c[1, i], c[2, i]
-                out.append((3.0 * a * t + 2.0 * b) * t + cc)
-        if order >= 2:
-            for c in (self.cx, self.cy):
-                out.append(6.0 * c[0, i] * t + 2.0 * c[1, i])
-        return out
-
-    def curvature(self, s: np.ndarray) -> np.ndarray:
-        _, _, dx, dy, ddx, ddy = self.eval(s, order=2)
-        return (dx * ddy - dy * ddx) / np.power(dx * dx + dy * dy, 1.5)
-
-    # scalar -----------------------------------------------------------------
-    def wrap_scalar(self, s: float) -> float:
-        r = s % self.length
-        return 0.0 if r >= self.length else r
-
-    def _segment(self, s: float) -> tuple[float, tuple]:
-        """(t, coefficients) of the spline piece holding the wrapped scalar ``s``, t = s - its knot."""
-        i = bisect.bisect_right(self._knots_list, s) - 1
-        if i > self._last:
-            i = self._last
-        elif i < 0:
-            i = 0
-        return s - self._knots_list[i], self._coef_list[i]
-
-    @staticmethod
-    def _position_tangent(t: float, coef: tuple) -> tuple[float, float, float, float]:
-        """(x, y, x', y') of the cubic piece with coefficients ``coef`` at local parameter ``t``."""
-        a, b, c, d, e, f, g, h = coef
-        return (
-            ((a * t + b) * t + c) * t + d,
-            ((e * t + f) * t + g) * t + h,
-            (3.0 * a * t + 2.0 * b) * t + c,
-            (3.0 * e * t + 2.0 * f) * t + g,
-        )
-
-    def tangent_scalar(self, s: float) -> tuple[float, float, float, float]:
-        """(x, y, x', y') at a wrapped scalar ``s`` (the first four values of :meth:`eval_scalar`)."""
-        return self._position_tangent(*self._segment(s))
-
-    def eval_scalar(self, s: float) -> tuple[float, float, float, float, float, float]:
-        """(x, y, x', y', x'', y'') at a wrapped scalar ``s``."""
-        t, coef = self._segment(s)
-        a, b, _, _, e, f, _, _ = coef
-        return self._position_tangent(t, coef) + (6.0 * a * t + 2.0 * b, 6.0 * e * t + 2.0 * f)
 
 
 def _as_scalar(value: Any) -> float | None:
@@ -359,8 +144,8 @@ class Track:
         """Load a shipped circuit by name/alias, or a circuit folder by path."""
         if not isinstance(name_or_path, os.PathLike):
             key = str(name_or_path).strip().lower()
-            if key in _ALIASES:
-                canonical = _ALIASES[key]
+            if key in ALIASES:
+                canonical = ALIASES[key]
                 folder = resources.files("sofar_env.track_data").joinpath(canonical)
                 return cls._load_folder(folder, str(folder))
         text = os.fspath(name_or_path)
@@ -372,19 +157,22 @@ class Track:
             return cls._load_folder(path, str(path))
         if looks_like_path or path.exists():
             raise TrackFormatError(f"{path}: no such circuit folder")
-        raise _unknown_name(text)
+        raise unknown_name_error(text)
 
     @classmethod
     def _load_folder(cls, folder: Any, label: str) -> "Track":
-        meta = _parse_meta(_read_text(folder, META_FILE), _describe(folder, META_FILE))
+        meta = parse_meta(read_text(folder, META_FILE), describe(folder, META_FILE))
         raceline = parse_csv_table(
-            _read_text(folder, RACELINE_FILE), _describe(folder, RACELINE_FILE), RACELINE_COLUMNS, _MIN_RACELINE_ROWS
+            read_text(folder, RACELINE_FILE), describe(folder, RACELINE_FILE), RACELINE_COLUMNS, _MIN_RACELINE_ROWS
         )
         left = parse_csv_table(
-            _read_text(folder, LEFT_EDGE_FILE), _describe(folder, LEFT_EDGE_FILE), EDGE_COLUMNS, _MIN_EDGE_ROWS
+            read_text(folder, LEFT_EDGE_FILE), describe(folder, LEFT_EDGE_FILE), EDGE_COLUMNS, _MIN_EDGE_ROWS
         )
         right = parse_csv_table(
-            _read_text(folder, RIGHT_EDGE_FILE), _describe(folder, RIGHT_EDGE_FILE), EDGE_COLUMNS, _MIN_EDGE_ROWS
+            read_text(folder, RIGHT_EDGE_FILE), describe(folder, RIGHT_EDGE_FILE), EDGE_COLUMNS, _MIN_EDGE_ROWS
+        )
+        check_raceline_samples(
+            raceline, float(meta["length_m"]), describe(folder, RACELINE_FILE), describe(folder, META_FILE)
         )
         return cls(meta["name"], meta["length_m"], raceline, left, right, meta, source=label)
 
@@ -429,9 +217,10 @@ class Track:
 
         Kept instead of ``float(np.interp(...))`` because that form changes bits: it computes
         ``slope * (s - s_i) + f_i``, this ``f_i + w (f_{i+1} - f_i)``, and the two differ in the
-        last bit at about 1 point in 3000. (It is also 1.3 us faster per call, about 1 % of an env
-        step: 20 scalar calls per step, measured with cProfile call counts over 1,000 steps of
-        ``eval/bench_env.py`` and timeit.)
+        last bit at about 1 point in 3000, which changes seeded trajectories. (It also saves
+        about 1.4 % of an env step, measured with cProfile call counts over 1,000 steps of the
+        ``eval/bench_env.py`` scenario, 20 scalar calls per step, times 1.1 us per call from
+        timeit, against a 1.55 ms step.)
         """
         s = s % self.length
         if s >= self.length:

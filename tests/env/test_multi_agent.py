@@ -72,3 +72,18 @@ def test_crashed_agents_terminate_and_leave():
 def test_scripted_opponents_are_rejected():
     with pytest.raises(ValueError, match="no scripted opponents"):
         sofar_env.parallel_env(n_agents=2, n_opponents=2)
+
+
+@pytest.mark.parametrize("track", ["LagunaSeca", "Monza", "Indianapolis", "Kentucky"])
+def test_no_car_starts_off_the_track_or_overlapping(track):
+    """200 seeded starts per circuit: every car's footprint inside the edges, no two footprints touching."""
+    from sofar_env.multi_agent import parallel_env as make_parallel
+
+    env = make_parallel(track, n_agents=4)
+    for seed in range(200):
+        env.reset(seed=seed)
+        race = env.race
+        for k in range(race.n_cars):
+            assert not race._off_track(k), (track, seed, k)
+            assert not race._collides(k), (track, seed, k)
+    env.close()

@@ -72,3 +72,13 @@ def test_task_key_holds_every_setting_that_changes_an_episode():
 def test_full_table1_size():
     # 4 circuits x 5 rho x 5 episodes x (adaptive + 6 fixed gammas) x 2000 steps
     assert ev.FULL_TABLE1_STEPS == 4 * 5 * 5 * 7 * 2000
+
+
+def test_scenario_and_stack_enter_the_resume_key_and_the_env_key():
+    base = ev.EpisodeTask("Monza", ev.Strategy.fixed(0.5), 0.3, 0, 42)
+    world = ev.EpisodeTask("Monza", ev.Strategy.fixed(0.5), 0.3, 0, 42, scenario="interactive")
+    paper = ev.EpisodeTask("Monza", ev.Strategy.fixed(0.5), 0.3, 0, 42, stack="paper")
+    assert len({base.key, world.key, paper.key}) == 3
+    assert len({base.env_key, world.env_key, paper.env_key}) == 3
+    tasks = ev.table1_tasks([ev.Strategy.fixed(0.5)], ["Monza"], [0.3], 1, scenario="interactive")
+    assert all(t.scenario == "interactive" for t in tasks)

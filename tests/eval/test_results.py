@@ -118,3 +118,56 @@ def test_older_format_rows_resume_before_any_append(tmp_path):
     rows = ev.read_episode_csv(path)
     assert len(rows) == 1 and rows[0]["stack"] == "sofar"
     assert _row_key(rows[0]) == _task().key
+
+
+def _old_format_file(path, rows) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=OLD_COLUMNS, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: int(v) if isinstance(v, bool) else v for k, v in r.items()})
+
+
+# (id, old format?, the last row, how many characters its line loses when torn)
+TORN_CASES = [
+    ("opponent-count-12-cut-to-1", False, dict(n_opponents=12), 1),
+    ("stack-paper-cut-to-pa", False, dict(stack="paper"), 4),  # row ends "...,paper,"
+    ("old-duration-60-cut-to-6", True, dict(duration=60.0, policy_id=""), 1),
+    ("old-float-200-cut-to-20", True, dict(duration=200.0, policy_id=""), 1),
+    ("old-policy-id-cut-short", True, dict(policy_id="pasta_lagunaseca"), 6),
+]
+
+
+@pytest.mark.parametrize(("name", "old", "last", "cut"), TORN_CASES, ids=[c[0] for c in TORN_CASES])
+def test_a_row_torn_inside_a_field_is_not_a_complete_row(tmp_path, name, old, last, cut):
+    """A last line without its newline was cut mid-write: it is ignored, then dropped on append."""
+    path = tmp_path / f"{name}.csv"
+    rows = [_result(_task(seed=1)).to_row(), _result(_task(seed=2)).to_row() | last]
+    if old:
+        _old_format_file(path, rows)
+    else:
+        _write(path, rows)
+    text = path.read_text()
+    assert text.endswith("\n")
+    path.write_text(text[: len(text.rstrip("\r\n")) - cut])  # killed mid-field: no newline
+    assert [r["seed"] for r in ev.read_episode_csv(path)] == [1]
+    _write(path, [_result(_task(seed=3)).to_row()])
+    assert [r["seed"] for r in ev.read_episode_csv(path)] == [1, 3]
+    assert path.read_text().endswith("\n")
+
+
+def test_the_committed_results_read_fully():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2] / "results"
+    assert len(ev.read_episode_csv(root / "table1_episodes.csv")) == 700
+
+
+def test_a_torn_trace_line_is_ignored(tmp_path):
+    path = tmp_path / "trace.csv"
+    out = _AppendingCSV(path, ev.TRACE_COLUMNS)
+    out.write_many([("Monza", "adaptive", "0.3", 1, 1, 0.1, 0.25, 12.5, 0.75),
+                    ("Monza", "adaptive", "0.3", 1, 2, 0.2, 0.5, 30.0, 0.55)])
+    out.close()
+    path.write_text(path.read_text().rstrip("\r\n")[:-1])  # min_barrier 0.55 cut to 0.5
+    np.testing.assert_array_equal(ev.read_trace_csv(path)["min_barrier"], [0.75])

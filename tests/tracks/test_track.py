@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import json
 import math
-import shutil
-from importlib import resources
 
 import numpy as np
 import pytest
+from shipped_circuits import copy_circuit
 
 from sofar_env.tracks import TRACK_NAMES, Track, TrackFormatError
 
@@ -89,10 +87,15 @@ def test_unknown_name_lists_valid_names():
 
 
 def test_load_from_folder_path(tmp_path):
-    folder = _copy_circuit("Kentucky", tmp_path)
+    folder = copy_circuit("Kentucky", tmp_path)
     track = Track.load(folder)
     assert track.name == "Kentucky"
     assert Track.load(str(folder)).length == track.length
+
+
+def test_missing_folder(tmp_path):
+    with pytest.raises(TrackFormatError, match="no_such_dir"):
+        Track.load(tmp_path / "no_such_dir")
 
 
 # ---------------------------------------------------------------- geometry
@@ -305,75 +308,3 @@ def test_scalar_projection_agrees_with_the_vectorised_one(tracks):
             s_k, n_k = track.to_frenet(float(x[k]), float(y[k]), None if h is None else float(h[k]))
             assert abs(track.gap(s_k, float(s_vec[k]))) < 1e-9 and abs(n_k - n_vec[k]) < 1e-9
             assert abs(track.gap(s_k, float(s0[k]))) < 1e-6
-
-
-# ------------------------------------------------------------ format errors
-
-
-def _copy_circuit(name: str, tmp_path):
-    src = resources.files("sofar_env.track_data").joinpath(name)
-    dst = tmp_path / name
-    dst.mkdir()
-    for fname in ("raceline.csv", "left_edge.csv", "right_edge.csv", "meta.json"):
-        with resources.as_file(src.joinpath(fname)) as path:
-            shutil.copy(path, dst / fname)
-    return dst
-
-
-@pytest.mark.parametrize("fname", ["raceline.csv", "left_edge.csv", "right_edge.csv", "meta.json"])
-def test_missing_file_names_the_file(tmp_path, fname):
-    folder = _copy_circuit("Kentucky", tmp_path)
-    (folder / fname).unlink()
-    with pytest.raises(TrackFormatError, match=fname):
-        Track.load(folder)
-
-
-def test_missing_folder(tmp_path):
-    with pytest.raises(TrackFormatError, match="no_such_dir"):
-        Track.load(tmp_path / "no_such_dir")
-
-
-def _edit_lines(path, edit):
-    lines = path.read_text().splitlines()
-    path.write_text("\n".join(edit(lines)) + "\n")
-
-
-@pytest.mark.parametrize(
-    "fname, edit, message",
-    [
-        ("raceline.csv", lambda ls: ["s,x,y"] + ls[1:], "columns"),
-        ("raceline.csv", lambda ls: ls[:5] + [ls[5].replace(",", ",abc,", 1).rsplit(",", 1)[0]] + ls[6:], "non-numeric"),
-        ("raceline.csv", lambda ls: ls[:5] + ["nan" + ls[5][ls[5].index(","):]] + ls[6:], "non-finite"),
-        ("raceline.csv", lambda ls: ls[:5] + [ls[5] + ",1.0"] + ls[6:], "fields"),
-        ("raceline.csv", lambda ls: ls[:4] + [ls[5], ls[4]] + ls[6:], "increasing"),
-        ("raceline.csv", lambda ls: ls[:6], "rows"),
-        ("left_edge.csv", lambda ls: ls[:1] + [ls[1].replace(",", ";")] + ls[2:], "left_edge.csv"),
-        ("right_edge.csv", lambda ls: ls[:3], "rows"),
-        ("meta.json", lambda ls: ["{not json"], "JSON"),
-    ],
-)
-def test_malformed_file_names_the_file(tmp_path, fname, edit, message):
-    folder = _copy_circuit("Kentucky", tmp_path)
-    _edit_lines(folder / fname, edit)
-    with pytest.raises(TrackFormatError) as info:
-        Track.load(folder)
-    assert fname in str(info.value)
-    assert message.lower() in str(info.value).lower()
-
-
-def test_wrong_format_version(tmp_path):
-    folder = _copy_circuit("Kentucky", tmp_path)
-    meta = json.loads((folder / "meta.json").read_text())
-    meta["format_version"] = 99
-    (folder / "meta.json").write_text(json.dumps(meta))
-    with pytest.raises(TrackFormatError, match="meta.json.*format_version"):
-        Track.load(folder)
-
-
-def test_length_inconsistent_with_s(tmp_path):
-    folder = _copy_circuit("Kentucky", tmp_path)
-    meta = json.loads((folder / "meta.json").read_text())
-    meta["length_m"] = 100.0
-    (folder / "meta.json").write_text(json.dumps(meta))
-    with pytest.raises(TrackFormatError, match="raceline.csv"):
-        Track.load(folder)

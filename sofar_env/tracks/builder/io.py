@@ -19,16 +19,16 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..track import (
+from ..format import (
     EDGE_COLUMNS,
     LEFT_EDGE_FILE,
     META_FILE,
     RACELINE_COLUMNS,
     RACELINE_FILE,
     RIGHT_EDGE_FILE,
-    Track,
     TrackFormatError,
 )
+from ..track import Track
 from .polyline import clean_closed, tangent_normal
 
 __all__ = [
@@ -71,8 +71,23 @@ def sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
+def _reject_other_delimiter(path: Path, lineno: int, line: str, ncols: int) -> None:
+    """Raise when a line without commas splits into ``ncols`` fields at ';', a tab or '|'."""
+    for sep, shown in ((";", "';'"), ("\t", "tabs"), ("|", "'|'")):
+        if line.count(sep) == ncols - 1:
+            raise TrackFormatError(
+                f"{path}: line {lineno}: expected comma-separated values, found {shown} "
+                f"({line[:60]!r}); convert the file to commas (with '.' as the decimal point)"
+            )
+
+
 def _read_numeric_csv(path: Path, ncols: int) -> np.ndarray:
-    """Numeric rows of a CSV; '#' comment lines and one non-numeric header line are skipped."""
+    """Numeric rows of a CSV; '#' comment lines and one non-numeric header line are skipped.
+
+    Raises TrackFormatError naming ``path`` for an unreadable file, a file delimited by
+    ';', tabs or '|' instead of commas, a non-numeric value, a wrong number of fields or
+    no data rows.
+    """
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -84,6 +99,8 @@ def _read_numeric_csv(path: Path, ncols: int) -> np.ndarray:
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
+        if "," not in line:
+            _reject_other_delimiter(path, lineno, line, ncols)
         fields = [f.strip() for f in line.split(",")]
         try:
             values = [float(f) if f else math.nan for f in fields]

@@ -17,7 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..track import FORMAT_VERSION, LEFT_EDGE_FILE, RACELINE_FILE, RIGHT_EDGE_FILE, Track
+from ..format import FORMAT_VERSION, LEFT_EDGE_FILE, RACELINE_FILE, RIGHT_EDGE_FILE
+from ..track import Track
+from .checks import check_edges
 from .config import BuildConfig
 from .edges import centerline, orient_edges, prepare_edge
 from .io import CENTERLINE_FILE, BuiltCircuit, read_centerline_csv, read_edges_csv, sha256, write_circuit
@@ -56,12 +58,19 @@ def build_from_edges(
     name: str,
     config: BuildConfig | None = None,
     source: dict | None = None,
+    label: str | None = None,
 ) -> BuiltCircuit:
-    """Build a circuit from two closed edges (left = +n side in the driving direction)."""
+    """Build a circuit from two closed edges (left = +n side in the driving direction).
+
+    The edges are checked first (:func:`.checks.check_edges`); ``label`` names the input
+    in the error messages (default: the circuit name).
+    """
     config = config or BuildConfig()
     config.validate()
-    left = clean_closed(np.asarray(left, dtype=float), "left edge")
-    right = clean_closed(np.asarray(right, dtype=float), "right edge")
+    label = label or f"edges of {name}"
+    left = clean_closed(np.asarray(left, dtype=float), f"{label} (left edge)")
+    right = clean_closed(np.asarray(right, dtype=float), f"{label} (right edge)")
+    check_edges(left, right, label)
     left, right = orient_edges(left, right)
     anchor = 0.5 * (left[0] + closest_points(left[:1], right)[0])
 
@@ -162,7 +171,7 @@ def build_track(
     else:
         raise ValueError(f"unknown source format {source_format!r}; use 'edges' or 'centerline'")
     info = {"file": path.name, "sha256": sha256(path), "format": source_format}
-    built = build_from_edges(left, right, name, config, source=info)
+    built = build_from_edges(left, right, name, config, source=info, label=str(path))
     if out_dir is None:
         return built.to_track()
     folder = write_circuit(out_dir, built)

@@ -16,7 +16,7 @@ from scipy import sparse
 from scipy.interpolate import CubicSpline
 from scipy.sparse.linalg import splu
 
-from ..track import TrackFormatError
+from ..format import TrackFormatError
 
 __all__ = [
     "clean_closed",

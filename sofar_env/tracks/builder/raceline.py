@@ -24,7 +24,7 @@ import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
 
-from ..track import PeriodicCurve
+from ..curve import PeriodicCurve
 from .config import BuildConfig
 from .polyline import edge_widths, polyline_distance, spline_resample_closed, tangent_normal
 

@@ -1,0 +1,50 @@
+"""Controller presets through the environment: the spec, a closed loop, the shipped policies by name."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import sofar_env  # noqa: F401
+from sofar_agents import default_policy_path, load_policy
+from sofar_env.stack import stack_preset
+
+
+def test_preset_is_part_of_the_env_spec_and_config():
+    env = gym.make("SOfAR-LagunaSeca-v0", stack="paper")
+    assert env.spec.kwargs["stack"] == "paper"
+    assert env.unwrapped.config.stack == stack_preset("paper")
+    # other keys apply on top of the preset
+    env2 = gym.make("SOfAR-LagunaSeca-v0", stack="paper", speed_factor=0.7)
+    assert env2.unwrapped.config.stack.speed_factor == 0.7 and not env2.unwrapped.config.stack.follow
+    with pytest.raises(ValueError, match="valid presets"):
+        gym.make("SOfAR-LagunaSeca-v0", stack="papr")
+
+
+def test_paper_preset_never_follows_where_the_default_stack_does():
+    """Kentucky at rho 0.1: a slow car in a section too narrow to pass. The default stack follows it;
+    the paper's Algorithm 1 has no following mode and attempts the pass."""
+    counters = {}
+    for stack in ("sofar", "paper"):
+        env = gym.make("SOfAR-Kentucky-v0", stack=stack, rho=0.1).unwrapped
+        env.reset(seed=3)
+        for _ in range(150):
+            _, _, terminated, truncated, _ = env.step(np.array([0.5], np.float32))
+            if terminated or truncated:
+                break
+        counters[stack] = dict(env.stack.counters)
+    assert counters["sofar"]["follow_steps"] > 0
+    assert counters["paper"]["follow_steps"] == 0
+
+
+@pytest.mark.parametrize("stack", ["sofar", "paper"])
+def test_shipped_policies_load_by_name(stack):
+    path = default_policy_path(stack=stack)
+    assert path.name == ("pasta_lagunaseca.json" if stack == "sofar" else "pasta_lagunaseca_paper.json")
+    policy = load_policy(path)
+    gamma = policy(np.zeros(12, np.float32))
+    assert 0.05 <= float(np.asarray(gamma).reshape(-1)[0]) <= 1.0
+
+
+def test_no_shipped_policy_for_an_unknown_combination():
+    with pytest.raises(ValueError, match="no shipped PASTA policy"):
+        default_policy_path(stack="paper", scenario="moon")
