@@ -1,7 +1,8 @@
 """Gymnasium wrappers used to train on the SOfAR environments.
 
 - :class:`LinearReward`: vector reward -> weighted scalar (MO-Gymnasium convention),
-  keeping the vector in ``info["reward_vector"]``. Also what lets a
+  keeping the vector in ``info["reward_vector"]`` (see its docstring for when to use
+  ``mo_gymnasium.wrappers.LinearReward`` instead). Also what lets a
   ``gymnasium.vector.SyncVectorEnv`` carry vector rewards (it stores scalar rewards).
 - :class:`RescaleGammaAction`: policy actions in ``[-1, 1]`` -> gamma in ``[0.05, 1]``
   (for Stable-Baselines3, whose Gaussian policies assume a symmetric unit box).
@@ -30,6 +31,15 @@ class LinearReward(gym.Wrapper):
     The original vector is stored in ``info["reward_vector"]`` (a copy). ``weights``
     default to ones (plain sum). The number of objectives is taken from
     ``env.unwrapped.reward_space`` when the env declares one.
+
+    For the SOfAR envs prefer the maintained ``mo_gymnasium.wrappers.LinearReward``
+    (as ``train/ppo.py`` does). This one is kept because PASTA's rollout collector
+    (:mod:`sofar_agents.pasta.rollout`) reads the vector from ``info["reward_vector"]``,
+    which this wrapper guarantees for any vector-reward env (the SOfAR envs also set it
+    themselves; MO-Gymnasium's wrapper writes ``info["vector_reward"]``), and because it also wraps envs that
+    declare no ``reward_space`` when ``weights`` are given, returns a Python ``float``,
+    leaves the wrapped env's ``info`` dict unmodified and reports bad weights with
+    ``ValueError`` rather than an ``assert``.
     """
 
     def __init__(self, env: gym.Env, weights: Sequence[float] | np.ndarray | None = None) -> None:

@@ -92,7 +92,11 @@ class SOfARRaceEnv(gym.Env):
     overtakes; a 200 s race at the default speed factor is worth about 80 of progress;
     a step that uses a full unit of barrier slack costs 0.5). ``reward_mode="vector"``
     returns the float32 vector and declares it in ``env.unwrapped.reward_space``
-    (MO-Gymnasium convention; scalarise it outside the env). The vector is always in
+    (MO-Gymnasium convention; scalarise it outside the env). Make it with
+    ``mo_gymnasium.make(...)`` (Gymnasium's passive checker expects a float reward) and use
+    MO-Gymnasium's wrappers (``LinearReward``, ``MORecordEpisodeStatistics`` inside the
+    scalarisation) and ``mo_gymnasium.wrappers.vector.MOSyncVectorEnv``;
+    ``gymnasium.vector.SyncVectorEnv`` stores scalar rewards only. The vector is always in
     ``info["reward_vector"]``.
 
     ## Starting State

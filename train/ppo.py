@@ -6,8 +6,8 @@ Usage (from the repository root, with the package installed)::
     python train/ppo.py --n-envs 2 --total-steps 800000 --out runs/ppo_ls
     tensorboard --logdir runs
 
-The environment returns its reward vector; :class:`sofar_agents.wrappers.LinearReward`
-scalarises it with ``--weights`` (default: the reference deployment preference
+The environment is made with ``mo_gymnasium.make`` and returns its reward vector;
+MO-Gymnasium's ``LinearReward`` scalarises it with ``--weights`` (default: the reference deployment preference
 0.31 0.45 0.05 0.04 0.15 over safety, overtakes, progress, barrier_margin,
 gamma_smoothness), and :class:`sofar_agents.wrappers.RescaleGammaAction` maps the
 policy's ``[-1, 1]`` output onto gamma in ``[0.05, 1]``. rho is drawn per episode as in
@@ -25,13 +25,16 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import mo_gymnasium
+import numpy as np
 import torch
+from mo_gymnasium.wrappers import LinearReward
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import CheckpointCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
-from sofar_agents.wrappers import LinearReward, RandomRhoReset, RescaleGammaAction
+from sofar_agents.wrappers import RandomRhoReset, RescaleGammaAction
 
 logger = logging.getLogger("train.ppo")
 
@@ -88,13 +91,15 @@ def _ensure_registered(env_id: str) -> None:
 def make_env(args: argparse.Namespace, env_kwargs: dict[str, Any]) -> Any:
     def thunk() -> gym.Env:
         _ensure_registered(args.env_id)
-        env = gym.make(args.env_id, reward_mode="vector", **env_kwargs)
+        env = mo_gymnasium.make(args.env_id, reward_mode="vector", **env_kwargs)
         env = RandomRhoReset(env, args.rho_min, args.rho_max, args.rho_values)
         k = int(env.unwrapped.reward_space.shape[0])
         weights = args.weights
         if weights is None:
             weights = REFERENCE_PREFERENCE if k == len(REFERENCE_PREFERENCE) else [1.0] * k
-        env = LinearReward(env, weights=weights)
+        if len(weights) != k:
+            raise ValueError(f"{len(weights)} weights for a reward space of {k} objectives")
+        env = LinearReward(env, weight=np.asarray(weights, dtype=np.float64))
         env = RescaleGammaAction(env)
         return Monitor(env, info_keywords=tuple(k_ for k_ in EPISODE_INFO if k_ != "is_success"))
 
