@@ -72,13 +72,17 @@ def run_table1(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "res
     cmp = paper_comparison(rows, strategies)
     if cmp:
         parts += ["\n## Success rate next to the paper's Table I\n", cmp]
+    return _write_report(parts, tasks, rows, stats, csv_path, out / f"{prefix}.md")
+
+
+def _write_report(parts: list[str], tasks, rows, stats, csv_path: Path, md_path: Path) -> TableReport:
+    """Append the completeness line and the sweep statistics to ``parts``, write the Markdown file."""
     missing = len(tasks) - len(rows)
     if missing:
         parts.append(f"\n**Incomplete:** {missing} of {len(tasks)} episodes are missing; rerun the same command "
                      "to finish them.")
     parts.append("\n" + _stats_text(stats))
     md = "\n".join(parts) + "\n"
-    md_path = out / f"{prefix}.md"
     md_path.write_text(md)
     return TableReport(md, stats, csv_path, md_path, rows)
 
@@ -106,12 +110,4 @@ def run_miqp_ablation(strategies: Sequence[Strategy], out_dir: str | os.PathLike
     parts = [_run_header("Table II: with and without the MIQP layer", settings),
              "**Bold** is the best and <u>underlined</u> the second best over the four rows (as in the paper).\n",
              format_table2(rows, strategies)]
-    missing = len(tasks) - len(rows)
-    if missing:
-        parts.append(f"\n**Incomplete:** {missing} of {len(tasks)} episodes are missing; rerun the same command "
-                     "to finish them.")
-    parts.append("\n" + _stats_text(stats))
-    md = "\n".join(parts) + "\n"
-    md_path = out / f"{prefix}.md"
-    md_path.write_text(md)
-    return TableReport(md, stats, csv_path, md_path, rows)
+    return _write_report(parts, tasks, rows, stats, csv_path, out / f"{prefix}.md")
