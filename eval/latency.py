@@ -17,18 +17,28 @@ import sys
 from sofar_agents import evaluation as ev
 
 
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Defaults in the help, except ``None`` (the help text says what happens then)."""
+
+    def _get_help_string(self, action):
+        return action.help if action.default is None else super()._get_help_string(action)
+
+
 def parse_args(argv=None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--seconds", type=float, default=60.0, help="simulated time of the closed loop [s]")
-    p.add_argument("--json", default=None, help="write the measurements to this JSON file")
-    p.add_argument("--policy", default=None, help="policy checkpoint (default: the shipped one)")
-    p.add_argument("--track", default="LagunaSeca")
-    p.add_argument("--rho", type=float, default=0.3)
-    p.add_argument("--opponents", type=int, default=4)
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=_HelpFormatter)
+    p.add_argument("--seconds", type=float, default=60.0,
+                   help="simulated time of the closed loop [s]; the race restarts after a collision or off-track")
+    p.add_argument("--json", default=None, metavar="PATH",
+                   help="also write the measurements (and the machine) to this JSON file (default: none)")
+    p.add_argument("--policy", default=None, metavar="PATH",
+                   help="PASTA checkpoint that chooses gamma and whose inference is timed (default: the shipped "
+                        "policy; without one, gamma is fixed at --gamma and an untrained MLP is timed)")
+    p.add_argument("--track", default="LagunaSeca", help="circuit (LagunaSeca, Monza, Indianapolis, Kentucky)")
+    p.add_argument("--rho", type=float, default=0.3, help="opponent pace ratio (fraction of the speed profile)")
+    p.add_argument("--opponents", type=int, default=4, help="number of opponents")
     p.add_argument("--gamma", type=float, default=0.5, help="fixed gamma when there is no policy")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--log-level", default="WARNING")
+    p.add_argument("--seed", type=int, default=0, help="seed of the episode start")
+    p.add_argument("--log-level", default="WARNING", help="logging level (DEBUG, INFO, WARNING, ERROR)")
     return p.parse_args(argv)
 
 

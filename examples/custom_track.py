@@ -3,7 +3,8 @@
     python examples/custom_track.py
 
 A synthetic oval-ish circuit is written to a temporary folder as ``x_m,y_m,w_tr_right_m,w_tr_left_m``,
-built with ``python -m sofar_env.tracks build`` and loaded by folder path.
+built with ``python -m sofar_env.tracks build`` and raced through the ``SOfAR-Custom-v0`` id by folder path
+(a :class:`sofar_env.tracks.Track` works too: ``track=Track.load(out)``).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ def main() -> None:
         write_centerline(csv)
         subprocess.run([sys.executable, "-m", "sofar_env.tracks", "build", str(csv), "--name", "Oval",
                         "--out", str(out), "--format", "centerline"], check=True)
-        env = gym.make("SOfAR-LagunaSeca-v0", config={"track": str(out), "race": {"duration": race_seconds(20.0)}})
+        env = gym.make("SOfAR-Custom-v0", track=out, race={"duration": race_seconds(20.0)})
         env.reset(seed=0)
         for _ in range(max_steps(10_000)):
             _, _, terminated, truncated, info = env.step(np.array([0.3], dtype=np.float32))

@@ -106,8 +106,9 @@ class EnvConfig:
     scenario: str = "paper"
     """The world (:mod:`sofar_env.scenarios`): ``"paper"`` or ``"interactive"``. Set through the ``scenario``
     key, which applies the scenario's overrides before the other keys."""
-    track: str = "LagunaSeca"
-    """Circuit name (``LagunaSeca``, ``Monza``, ``Indianapolis``, ``Kentucky``, or an alias / folder path)."""
+    track: Any = "LagunaSeca"
+    """Circuit name (``LagunaSeca``, ``Monza``, ``Indianapolis``, ``Kentucky``, or an alias), a circuit folder path,
+    or a :class:`~sofar_env.tracks.Track` (used as is; see the ``SOfAR-Custom-v0`` id)."""
     decision_interval: int = 1
     """The policy acts every this many control steps; gamma is held in between and the rewards are summed."""
     reward_mode: str = "scalar"
@@ -116,6 +117,15 @@ class EnvConfig:
     """Weights of the scalar reward."""
     initial_gamma: float = 0.5
     """gamma_{t-1} assumed at the first step of an episode (for the smoothness term) [-]."""
+    stall_speed: float = 1.0
+    """A controlled car slower than this is standing still, for the stall rule [m/s] (walking pace; the
+    slowest opponent of the paper's world at the lowest pace ratio of Table I moves at 1.75 m/s)."""
+    stall_seconds: float | None = 20.0
+    """The stall rule: a car that stays slower than ``stall_speed`` for this long without interruption
+    terminates its episode with ``info["stalled"] = True`` and ``is_success = False`` [s]. 20 s is a
+    tenth of the 200 s race: far longer than any stop the controller makes to let a car clear, so it only
+    fires when the car is stuck (behind a car it cannot pass, or in a barrier deadlock). ``None`` or 0
+    turns the rule off."""
     timing_info: bool = False
     """Also report the wall-clock solve times ``mpc_time_ms`` / ``miqp_time_ms`` in ``info``. Off by default:
     they are the only info values that differ between two runs with the same seed, and conformance checks
@@ -132,6 +142,15 @@ class EnvConfig:
             raise ConfigError(f"reward_mode must be one of {REWARD_MODES}, got {self.reward_mode!r}")
         if not (0.0 < self.initial_gamma <= 1.0):
             raise ConfigError(f"initial_gamma must lie in (0, 1], got {self.initial_gamma!r}")
+        if not (isinstance(self.stall_speed, (int, float, np.integer, np.floating)) and not isinstance(
+                self.stall_speed, bool) and np.isfinite(self.stall_speed) and self.stall_speed >= 0.0):
+            raise ConfigError(f"stall_speed must be a finite number >= 0 [m/s], got {self.stall_speed!r}")
+        if self.stall_seconds is not None and not (
+                isinstance(self.stall_seconds, (int, float, np.integer, np.floating))
+                and not isinstance(self.stall_seconds, bool) and np.isfinite(self.stall_seconds)
+                and self.stall_seconds >= 0.0):
+            raise ConfigError(f"stall_seconds must be None (off) or a finite number >= 0 [s], got "
+                              f"{self.stall_seconds!r}")
 
     # read-only views of the shortcut keys
     @property
@@ -153,6 +172,13 @@ class EnvConfig:
     @property
     def use_miqp(self) -> bool:
         return self.stack.use_miqp
+
+    @property
+    def stall_steps(self) -> int | None:
+        """Control steps of the stall rule (``stall_seconds / race.dt`` rounded up), None when it is off."""
+        if not self.stall_seconds:
+            return None
+        return max(1, int(np.ceil(self.stall_seconds / self.race.dt - 1e-9)))
 
     @property
     def control_steps(self) -> int:
@@ -229,6 +255,12 @@ def make_env_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwarg
     for key in list(items):
         if key in _SHORTCUTS:
             nested[key] = items.pop(key)
+    fields = {f.name for f in dataclasses.fields(EnvConfig) if f.init}
+    for key in items:
+        if key not in fields:
+            shortcuts = ", ".join(f"{k} (= {'.'.join(p)}.{k})" for k, p in _SHORTCUTS.items())
+            raise ConfigError(f"unknown configuration key {key!r}; valid keys: {', '.join(sorted(fields))}; "
+                              f"shortcuts: {shortcuts}")
     cfg = apply_overrides(base, items)
     for key, value in nested.items():
         sub_path = _SHORTCUTS[key]

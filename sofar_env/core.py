@@ -19,8 +19,13 @@ times with gamma held:
    ``(s, n, v)`` of everything it must avoid (:meth:`Race.opponent_frenet`);
 2. the race integrates all controls over ``dt`` and reports each car's events (collision,
    leaving the track, overtakes, progress);
-3. each car's tally adds the step's reward vector; a car that collided or left the track
-   stops running (in a multi-car race it also leaves the race: :meth:`Race.deactivate`).
+3. each car's tally adds the step's reward vector; a car that collided, left the track or
+   stalled stops running (in a multi-car race it also leaves the race: :meth:`Race.deactivate`).
+
+The stall rule (``EnvConfig.stall_speed``, ``stall_seconds``): a car whose speed stays below
+``stall_speed`` for ``stall_seconds`` without interruption has *stalled*; its episode
+terminates with ``info["stalled"] = True`` and ``is_success = False`` (it stands still, e.g.
+behind a car it cannot pass; nothing more happens in that episode). No reward term is added.
 """
 
 from __future__ import annotations
@@ -88,6 +93,7 @@ class DecisionTally:
         self.miqp_time = 0.0
         self.collision = False
         self.off_track = False
+        self.stalled = False
         self.min_h = math.inf
         self.nearest = math.inf
         self.gamma = math.nan
@@ -117,7 +123,7 @@ class DecisionTally:
 
     @property
     def terminated(self) -> bool:
-        return self.collision or self.off_track
+        return self.collision or self.off_track or self.stalled
 
     def info(self, race, stack, car: int = 0, timings: bool = False) -> dict:
         """The per-step info dictionary (see the environment docstring); ``timings`` adds the solve times."""
@@ -132,6 +138,7 @@ class DecisionTally:
             "gamma": self.gamma,
             "collision": self.collision,
             "off_track": self.off_track,
+            "stalled": self.stalled,
             "nearest_opponent_m": self.nearest,
             "min_barrier": self.min_h,
             "barrier_slack": self.barrier_slack,
@@ -139,6 +146,7 @@ class DecisionTally:
             "miqp_sides": tuple(np.asarray(plan.sides, dtype=int).tolist()) if plan is not None else (),
             "mpc_failures": stack.counters["mpc_failures"],
             "miqp_failures": stack.counters["miqp_failures"],
+            "parked_checks": stack.counters["parked_checks"],
         }
         if timings:
             info["mpc_time_ms"] = 1e3 * self.mpc_time
@@ -155,7 +163,7 @@ class CarStep:
     reward: Any
     """Its reward: the float ``weights . vector`` (``reward_mode="scalar"``) or the float32 vector."""
     terminated: bool
-    """It collided or left the track."""
+    """It collided, left the track or stalled."""
     truncated: bool
     """The race reached its duration (and the car was not terminated)."""
     info: dict
@@ -195,6 +203,8 @@ class ControlledRace:
         self._sensed_ids: list[np.ndarray] = [np.zeros(0, int)] * self.n_cars
         self.sensors: list | None = None
         """One :class:`~sofar_env.sensing.Sensor` per car when ``race.sensor.enabled``."""
+        self.slow_steps = np.zeros(self.n_cars, dtype=int)
+        """Per car, the control steps it has been slower than ``stall_speed`` without interruption."""
 
     # ------------------------------------------------------------------ building
     def build(self) -> None:
@@ -204,7 +214,7 @@ class ControlledRace:
         from .tracks import Track
 
         cfg = self.config
-        self.track = Track.load(cfg.track)
+        self.track = cfg.track if isinstance(cfg.track, Track) else Track.load(cfg.track)
         self.race = Race(self.track, cfg.race, n_cars=self.n_cars)
         if self.speed_factors is None:
             configs = [cfg.stack] * self.n_cars
@@ -238,6 +248,7 @@ class ControlledRace:
             for sensor in self.sensors:
                 sensor.reset(rng)
         self.live = list(range(self.n_cars))
+        self.slow_steps[:] = 0
         self.previous_gamma[:] = self.config.initial_gamma
         self.outputs = [None] * self.n_cars
         bp = self.config.stack.mpc.barrier
@@ -260,6 +271,7 @@ class ControlledRace:
         tallies = {i: DecisionTally() for i in live}
         running = list(live)
         controls = np.zeros((self.n_cars, 2))
+        stall_steps = self.config.stall_steps
         for _ in range(self.config.decision_interval):
             controls[:] = 0.0
             outs = {}
@@ -278,6 +290,10 @@ class ControlledRace:
                                self.previous_gamma[i], bp)
                 self.previous_gamma[i] = gammas[i]
                 self.outputs[i] = outs[i]
+                slow = race.frenet[i, 3] < self.config.stall_speed
+                self.slow_steps[i] = self.slow_steps[i] + 1 if slow else 0
+                if stall_steps is not None and self.slow_steps[i] >= stall_steps and not tallies[i].terminated:
+                    tallies[i].stalled = True
             crashed = [i for i in running if tallies[i].terminated]
             for i in crashed:
                 running.remove(i)

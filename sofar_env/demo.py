@@ -3,7 +3,7 @@
 Usage::
 
     python -m sofar_env.demo [--track LagunaSeca] [--seconds 60] [--gamma 0.5] [--rho 0.3]
-                             [--opponents 4] [--seed 0] [--out sofar_demo.gif] [--no-video]
+                             [--opponents 4] [--seed 0] [--out sofar_demo.gif] [--no-video] [--no-progress]
 
 Defaults: a 60 s race on Laguna Seca against 4 opponents at pace ratio 0.3, gamma 0.5,
 written to ``sofar_demo.gif`` in the current directory (an ``.mp4`` path is written
@@ -12,6 +12,7 @@ demo falls back to a GIF next to it). The summary reports overtakes, the closest
 approach (distance between the cars' reference points and the gap between their
 footprints), the smallest barrier value, how often the MPC used barrier slack,
 collisions, off-tracks, laps, the median MPC / MIQP solve times and the solver failures.
+A progress bar (stderr) follows the race and the writing of the animation.
 """
 
 from __future__ import annotations
@@ -114,10 +115,18 @@ def _resolve_output(path: str) -> str:
 
 
 def run_demo(track: str = "LagunaSeca", seconds: float = 60.0, gamma: float = 0.5, rho: float = 0.3,
-             n_opponents: int = 4, seed: int = 0, out: str | None = "sofar_demo.gif") -> DemoSummary:
-    """Run one race at a fixed gamma; write the animation to ``out`` (None: no video)."""
+             n_opponents: int = 4, seed: int = 0, out: str | None = "sofar_demo.gif",
+             progress: bool = False) -> DemoSummary:
+    """Run one race at a fixed gamma; write the animation to ``out`` (None: no video).
+
+    ``progress`` shows a progress bar (tqdm, on stderr) over the control steps and the frames written.
+    """
+    from tqdm import tqdm
+
     env = SOfARRaceEnv(track=track, rho=rho, n_opponents=n_opponents, race={"duration": float(seconds)},
                        timing_info=True, render_mode="rgb_array" if out else None)
+    bar = tqdm(total=env.config.control_steps, desc="racing and rendering" if out else "racing", unit="step",
+               disable=not progress, leave=False)
     frames = []
     t0 = time.perf_counter()
     _, info = env.reset(seed=seed)
@@ -143,14 +152,16 @@ def run_demo(track: str = "LagunaSeca", seconds: float = 60.0, gamma: float = 0.
         off_tracks += info["off_track"]
         if out:
             frames.append(env.render())
+        bar.update()
         if terminated or truncated:
             break
+    bar.close()
     wall = time.perf_counter() - t0
     video = None
     if out:
         from .render import write_animation
 
-        video = write_animation(frames, _resolve_output(out), fps=env.metadata["render_fps"])
+        video = write_animation(frames, _resolve_output(out), fps=env.metadata["render_fps"], progress=progress)
     env.close()
     return DemoSummary(
         track=race.track.name, sim_time_s=race.time, steps=steps, overtakes=info["overtakes"],
@@ -173,9 +184,11 @@ def main(argv: list[str] | None = None) -> DemoSummary:
     parser.add_argument("--seed", type=int, default=0, help="random seed of the start (default 0)")
     parser.add_argument("--out", default="sofar_demo.gif", help="animation file, .gif or .mp4 (default sofar_demo.gif)")
     parser.add_argument("--no-video", action="store_true", help="skip rendering and the animation")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     summary = run_demo(track=args.track, seconds=args.seconds, gamma=args.gamma, rho=args.rho,
-                       n_opponents=args.opponents, seed=args.seed, out=None if args.no_video else args.out)
+                       n_opponents=args.opponents, seed=args.seed, out=None if args.no_video else args.out,
+                       progress=not args.no_progress)
     print(summary.format())
     return summary
 

@@ -93,7 +93,8 @@ class SOfARRaceEnv(gym.Env):
     a step that uses a full unit of barrier slack costs 0.5). ``reward_mode="vector"``
     returns the float32 vector and declares it in ``env.unwrapped.reward_space``
     (MO-Gymnasium convention; scalarise it outside the env). Make it with
-    ``mo_gymnasium.make(...)`` (Gymnasium's passive checker expects a float reward) and use
+    ``mo_gymnasium.make(...)`` or plain ``gymnasium.make(...)`` (the registered ids leave Gymnasium's
+    passive checker, which expects a float reward, off in vector mode; :mod:`sofar_env.factory`) and use
     MO-Gymnasium's wrappers (``LinearReward``, ``MORecordEpisodeStatistics`` inside the
     scalarisation) and ``mo_gymnasium.wrappers.vector.MOSyncVectorEnv``;
     ``gymnasium.vector.SyncVectorEnv`` stores scalar rewards only. The vector is always in
@@ -110,25 +111,30 @@ class SOfARRaceEnv(gym.Env):
 
     ## Episode End
 
-    * Termination: a collision (the 4.9 m x 1.9 m footprints intersect) or a corner of
-      the ego's footprint beyond a track edge.
+    * Termination: a collision (the 4.9 m x 1.9 m footprints intersect), a corner of
+      the ego's footprint beyond a track edge, or a stall: the ego slower than
+      ``stall_speed`` (1 m/s) for ``stall_seconds`` (20 s) without interruption, e.g.
+      stopped for good behind a car it cannot pass (``info["stalled"]``; ``stall_seconds=None``
+      or 0 turns the rule off).
     * Truncation: the race duration (200 s = 2000 control steps; the registered ids use
       ``max_episode_steps=2000`` and the environment also truncates itself at the
       duration whatever the decision interval).
 
     ``info["is_success"]`` is set at the end of an episode: True when the duration was
-    reached without a collision or leaving the track.
+    reached without a collision, leaving the track or stalling.
 
     ## Info
 
     ``reward_vector`` (float32, 5), ``cost`` (barrier slack + collisions + off-tracks, for
     constrained RL), ``overtakes`` (episode total), ``laps`` (arc length driven / lap
-    length), ``sim_time`` [s], ``gamma``, ``collision``, ``off_track``,
-    ``nearest_opponent_m`` (distance between reference points [m], inf if none),
+    length), ``sim_time`` [s], ``gamma``, ``collision``, ``off_track``, ``stalled``
+    (the stall rule ended the episode), ``nearest_opponent_m`` (distance between reference points [m], inf if none),
     ``min_barrier`` (min h over the opponents now, inf if none), ``barrier_slack``,
     ``mpc_status``, ``miqp_sides`` (per opponent the planners saw, nearest first: +1 = the plan passes it
     on the left, -1 = on the right, 0 = not constrained by the plan),
-    ``mpc_failures``, ``miqp_failures`` (episode counters), ``is_success`` at the end. With
+    ``mpc_failures``, ``miqp_failures``, ``parked_checks`` (episode counters; the last: MIQP calls that
+    planned the pass of near-stationary opponents with the parked clearance, see
+    :mod:`sofar_env.stack.follow`), ``is_success`` at the end. With
     ``timing_info=True`` also the wall-clock solve times ``mpc_time_ms``, ``miqp_time_ms`` of
     the step: off by default, because they are the only values that differ between two runs
     with the same seed, and checks that compare infos exactly (Gymnasium's ``check_env``,
@@ -143,10 +149,14 @@ class SOfARRaceEnv(gym.Env):
     env = gym.make("SOfAR-Monza-v0", config={"reward_mode": "vector", "race": {"duration": 60.0}})
     ```
 
+    A circuit of your own: ``gym.make("SOfAR-Custom-v0", track="path/to/folder")`` (a folder written by
+    ``python -m sofar_env.tracks build``, or a :class:`~sofar_env.tracks.Track`).
+
     Keyword arguments and the ``config`` mapping are validated into
     :class:`~sofar_env.config.EnvConfig` (unknown keys raise ``ValueError``): ``track``,
     ``n_opponents``, ``offsets``, ``rho``, ``speed_factor``, ``use_miqp``,
-    ``decision_interval``, ``reward_mode``, ``reward_weights``, ``initial_gamma``, ``timing_info``,
+    ``decision_interval``, ``reward_mode``, ``reward_weights``, ``initial_gamma``, ``stall_speed``,
+    ``stall_seconds``, ``timing_info``,
     ``race`` (:class:`~sofar_env.race.RaceConfig`), ``stack``
     (:class:`~sofar_env.stack.StackConfig`, or a preset name: ``"sofar"``, the default, or
     ``"paper"``, the paper's Algorithm 1 as written, see :func:`~sofar_env.stack.stack_preset`).

@@ -10,9 +10,10 @@ only with ``timing_info=True``). Cars start
 the lateral offsets ``race.car_offsets``. Give them different ``speed_factors`` for
 overtakes to happen.
 
-A car that collides or leaves the track terminates and leaves the race (it stops
-and no longer counts as an obstacle); in a collision between two cars both
-terminate. All remaining cars are truncated at the race duration.
+A car that collides, leaves the track or stalls (the stall rule of
+:mod:`sofar_env.core`: slower than ``stall_speed`` for ``stall_seconds``, per car)
+terminates and leaves the race (it stops and no longer counts as an obstacle); in a
+collision between two cars both terminate. All remaining cars are truncated at the race duration.
 
 ``reset(options=...)`` accepts ``start_s`` and ``start_speed``; other keys are
 ignored with a logged warning (PettingZoo's API test passes arbitrary options).

@@ -1,9 +1,17 @@
 """Registration of the SOfAR environments with Gymnasium.
 
 ``import sofar_env`` registers one id per shipped circuit, e.g.
-``gymnasium.make("SOfAR-LagunaSeca-v0")``; ``gymnasium.make("sofar_env:SOfAR-Monza-v0")``
-works without a prior import. The entry point is a ``"module:Class"`` string, so the
-specs pickle (vector environments) and nothing heavy is imported at registration.
+``gymnasium.make("SOfAR-LagunaSeca-v0")``, its interactive-world twin
+``SOfAR-LagunaSeca-Interactive-v0``, and :data:`CUSTOM_ID` for a circuit of your own::
+
+    gymnasium.make("SOfAR-Custom-v0", track="path/to/MyCircuit")   # a folder of `python -m sofar_env.tracks build`
+    gymnasium.make("SOfAR-Custom-v0", track=Track.load("path/to/MyCircuit"), scenario="interactive")
+
+``gymnasium.make("sofar_env:SOfAR-Monza-v0")`` works without a prior import. The entry
+points are ``"module:function"`` strings (:mod:`sofar_env.factory`), so the specs pickle
+(vector environments) and nothing heavy is imported at registration. The ids are registered
+with ``disable_env_checker=True`` because the entry points apply Gymnasium's passive checker
+themselves in scalar mode and leave it off in vector mode (see :mod:`sofar_env.factory`).
 """
 
 from __future__ import annotations
@@ -12,7 +20,7 @@ import gymnasium as gym
 
 from .constants import CIRCUITS
 
-__all__ = ["TRACKS", "ENV_IDS", "INTERACTIVE_IDS", "MAX_EPISODE_STEPS", "register_envs"]
+__all__ = ["TRACKS", "ENV_IDS", "INTERACTIVE_IDS", "CUSTOM_ID", "MAX_EPISODE_STEPS", "register_envs"]
 
 TRACKS = CIRCUITS
 """Circuits with a registered environment."""
@@ -20,20 +28,24 @@ ENV_IDS = tuple(f"SOfAR-{name}-v0" for name in TRACKS)
 """The paper-world ids, in the order of :data:`TRACKS`."""
 INTERACTIVE_IDS = tuple(f"SOfAR-{name}-Interactive-v0" for name in TRACKS)
 """The interactive-world ids (``scenario="interactive"``, :mod:`sofar_env.scenarios`)."""
+CUSTOM_ID = "SOfAR-Custom-v0"
+"""A circuit of your own: ``track=`` a circuit folder or a :class:`~sofar_env.tracks.Track` (required; any world
+through ``scenario=``)."""
 MAX_EPISODE_STEPS = 2000
 """200 s at dt = 0.1 s."""
-ENTRY_POINT = "sofar_env.env:SOfARRaceEnv"
+ENTRY_POINT = "sofar_env.factory:make_env"
+CUSTOM_ENTRY_POINT = "sofar_env.factory:make_custom_env"
+
+
+def _register(env_id: str, entry_point: str, kwargs: dict) -> None:
+    if env_id not in gym.registry:
+        gym.register(id=env_id, entry_point=entry_point, max_episode_steps=MAX_EPISODE_STEPS,
+                     disable_env_checker=True, kwargs=kwargs)
 
 
 def register_envs() -> None:
-    """Register every id of :data:`ENV_IDS` and :data:`INTERACTIVE_IDS` (idempotent)."""
+    """Register every id of :data:`ENV_IDS`, :data:`INTERACTIVE_IDS` and :data:`CUSTOM_ID` (idempotent)."""
     for ids, extra in ((ENV_IDS, {}), (INTERACTIVE_IDS, {"scenario": "interactive"})):
         for name, env_id in zip(TRACKS, ids):
-            if env_id in gym.registry:
-                continue
-            gym.register(
-                id=env_id,
-                entry_point=ENTRY_POINT,
-                max_episode_steps=MAX_EPISODE_STEPS,
-                kwargs={"track": name, **extra},
-            )
+            _register(env_id, ENTRY_POINT, {"track": name, **extra})
+    _register(CUSTOM_ID, CUSTOM_ENTRY_POINT, {})

@@ -9,8 +9,9 @@ track edges (the edges of the off-track test, ``n = +width_left(s)`` and
 level set ``h = 0`` of the velocity-aware barrier: an ellipse in the Frenet frame mapped
 to Cartesian coordinates, drawn with the longitudinal semi-axis of the side the ego would
 approach from), the MIQP lateral plan (orange dots), the MPC prediction (cyan line), the
-opponents (red) and the ego (blue) as their 4.9 m x 1.9 m footprints, and a text panel
-with time, speed, gamma and overtakes. Frames are drawn with PIL (~5-8 ms at 640 x 480).
+opponents (red) and the ego (blue) as their 4.9 m x 1.9 m footprints, a text panel
+with time, speed, gamma and overtakes (top left) and a legend of these marks (bottom left;
+``Renderer(legend=False)`` leaves it out). Frames are drawn with PIL (~5-8 ms at 640 x 480).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from .control.barrier import BarrierParams, semi_axis_s
 from .geometry import footprint_corners
 from .vehicle import AV21, VehicleParams
 
-__all__ = ["Renderer", "write_animation"]
+__all__ = ["LEGEND", "Renderer", "write_animation"]
 
 _GRASS = (62, 112, 58)
 _TARMAC = (92, 92, 98)
@@ -40,6 +41,18 @@ _MPC = (0, 230, 230)
 _PANEL = (20, 20, 24)
 _TEXT = (240, 240, 240)
 _THETA = np.linspace(0.0, 2.0 * np.pi, 48)
+_GIF_COLOURS = 127
+"""Colours of an animation's palette; index 127 is the transparent "unchanged" colour of the delta frames."""
+LEGEND = (
+    ("ego", "car", _EGO),
+    ("opponent", "car", _OPPONENT),
+    ("barrier h = 0", "ring", _BARRIER),
+    ("MIQP lateral plan", "dots", _PLAN),
+    ("MPC prediction", "line", _MPC),
+    ("raceline", "line", _RACELINE),
+    ("track edge", "line", _EDGE),
+)
+"""The legend of a frame: (label, mark, colour) of everything :meth:`Renderer.draw` draws."""
 
 
 def _font(size: int):
@@ -49,11 +62,35 @@ def _font(size: int):
         return ImageFont.load_default()
 
 
+def _legend_image(font) -> Image.Image:
+    """The legend panel of :data:`LEGEND` (drawn once, pasted into every frame)."""
+    row, mark_w, pad = 15, 22, 6
+    probe = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    text_w = max(probe.textlength(label, font=font) for label, _, _ in LEGEND)
+    img = Image.new("RGB", (int(2 * pad + mark_w + 6 + text_w), 2 * pad + row * len(LEGEND) - 3), _PANEL)
+    d = ImageDraw.Draw(img)
+    for i, (label, mark, colour) in enumerate(LEGEND):
+        y = pad + row * i + row // 2 - 1
+        x0, x1 = pad, pad + mark_w
+        if mark == "car":
+            d.rectangle((x0 + 4, y - 3, x1 - 4, y + 3), fill=colour, outline=(0, 0, 0))
+        elif mark == "ring":
+            d.ellipse((x0, y - 4, x1, y + 4), outline=colour, width=1)
+        elif mark == "dots":
+            for x in range(x0 + 2, x1, 6):
+                d.ellipse((x - 2, y - 2, x + 2, y + 2), fill=colour)
+        else:
+            d.line((x0, y, x1, y), fill=colour, width=2)
+        d.text((x1 + 6, y - 7), label, fill=_TEXT, font=font)
+    return img
+
+
 class Renderer:
     """Draws frames of one track; keeps the static geometry between frames."""
 
     def __init__(self, track, vehicle: VehicleParams = AV21, barrier: BarrierParams = BarrierParams(),
-                 width: int = 640, height: int = 480, view_width: float = 180.0, fps: int = 10):
+                 width: int = 640, height: int = 480, view_width: float = 180.0, fps: int = 10,
+                 legend: bool = True):
         self.track = track
         self.vehicle = vehicle
         self.barrier = barrier
@@ -72,6 +109,7 @@ class Renderer:
         self.look_ahead = 0.2 * float(view_width)
         """The camera centre is this far ahead of the ego along its heading [m]."""
         self._font = _font(14)
+        self._legend = _legend_image(_font(12)) if legend else None
         self._figure = None
         self._image = None
 
@@ -160,7 +198,17 @@ class Renderer:
         d.rectangle((6, 6, 170, 12 + 18 * len(lines)), fill=_PANEL)
         for i, text in enumerate(lines):
             d.text((12, 9 + 18 * i), text, fill=_TEXT, font=self._font)
+        if self._legend is not None:
+            img.paste(self._legend, self.legend_box[:2])
         return np.asarray(img, dtype=np.uint8)
+
+    @property
+    def legend_box(self) -> tuple[int, int, int, int] | None:
+        """(left, top, right, bottom) of the legend in a frame [px], None without a legend."""
+        if self._legend is None:
+            return None
+        w, h = self._legend.size
+        return 6, self.height - 6 - h, 6 + w, self.height - 6
 
     # ------------------------------------------------------------------ window
     def show(self, frame: np.ndarray) -> None:
@@ -186,28 +234,45 @@ class Renderer:
             self._figure = None
 
 
-def write_animation(frames: Sequence[np.ndarray], path: str | os.PathLike, fps: float = 10.0) -> str:
+def write_animation(frames: Sequence[np.ndarray], path: str | os.PathLike, fps: float = 10.0,
+                    progress: bool = False) -> str:
     """Write RGB frames to ``path``: a GIF (PIL) for ``.gif``, else a video through imageio's ffmpeg plugin.
 
-    Returns the path written. An MP4 needs the ``imageio-ffmpeg`` package.
+    Returns the path written. An MP4 needs the ``imageio-ffmpeg`` package. ``progress`` shows a
+    progress bar over the frames (tqdm, on stderr).
     """
     path = os.fspath(path)
     if not frames:
         raise ValueError("no frames to write")
+    from tqdm import tqdm
+
+    bar = tqdm(frames, desc=f"writing {os.path.basename(path)}", unit="frame", disable=not progress, leave=False)
     if path.lower().endswith(".gif"):
         # one palette for the whole animation, from a few frames spread over it: mapping onto a
         # fixed palette is ~10x faster than PIL's per-frame quantisation and does not flicker
         picks = np.linspace(0, len(frames) - 1, min(len(frames), 8)).astype(int)
         sample = Image.fromarray(np.concatenate([np.asarray(frames[i], np.uint8) for i in picks], axis=0))
-        palette = sample.quantize(colors=128, method=Image.Quantize.MEDIANCUT)
-        images = [Image.fromarray(np.asarray(f, np.uint8)).quantize(palette=palette, dither=Image.Dither.NONE)
-                  for f in frames]
+        palette = sample.quantize(colors=_GIF_COLOURS, method=Image.Quantize.MEDIANCUT)
+        colours = palette.getpalette()[: 3 * _GIF_COLOURS]
+        colours += [0] * (3 * 256 - len(colours))  # index _GIF_COLOURS (transparent) and the unused rest
+        images, previous = [], None
+        for f in bar:
+            index = np.asarray(Image.fromarray(np.asarray(f, np.uint8)).quantize(palette=palette,
+                                                                              dither=Image.Dither.NONE))
+            # a pixel unchanged since the previous frame is transparent (the previous frame shows through):
+            # what PIL's optimize=True does, with numpy instead of its ~20 ms-a-frame pixel loop
+            delta = index if previous is None else np.where(index == previous, _GIF_COLOURS, index).astype(np.uint8)
+            previous = index
+            image = Image.frombytes("P", (delta.shape[1], delta.shape[0]), np.ascontiguousarray(delta).tobytes())
+            image.putpalette(colours)
+            images.append(image)
         duration_ms = int(round(1000.0 / fps))
-        images[0].save(path, save_all=True, append_images=images[1:], duration=duration_ms, loop=0)
+        images[0].save(path, save_all=True, append_images=images[1:], duration=duration_ms, loop=0, optimize=False,
+                       transparency=_GIF_COLOURS, disposal=1)
         return path
     import imageio.v2 as imageio
 
     with imageio.get_writer(path, fps=fps) as writer:
-        for f in frames:
+        for f in bar:
             writer.append_data(np.asarray(f, np.uint8))
     return path

@@ -5,8 +5,12 @@ Usage (from the repository root, with the package installed)::
     python train/pasta.py                                   # Laguna Seca, defaults
     python train/pasta.py --stack paper                     # with the paper's Algorithm 1 as controller
     python train/pasta.py --scenario interactive            # in the interactive world
+    python train/pasta.py --quick                           # a few-minute run that finishes episodes
     python train/pasta.py --n-envs 2 --total-steps 800000 --out runs/pasta_ls
-    python train/pasta.py --resume runs/pasta_ls/pasta_final.json --total-steps 1200000
+    python train/pasta.py --resume runs/pasta_ls/pasta_final.json --total-steps 1200000 \
+        --out runs/pasta_ls --force                         # continue in place
+    python train/pasta.py --backend ray --num-workers 4     # envs in Ray actors (pip install "sofar[ray]")
+    python train/pasta.py --backend ray --address auto --num-workers 16 --n-envs 16   # on a Ray cluster
     tensorboard --logdir runs
 
 Every PASTA hyper-parameter (``sofar_agents.PASTAConfig``) is also an option, e.g.
@@ -16,13 +20,24 @@ Per episode the opponent pace ratio rho is drawn uniformly from ``[--rho-min,
 --rho-max]`` (the paper evaluates at 0.1, 0.3, 0.5, 0.65, 0.8), or from
 ``--rho-values`` when given. Outputs in ``--out``: ``tb/`` (TensorBoard),
 ``checkpoints/pasta_<steps>.{json,pt}`` every ``--save-every`` updates and
-``pasta_final.{json,pt}``.
+``pasta_final.{json,pt}``. An ``--out`` that already holds a run (a ``pasta_final.json``)
+is refused unless ``--force`` is given. After every update one console line reports the
+mean returns of the last finished episodes per objective, by name.
+
+``--quick`` is a preset for a first look (1 to 2 minutes on one core): 16384 steps
+in rollouts of 512, 30 s episodes, 4 PPO epochs, output in ``runs/pasta_quick``; options
+given explicitly win over it.
+
+``--backend ray`` runs the environments (and their solvers) in ``--num-workers`` Ray
+actors, the learner in this process; a seeded run gives the same checkpoints as the
+local backend with the same ``--n-envs`` (see :mod:`sofar_agents.pasta.ray_rollout`).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import logging
 import shlex
@@ -37,16 +52,26 @@ import numpy as np
 import torch
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
+from tqdm.contrib.logging import logging_redirect_tqdm
 
 from sofar_agents.cli import add_dataclass_options
 from sofar_agents.pasta import PASTA, PASTAConfig
-from sofar_agents.wrappers import LinearReward, RandomRhoReset
+from sofar_agents.pasta.rollout import make_training_env
+from sofar_agents.pasta.training_log import (check_out, code_commit, console_line, log_update, n_objectives,
+                                             objective_names)
 
 logger = logging.getLogger("train.pasta")
 
 REFERENCE_PREFERENCE = (0.31, 0.45, 0.05, 0.04, 0.15)
 """Deployment preference of the reference implementation, in the order of the SOfAR
 objectives (safety, overtakes, progress, barrier_margin, gamma_smoothness)."""
+
+QUICK_RUN = {"total_steps": 16384, "out": "runs/pasta_quick", "save_every": 8}
+"""Run options of ``--quick`` (applied to the options not given on the command line)."""
+QUICK_PASTA = {"n_steps": 512, "n_epochs": 4}
+"""PASTA hyper-parameters of ``--quick``."""
+QUICK_EPISODE_S = 30.0
+"""Episode length of ``--quick`` in simulated seconds (``race.duration``; default 200 s)."""
 
 
 @dataclass
@@ -65,8 +90,22 @@ class Args:
     """If set, passed to the environment as ``decision_interval`` (simulator steps per action)."""
     total_steps: int = 1_000_000
     """Environment steps to train for, counted over all envs (including resumed steps)."""
-    n_envs: int = 1
-    """Parallel environments (``AsyncVectorEnv`` subprocesses when > 1)."""
+    n_envs: int | None = None
+    """Parallel environments (``AsyncVectorEnv`` subprocesses when > 1); default 1, or
+    ``--num-workers`` with ``--backend ray``."""
+    backend: str = "local"
+    """Where the environments run: ``local`` (this machine's processes) or ``ray`` (Ray
+    actors, each owning a slice of the envs and their solvers; the learner stays here)."""
+    num_workers: int | None = None
+    """Ray actors with ``--backend ray`` (one CPU each; default: one per env)."""
+    address: str | None = None
+    """Ray cluster to join with ``--backend ray``: ``auto`` or ``HOST:PORT`` (default:
+    start a private local Ray instance with ``--num-workers`` CPUs)."""
+    quick: bool = False
+    """Preset for a first look (1 to 2 minutes): 16384 steps, rollouts of 512, 30 s
+    episodes, 4 epochs, ``--out runs/pasta_quick``; explicit options win."""
+    force: bool = False
+    """Allow writing into an ``--out`` that already holds a run (overwrites its final checkpoint)."""
     seed: int = 1
     """Seed of the agent and of the environments (env i is seeded with seed + i)."""
     out: str = "runs/pasta"
@@ -101,32 +140,41 @@ class Args:
 # ---------------------------------------------------------------------------- arguments
 
 
-def _code_commit() -> str | None:
-    """The git commit of the source tree this script runs from (``+dirty`` if modified), if known."""
-    import subprocess
-
-    root = Path(__file__).resolve().parent.parent
-    try:
-        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
-                                timeout=5, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, timeout=5, check=True).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return commit + ("+dirty" if dirty else "")
-
-
 def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
-    """Parse the command line into run options and PASTA config overrides."""
+    """Parse the command line into run options and PASTA config overrides (``--quick`` applied, checked)."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_dataclass_options(parser, Args, "run")
     add_dataclass_options(parser, PASTAConfig, "PASTA hyper-parameters")
+    parser._option_string_actions["--mu-decay-steps"].help = (
+        "Length of the linear decay of the target mu from --mu-max to --mu-min, in environment steps over "
+        "all envs; mu stays at --mu-min afterwards (default: --total-steps of a new run; kept on --resume)")
+    for action in parser._actions:  # "(default: None)" where the help already says what the default is
+        if action.help and action.help.endswith(" (default: None)") and "default" in action.help[:-16]:
+            action.help = action.help[:-16]
     ns = vars(parser.parse_args(argv))
+    if ns["quick"]:
+        for key, value in {**QUICK_RUN, **QUICK_PASTA}.items():
+            if ns[key] is None:
+                ns[key] = value
     run_names = {f.name for f in dataclasses.fields(Args)}
     args = Args(**{k: v for k, v in ns.items() if k in run_names and v is not None})
     overrides = {k: v for k, v in ns.items() if k not in run_names and v is not None}
     if "hidden_sizes" in overrides:
         overrides["hidden_sizes"] = tuple(overrides["hidden_sizes"])
+    if args.backend not in ("local", "ray"):
+        parser.error(f"--backend must be 'local' or 'ray', got {args.backend!r}")
+    if args.backend == "local" and (args.num_workers is not None or args.address is not None):
+        parser.error("--num-workers and --address need --backend ray")
+    if args.num_workers is not None and args.num_workers < 1:
+        parser.error(f"--num-workers must be positive, got {args.num_workers}")
+    if args.n_envs is None:
+        args.n_envs = args.num_workers if args.num_workers is not None else 1
+    if args.n_envs < 1:
+        parser.error(f"--n-envs must be positive, got {args.n_envs}")
+    if args.backend == "ray":
+        args.num_workers = args.num_workers if args.num_workers is not None else args.n_envs
+        if args.num_workers > args.n_envs:
+            parser.error(f"--num-workers {args.num_workers} exceeds --n-envs {args.n_envs} (each worker owns envs)")
     return args, overrides
 
 
@@ -154,15 +202,8 @@ def ensure_registered(env_id: str) -> None:
 
 
 def make_env(env_id: str, env_kwargs: dict[str, Any], args: Args) -> Any:
-    """Thunk building one training env: vector reward kept in ``info["reward_vector"]``."""
-
-    def thunk() -> gym.Env:
-        ensure_registered(env_id)
-        env = gym.make(env_id, reward_mode="vector", **env_kwargs)
-        env = RandomRhoReset(env, args.rho_min, args.rho_max, args.rho_values)
-        return LinearReward(env)
-
-    return thunk
+    """Picklable thunk building one training env: vector reward kept in ``info["reward_vector"]``."""
+    return functools.partial(make_training_env, env_id, env_kwargs, args.rho_min, args.rho_max, args.rho_values)
 
 
 def env_kwargs_of(args: Args) -> dict[str, Any]:
@@ -173,71 +214,29 @@ def env_kwargs_of(args: Args) -> dict[str, Any]:
     for key in ("stack", "scenario"):
         if getattr(args, key) is not None:
             env_kwargs[key] = getattr(args, key)
+    if args.quick:
+        race = env_kwargs.setdefault("race", {})
+        if isinstance(race, dict):
+            race.setdefault("duration", QUICK_EPISODE_S)
     return env_kwargs
 
 
-def make_vec_env(args: Args) -> gym.vector.VectorEnv:
+def make_vec_env(args: Args) -> Any:
+    """The training envs: a gymnasium vector env (local backend) or a :class:`RayEnvPool`."""
     env_kwargs = env_kwargs_of(args)
     if args.decision_interval is not None:
         env_kwargs["decision_interval"] = args.decision_interval
+    assert args.n_envs is not None
     fns = [make_env(args.env_id, env_kwargs, args) for _ in range(args.n_envs)]
+    if args.backend == "ray":
+        from sofar_agents.pasta.ray_rollout import RayEnvPool
+
+        assert args.num_workers is not None
+        return RayEnvPool(fns, args.num_workers, address=args.address)
     mode = gym.vector.AutoresetMode.SAME_STEP
     if args.n_envs > 1:
         return gym.vector.AsyncVectorEnv(fns, autoreset_mode=mode)
     return gym.vector.SyncVectorEnv(fns, autoreset_mode=mode)
-
-
-def _objective_names(vec_env: gym.vector.VectorEnv) -> tuple[str, ...] | None:
-    try:
-        names = vec_env.get_attr("objective_names")[0]
-        return tuple(str(n) for n in names)
-    except (AttributeError, IndexError, TypeError):
-        return None
-
-
-def _n_objectives(vec_env: gym.vector.VectorEnv) -> int:
-    try:
-        space = vec_env.get_attr("reward_space")[0]
-        return int(np.prod(space.shape))
-    except (AttributeError, IndexError, TypeError) as err:
-        raise SystemExit("the environment must declare env.unwrapped.reward_space") from err
-
-
-# ---------------------------------------------------------------------------- logging
-
-
-def _log_update(writer: SummaryWriter, agent: PASTA, stats: dict[str, Any]) -> None:
-    step = agent.num_timesteps
-    names = agent.objective_names
-    for key in ("policy_loss", "value_loss", "entropy", "approx_kl", "clipfrac", "log_std"):
-        writer.add_scalar(f"losses/{key}", stats[key], step)
-    writer.add_scalar("pasta/mu", stats["mu"], step)
-    writer.add_scalar("pasta/conflict_ratio", stats["conflict_ratio"], step)
-    writer.add_scalar("charts/sps", stats["sps"], step)
-    writer.add_scalar("charts/epochs", stats["epochs"], step)
-    for j, name in enumerate(names):
-        writer.add_scalar(f"attention/{name}", stats["attention"][j], step)
-        writer.add_scalar(f"regret/{name}", stats["regret"][j], step)
-        writer.add_scalar(f"return_scale/{name}", stats["return_scale"][j], step)
-        ev = stats["explained_variance"][j]
-        if np.isfinite(ev):
-            writer.add_scalar(f"explained_variance/{name}", ev, step)
-    buffer = stats["rollout"]
-    writer.add_histogram("actions/gamma", buffer.actions.reshape(-1), step)
-    writer.add_scalar("actions/gamma_mean", float(buffer.actions.mean()), step)
-    episodes = stats["episodes"]
-    if episodes:
-        returns = np.array([e["returns"] for e in episodes])
-        for j, name in enumerate(names):
-            writer.add_scalar(f"episode_return/{name}", returns[:, j].mean(), step)
-        writer.add_scalar("episode_return/preference_weighted", float((returns @ agent.preference).mean()), step)
-        writer.add_scalar("charts/episode_length", np.mean([e["length"] for e in episodes]), step)
-        writer.add_scalar("charts/episodes", len(episodes), step)
-        for key, tag in (("is_success", "success_rate"), ("overtakes", "overtakes"), ("laps", "laps"),
-                         ("collision", "collision_rate"), ("off_track", "off_track_rate")):
-            vals = [e[key] for e in episodes if key in e]
-            if vals:
-                writer.add_scalar(f"charts/{tag}", float(np.mean(vals)), step)
 
 
 # ---------------------------------------------------------------------------- main
@@ -246,8 +245,17 @@ def _log_update(writer: SummaryWriter, agent: PASTA, stats: dict[str, Any]) -> N
 def main(argv: list[str] | None = None) -> Path:
     args, overrides = parse_args(argv)
     logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="%(asctime)s %(name)s: %(message)s")
+    if args.backend == "ray":
+        from sofar_agents.ray_support import require_ray
+
+        try:
+            require_ray()
+        except ImportError as err:
+            print(f"train/pasta.py: --backend ray: {err}", file=sys.stderr)
+            raise SystemExit(2) from err
     torch.set_num_threads(args.torch_threads)
     out = Path(args.out)
+    check_out(out, args.force)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.time()
 
@@ -255,8 +263,8 @@ def main(argv: list[str] | None = None) -> Path:
     vec_env = make_vec_env(args)
     obs_space, act_space = vec_env.single_observation_space, vec_env.single_action_space
     obs_dim = int(np.prod(obs_space.shape))
-    k = _n_objectives(vec_env)
-    names = _objective_names(vec_env)
+    k = n_objectives(vec_env)
+    names = objective_names(vec_env)
 
     if args.resume:
         agent = PASTA.load(args.resume)
@@ -284,12 +292,14 @@ def main(argv: list[str] | None = None) -> Path:
 
     run_meta = {
         "command": shlex.join(["python", "train/pasta.py", *(sys.argv[1:] if argv is None else argv)]),
-        "code_commit": _code_commit(),
+        "code_commit": code_commit(Path(__file__).resolve().parent.parent),
         "seed": args.seed,
         "env_id": args.env_id,
         "env_kwargs": env_kwargs_of(args),
         "decision_interval": args.decision_interval,
         "n_envs": args.n_envs,
+        "backend": args.backend,
+        "num_workers": args.num_workers,
         "rho": args.rho_values if args.rho_values is not None else [args.rho_min, args.rho_max],
         "resumed_from": args.resume,
     }
@@ -314,19 +324,21 @@ def main(argv: list[str] | None = None) -> Path:
         return agent.save(path, metadata=meta)
 
     remaining = max(0, args.total_steps - agent.num_timesteps)
-    pbar = tqdm(total=remaining, unit="step", disable=not args.progress, dynamic_ncols=True)
+    pbar = tqdm(total=args.total_steps, initial=min(agent.num_timesteps, args.total_steps), unit="step",
+                disable=not args.progress, dynamic_ncols=True, desc="PASTA")
 
     def callback(ag: PASTA, stats: dict[str, Any]) -> bool:
-        _log_update(writer, ag, stats)
+        log_update(writer, ag, stats)
         pbar.update(stats["rollout"].rewards.shape[0] * stats["rollout"].rewards.shape[1])
-        pbar.set_postfix(mu=f"{stats['mu']:.2f}", conflict=f"{stats['conflict_ratio']:.2f}", refresh=False)
+        logger.info("%s", console_line(ag, stats, args.total_steps))
         if args.save_every and ag.num_updates % args.save_every == 0:
             path = save(out / "checkpoints" / f"pasta_{ag.num_timesteps:010d}")
             logger.debug("checkpoint %s", path)
         return True
 
     try:
-        agent.learn(vec_env, remaining, callback=callback)
+        with logging_redirect_tqdm():  # log lines above the one progress bar, not through it
+            agent.learn(vec_env, remaining, callback=callback, log_interval=0)
     finally:
         pbar.close()
         final = save(out / "pasta_final")

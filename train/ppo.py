@@ -4,6 +4,7 @@ Usage (from the repository root, with the package installed)::
 
     python train/ppo.py                                   # Laguna Seca, defaults
     python train/ppo.py --n-envs 2 --total-steps 800000 --out runs/ppo_ls
+    python train/ppo.py --resume runs/ppo_ls/ppo_final.zip --total-steps 1200000 --out runs/ppo_ls --force
     tensorboard --logdir runs
 
 The environment is made with ``mo_gymnasium.make`` and returns its reward vector;
@@ -13,7 +14,16 @@ gamma_smoothness), and :class:`sofar_agents.wrappers.RescaleGammaAction` maps th
 policy's ``[-1, 1]`` output onto gamma in ``[0.05, 1]``. rho is drawn per episode as in
 ``train/pasta.py``. The network matches PASTA's (2 x 256, tanh). Outputs in ``--out``:
 ``tb/``, ``checkpoints/ppo_<steps>_steps.zip`` and ``ppo_final.zip`` (load it for
-deployment with :class:`sofar_agents.policies.SB3Policy`).
+deployment with :class:`sofar_agents.policies.SB3Policy`). An ``--out`` that already
+holds a ``ppo_final.zip`` is refused unless ``--force`` is given.
+
+``--resume PATH.zip`` continues a run: ``PPO.load`` restores the policy, the optimiser and
+the hyper-parameters stored in the checkpoint (the PPO options on the command line are
+ignored then), the reward normaliser statistics are restored from the matching
+``*vecnormalize*.pkl`` written next to it, and training continues up to
+``--total-steps`` (counted from the start of the first run). The rollout in progress and
+the envs' episode states are not part of a checkpoint, so a resumed run is not
+bit-identical to an uninterrupted one.
 """
 
 from __future__ import annotations
@@ -30,9 +40,11 @@ import numpy as np
 import torch
 from mo_gymnasium.wrappers import LinearReward
 from stable_baselines3 import PPO
-from stable_baselines3.common.callbacks import CheckpointCallback
+from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
+
+from tqdm import tqdm
 
 from sofar_agents.wrappers import RandomRhoReset, RescaleGammaAction
 
@@ -72,6 +84,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=1, help="seed")
     p.add_argument("--out", default="runs/ppo", help="output directory")
     p.add_argument("--save-every", type=int, default=100_000, help="checkpoint every this many steps (0: off)")
+    p.add_argument("--resume", default=None,
+                   help="checkpoint (.zip) to continue from; its stored hyper-parameters are used")
+    p.add_argument("--force", action="store_true", help="allow writing into an --out that already holds a run")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True, help="show a progress bar")
     p.add_argument("--torch-threads", type=int, default=1, help="torch intra-op threads")
     p.add_argument("--log-level", default="INFO", help="Python logging level")
     return p.parse_args(argv)
@@ -106,11 +122,51 @@ def make_env(args: argparse.Namespace, env_kwargs: dict[str, Any]) -> Any:
     return thunk
 
 
+class ProgressBar(BaseCallback):
+    """One tqdm bar over the environment steps (SB3's own bar needs the ``rich`` package)."""
+
+    def __init__(self, total_steps: int) -> None:
+        super().__init__()
+        self.total_steps = int(total_steps)
+        self.bar: tqdm | None = None
+
+    def _on_training_start(self) -> None:
+        start = min(self.num_timesteps, self.total_steps)
+        self.bar = tqdm(total=self.total_steps, initial=start, unit="step", dynamic_ncols=True, desc="PPO")
+
+    def _on_step(self) -> bool:
+        assert self.bar is not None
+        self.bar.update(min(self.num_timesteps, self.total_steps) - self.bar.n)
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def vecnormalize_path(checkpoint: Path) -> Path:
+    """The reward-normaliser file written with ``checkpoint`` (final or ``CheckpointCallback``)."""
+    name = checkpoint.name
+    if name.startswith("ppo_") and name.endswith("_steps.zip"):  # ppo_<n>_steps.zip
+        return checkpoint.with_name("ppo_vecnormalize_" + name[len("ppo_"):-len(".zip")] + ".pkl")
+    return checkpoint.with_name(checkpoint.stem + "_vecnormalize.pkl")
+
+
 def main(argv: list[str] | None = None) -> Path:
     args = parse_args(argv)
     logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="%(asctime)s %(name)s: %(message)s")
     torch.set_num_threads(args.torch_threads)
     out = Path(args.out)
+    if (out / "ppo_final.zip").exists() and not args.force:
+        raise SystemExit(f"--out {out} already holds a run ({out / 'ppo_final.zip'}); pass --force to overwrite it "
+                         "or choose another --out")
+    resume = Path(args.resume) if args.resume else None
+    if resume is not None and not resume.is_file():
+        raise SystemExit(f"--resume {resume}: no such checkpoint")
+    norm_path = vecnormalize_path(resume) if resume is not None else None
+    if norm_path is not None and args.normalize_reward and not norm_path.is_file():
+        raise SystemExit(f"--resume {resume}: the reward normaliser {norm_path} is missing "
+                         "(or pass --no-normalize-reward)")
     out.mkdir(parents=True, exist_ok=True)
     env_kwargs = json.loads(args.env_kwargs)
     if args.decision_interval is not None:
@@ -121,9 +177,35 @@ def main(argv: list[str] | None = None) -> Path:
     venv: VecEnv = SubprocVecEnv(fns) if args.n_envs > 1 else DummyVecEnv(fns)
     venv.seed(args.seed)
     if args.normalize_reward:
-        venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=args.discount)
+        if norm_path is not None:
+            venv = VecNormalize.load(str(norm_path), venv)
+        else:
+            venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=args.discount)
 
-    model = PPO(
+    if resume is not None:
+        model = PPO.load(resume, env=venv, device="cpu", tensorboard_log=str(out / "tb"))
+        logger.info("resumed from %s at %d steps", resume, model.num_timesteps)
+    else:
+        model = new_model(args, venv, out)
+    callbacks: list[BaseCallback] = [ProgressBar(args.total_steps)] if args.progress else []
+    if args.save_every:
+        callbacks.append(CheckpointCallback(max(args.save_every // args.n_envs, 1), str(out / "checkpoints"),
+                                            name_prefix="ppo", save_vecnormalize=args.normalize_reward))
+    remaining = max(0, args.total_steps - model.num_timesteps)
+    model.learn(remaining, callback=callbacks, tb_log_name="ppo", reset_num_timesteps=resume is None,
+                progress_bar=False)
+    final = out / "ppo_final.zip"
+    model.save(final)
+    if args.normalize_reward:
+        venv.save(str(vecnormalize_path(final)))
+    venv.close()
+    logger.info("saved %s after %d steps", final, model.num_timesteps)
+    return final
+
+
+def new_model(args: argparse.Namespace, venv: VecEnv, out: Path) -> PPO:
+    """A fresh SB3 PPO with the command line's hyper-parameters."""
+    return PPO(
         "MlpPolicy", venv,
         learning_rate=args.learning_rate, n_steps=args.n_steps, batch_size=args.batch_size,
         n_epochs=args.n_epochs, gamma=args.discount, gae_lambda=args.gae_lambda, clip_range=args.clip_range,
@@ -131,18 +213,6 @@ def main(argv: list[str] | None = None) -> Path:
         policy_kwargs={"net_arch": list(args.hidden_sizes), "activation_fn": torch.nn.Tanh},
         tensorboard_log=str(out / "tb"), seed=args.seed, device="cpu", verbose=0,
     )
-    callbacks = []
-    if args.save_every:
-        callbacks.append(CheckpointCallback(max(args.save_every // args.n_envs, 1), str(out / "checkpoints"),
-                                            name_prefix="ppo", save_vecnormalize=args.normalize_reward))
-    model.learn(args.total_steps, callback=callbacks, tb_log_name="ppo", progress_bar=False)
-    final = out / "ppo_final.zip"
-    model.save(final)
-    if args.normalize_reward:
-        venv.save(str(out / "ppo_final_vecnormalize.pkl"))
-    venv.close()
-    logger.info("saved %s after %d steps", final, model.num_timesteps)
-    return final
 
 
 if __name__ == "__main__":

@@ -17,7 +17,9 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
 * :mod:`~sofar_agents.evaluation.experiments`: Tables I and II end to end (``run_table1``,
   ``run_miqp_ablation``);
 * :mod:`~sofar_agents.evaluation.latency`: Table III (``measure_latency``);
-* :mod:`~sofar_agents.evaluation.figures`: Fig. 5 (``plot_gamma_figures``).
+* :mod:`~sofar_agents.evaluation.figures`: Fig. 5 (``plot_gamma_figures``);
+* :mod:`~sofar_agents.evaluation.training_curves`: learning curves from TensorBoard logs
+  (``read_scalars``, ``plot_training_curves``; ``eval/plot_training.py``).
 
 Every public name is re-exported here: ``from sofar_agents import evaluation as ev``
 then ``ev.run_table1(...)``.
@@ -35,6 +37,7 @@ from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FU
 from sofar_agents.evaluation.results import (EPISODE_COLUMNS, TRACE_COLUMNS, EpisodeResult, read_episode_csv,
                                              read_trace_csv, select_rows)
 from sofar_agents.evaluation.sweep import SweepStats, run_sweep
+from sofar_agents.evaluation.training_curves import find_event_dirs, plot_training_curves, read_scalars
 from sofar_agents.evaluation.tables import (PAPER_TABLE1_SUCCESS, Summary, aggregate, format_table1,
                                             format_table2, paper_comparison, rank_marks, summarize)
 
@@ -81,4 +84,7 @@ __all__ = [
     "write_json",
     "read_trace_csv",
     "plot_gamma_figures",
+    "find_event_dirs",
+    "read_scalars",
+    "plot_training_curves",
 ]

@@ -44,7 +44,7 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
     """Run one episode of ``task`` in ``env`` (already built for its track/MIQP setting).
 
     Returns the result and, when ``task.trace``, the per-step rows of :data:`TRACE_COLUMNS`.
-    The episode ends at a termination (collision, leaving the track), at the environment's
+    The episode ends at a termination (collision, leaving the track, stalling), at the environment's
     truncation, or once the simulated time reaches ``task.duration``.
     """
     options: dict[str, Any] = {"rho": float(task.rho)}
@@ -54,7 +54,7 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
     obs, info = env.reset(seed=int(task.seed), options=options)
     steps = slack = 0
     gamma_sum = 0.0
-    collision = off_track = terminated = truncated = False
+    collision = off_track = stalled = terminated = truncated = False
     trace: list[tuple] = []
     while True:
         action = np.asarray(policy(obs), dtype=np.float32).reshape(1)
@@ -65,6 +65,7 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
         slack += int(slack_active(info))
         collision |= bool(info.get("collision", False))
         off_track |= bool(info.get("off_track", False))
+        stalled |= bool(info.get("stalled", False))
         sim_time = _info_scalar(info, "sim_time", math.nan)
         if task.trace:
             trace.append((task.track, task.strategy.name, _fmt_float(task.rho), task.seed, steps, sim_time, gamma,
@@ -75,7 +76,7 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
     if "is_success" in info and (terminated or truncated):
         success = bool(info["is_success"])
     else:  # stopped at our own horizon
-        success = not (terminated or collision or off_track)
+        success = not (terminated or collision or off_track or stalled)
     if success and sim_time < task.duration - 1e-6:
         warnings.warn(f"the environment ended the episode at {sim_time:.1f} s, before the {task.duration:g} s "
                       "horizon", stacklevel=2)
@@ -87,7 +88,7 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
         miqp_failures=int(_info_scalar(info, "miqp_failures")), wall_time=time.perf_counter() - t0,
         episode=int(task.episode), use_miqp=bool(task.use_miqp), duration=float(task.duration),
         policy_id=task.strategy.policy_id, stack=task.stack, scenario=task.scenario,
-        n_opponents="" if task.n_opponents is None else int(task.n_opponents),
+        n_opponents="" if task.n_opponents is None else int(task.n_opponents), stalled=stalled,
     )
     return result, trace
 

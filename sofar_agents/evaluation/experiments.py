@@ -37,7 +37,8 @@ def _stats_text(stats: SweepStats) -> str:
         return f"{stats.skipped} episodes taken from the CSV, none run."
     rate = stats.steps_per_second_per_worker
     return (f"{stats.completed} episodes run ({stats.skipped} taken from the CSV, {stats.failed} failed) "
-            f"with {stats.workers} workers in {stats.elapsed:.0f} s: {stats.steps} control steps, "
+            f"with {stats.workers} worker{'' if stats.workers == 1 else 's'} in {stats.elapsed:.0f} s: "
+            f"{stats.steps} control steps, "
             f"{rate:.0f} steps/s per worker.")
 
 

@@ -25,21 +25,12 @@ from collections.abc import Callable, Sequence
 
 from sofar_agents.evaluation.protocol import EpisodeTask
 from sofar_agents.evaluation.sweep import _EpisodeRunner
+from sofar_agents.ray_support import INSTALL_HINT, init_ray, require_ray  # noqa: F401  (re-exported)
 
 logger = logging.getLogger(__name__)
 
-INSTALL_HINT = 'the Ray backend needs Ray: pip install "sofar[ray]" (or, from a clone, pip install -e ".[ray]")'
 MAX_TASK_RETRIES = 3
 """Times an episode is retried after its actor's process died."""
-
-
-def require_ray():
-    """The ``ray`` module, or an ImportError saying how to install it."""
-    try:
-        import ray
-    except ImportError as exc:
-        raise ImportError(INSTALL_HINT) from exc
-    return ray
 
 
 class _RunnerActor:
@@ -66,14 +57,7 @@ def run_ray(pending: Sequence[EpisodeTask], handle: Callable, *, workers: int | 
     (see the module docstring) and shuts it down at the end. Returns the number of actors.
     """
     ray = require_ray()
-    started = False
-    if not ray.is_initialized():
-        if address is None:
-            ray.init(num_cpus=int(workers or os.cpu_count() or 1), include_dashboard=False,
-                     logging_level=logging.WARNING)
-        else:
-            ray.init(address=address, logging_level=logging.WARNING)
-        started = True
+    started = init_ray(address, int(workers or os.cpu_count() or 1))
     actors: list = []
     try:
         n_cpus = int(ray.cluster_resources().get("CPU", 1))

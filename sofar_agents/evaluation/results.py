@@ -2,8 +2,16 @@
 
 A sweep appends one row of :data:`EPISODE_COLUMNS` per finished episode (and, when
 traced, rows of :data:`TRACE_COLUMNS` per control step). Files of an older format
-(without the ``stack`` and ``n_opponents`` columns) are migrated in place on the next
-append; their rows stand for the ``sofar`` controller and the default opponent count.
+(without the ``stack``, ``n_opponents``, ``scenario`` or ``stalled`` columns) are read as
+they are and migrated in place on the next append; their rows stand for the ``sofar``
+controller, the default opponent count and the paper's world.
+
+``stalled`` of an older row is *unknown* (an empty field, read as None), not 0: those
+episodes ran without the stall rule, so none was ended by it, but whether the ego stood
+still for ``stall_seconds`` was not recorded (an episode that did is in the file as a
+success reaching the duration). Only a rerun tells; the tables show such groups as
+unknown. Their ``success`` is that of the rules they ran under (collision, leaving the
+track).
 A row counts only once its line is complete: the writer ends every row with a newline
 (flushed together with it), so a last line without one was torn by a run killed
 mid-write (a duration ``60`` cut to ``6``, a policy id cut short) and is ignored by
@@ -33,7 +41,7 @@ logger = logging.getLogger(__name__)
 EPISODE_COLUMNS: tuple[str, ...] = (
     "track", "strategy", "rho", "seed", "success", "sim_time", "laps", "overtakes", "collision", "off_track",
     "slack_steps", "steps", "mean_gamma", "mpc_failures", "miqp_failures", "wall_time",
-    "episode", "use_miqp", "duration", "policy_id", "stack", "n_opponents", "scenario",
+    "episode", "use_miqp", "duration", "policy_id", "stack", "n_opponents", "scenario", "stalled",
 )
 """Columns of the per-episode CSV (one row per episode)."""
 TRACE_COLUMNS: tuple[str, ...] = (
@@ -70,6 +78,8 @@ class EpisodeResult:
     scenario: str = "paper"
     n_opponents: int | str = ""
     """Opponent count of the episode ("" for the environment's default)."""
+    stalled: bool | None = False
+    """The stall rule ended the episode (the ego stood still too long); None: unknown (older rows)."""
 
     def to_row(self) -> dict[str, Any]:
         row = asdict(self)
@@ -85,12 +95,16 @@ def _as_bool(x: Any) -> bool:
 _INT_COLUMNS = {"seed", "overtakes", "slack_steps", "steps", "mpc_failures", "miqp_failures", "episode"}
 _BOOL_COLUMNS = {"success", "collision", "off_track", "use_miqp"}
 _FLOAT_COLUMNS = {"rho", "sim_time", "laps", "mean_gamma", "wall_time", "duration"}
+_UNKNOWN_BOOL_COLUMNS = {"stalled"}
+"""Boolean columns whose empty value means unknown (None)."""
 
 
 def _parse_row(row: Mapping[str, Any]) -> dict[str, Any]:
     out = dict(row)
     for k, v in row.items():
-        if k in _BOOL_COLUMNS:
+        if k in _UNKNOWN_BOOL_COLUMNS:
+            out[k] = None if v is None or (isinstance(v, str) and not v.strip()) else _as_bool(v)
+        elif k in _BOOL_COLUMNS:
             out[k] = _as_bool(v)
         elif k in _INT_COLUMNS:
             out[k] = int(float(v))
@@ -145,9 +159,10 @@ def read_episode_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
     return rows
 
 
-_ADDED_COLUMNS = {"stack": "sofar", "n_opponents": "", "scenario": "paper"}
-"""Columns added after the first format, with the value that rows of older files stand for."""
-_MAY_BE_EMPTY = {"policy_id", "n_opponents"}
+_ADDED_COLUMNS = {"stack": "sofar", "n_opponents": "", "scenario": "paper", "stalled": ""}
+"""Columns added after the first format, with the value that rows of older files stand for ("" of
+``stalled``: unknown, see the module docstring)."""
+_MAY_BE_EMPTY = {"policy_id", "n_opponents", "stalled"}
 
 
 def _is_older_header(header: Sequence[str], columns: Sequence[str]) -> bool:

@@ -2,7 +2,8 @@
 
 Per (track, strategy) the tables report the success rate [%], the cumulative
 simulated time [s], the laps and overtakes summed over the episodes, plus
-collisions, track-limit violations, barrier-slack activity (% of control steps
+collisions, track-limit violations, stalled episodes (the stall rule ended them; "–"
+when a row of the group predates the rule, see :mod:`~sofar_agents.evaluation.results`), barrier-slack activity (% of control steps
 in which the MPC used DCBF slack), the step-weighted mean gamma and the
 controller failure counts. The best value of a ranked column is **bold**, the
 second best <u>underlined</u>, compared as displayed.
@@ -41,6 +42,8 @@ class Summary:
     overtakes: int
     collisions: int
     off_tracks: int
+    stalled: float
+    """Episodes the stall rule ended; NaN when any row of the group does not record it (older files)."""
     slack_pct: float
     """Percentage of control steps with DCBF slack [%]."""
     mean_gamma: float
@@ -65,6 +68,7 @@ def summarize(rows: Iterable[Mapping[str, Any]]) -> Summary:
         overtakes=int(sum(r["overtakes"] for r in rows)),
         collisions=int(sum(bool(r["collision"]) for r in rows)),
         off_tracks=int(sum(bool(r["off_track"]) for r in rows)),
+        stalled=_stalled_count(rows),
         slack_pct=100.0 * sum(r["slack_steps"] for r in rows) / steps if steps else math.nan,
         mean_gamma=sum(r["mean_gamma"] * r["steps"] for r in rows) / steps if steps else math.nan,
         mpc_failures=int(sum(r["mpc_failures"] for r in rows)),
@@ -72,6 +76,14 @@ def summarize(rows: Iterable[Mapping[str, Any]]) -> Summary:
         steps=int(steps),
         wall_time=float(sum(r["wall_time"] for r in rows)),
     )
+
+
+def _stalled_count(rows: Sequence[Mapping[str, Any]]) -> float:
+    """Number of stalled episodes; NaN if any row's ``stalled`` is unknown (None or missing)."""
+    flags = [r.get("stalled") for r in rows]
+    if any(f is None for f in flags):
+        return math.nan
+    return float(sum(bool(f) for f in flags))
 
 
 def aggregate(rows: Iterable[Mapping[str, Any]], by: Sequence[str] = ("track", "strategy")) -> dict[tuple, Summary]:
@@ -114,6 +126,7 @@ _TABLE1_COLUMNS = (
     _Column("Overtakes ↑", "overtakes", 0, True),
     _Column("Collisions", "collisions", 0),
     _Column("Off-track", "off_tracks", 0),
+    _Column("Stalled", "stalled", 0),
     _Column("Slack [% steps]", "slack_pct", 1),
     _Column("Mean γ", "mean_gamma", 2),
     _Column("MPC fail.", "mpc_failures", 0),
@@ -126,6 +139,7 @@ _TABLE2_COLUMNS = (
     _Column("Overt. ↑", "overtakes", 0, True),
     _Column("Collisions", "collisions", 0),
     _Column("Off-track", "off_tracks", 0),
+    _Column("Stalled", "stalled", 0),
     _Column("Slack [% steps]", "slack_pct", 1),
     _Column("Episodes", "episodes", 0),
 )

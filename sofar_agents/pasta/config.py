@@ -84,8 +84,10 @@ class PASTAConfig:
     """Conflict threshold: above this gradient-conflict ratio the target mu is pushed
     back towards ``mu_max`` in proportion to ``(conflict - kappa) / (1 - kappa)``."""
     mu_decay_steps: int = 1_000_000
-    """Environment steps over which the target mu decays linearly from ``mu_max``
-    to ``mu_min`` (the reference's ``total_train_steps``)."""
+    """Length of the linear decay of the target mu, in environment steps counted over
+    all envs (as ``num_timesteps``): the target falls from ``mu_max`` to ``mu_min`` over
+    this many steps and stays at ``mu_min`` afterwards (the reference's
+    ``total_train_steps``). ``train/pasta.py`` sets it to ``--total-steps`` unless given."""
     mu_decay: bool = True
     """Enable the linear decay of the target mu."""
     conflict_boost: bool = True

@@ -5,10 +5,17 @@ that the final observation of an episode is in ``info["final_obs"]`` (needed to
 bootstrap truncated episodes). Reward vectors are taken from the environment reward
 when it has shape ``(n_envs, K)``, otherwise from ``info["reward_vector"]`` (see
 :class:`sofar_agents.wrappers.LinearReward`).
+
+A "vector env" that collects its rollouts itself (it has a ``collect_rollout(agent,
+t_steps)`` method, e.g. :class:`sofar_agents.pasta.ray_rollout.RayEnvPool`, whose envs
+live in Ray actors) is handed the whole rollout instead of being stepped here.
+:func:`make_training_env` builds the training env of ``train/pasta.py`` (picklable, so
+that remote workers can build it).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -21,7 +28,7 @@ from sofar_agents.pasta.networks import network_inputs
 if TYPE_CHECKING:
     from sofar_agents.pasta.agent import PASTA
 
-__all__ = ["RolloutCollector", "reward_vectors", "EPISODE_INFO_KEYS"]
+__all__ = ["RolloutCollector", "reward_vectors", "make_training_env", "EPISODE_INFO_KEYS"]
 
 EPISODE_INFO_KEYS = ("is_success", "overtakes", "laps", "collision", "off_track")
 """Final-info entries copied into the episode records of a rollout when present."""
@@ -34,6 +41,28 @@ def _info_item(infos: dict[str, Any], key: str, i: int) -> Any:
     if mask is not None and not bool(mask[i]):
         return None
     return infos[key][i]
+
+
+def make_training_env(env_id: str, env_kwargs: dict[str, Any], rho_min: float, rho_max: float,
+                      rho_values: Sequence[float] | None = None) -> Any:
+    """One PASTA training env: ``env_id`` in vector-reward mode, rho drawn per episode, reward vector in info.
+
+    ``gymnasium.make(env_id, reward_mode="vector", **env_kwargs)`` wrapped in
+    :class:`~sofar_agents.wrappers.RandomRhoReset` (rho uniform in ``[rho_min, rho_max]``
+    or from ``rho_values``) and :class:`~sofar_agents.wrappers.LinearReward`. An id
+    without ``module:`` that is not registered yet is registered by importing ``sofar_env``.
+    A module-level function, so ``functools.partial(make_training_env, ...)`` is a
+    picklable env factory.
+    """
+    import gymnasium as gym
+
+    from sofar_agents.wrappers import LinearReward, RandomRhoReset
+
+    if ":" not in env_id and env_id not in gym.registry:
+        import sofar_env  # noqa: F401  (registers the SOfAR ids)
+    env = gym.make(env_id, reward_mode="vector", **env_kwargs)
+    env = RandomRhoReset(env, rho_min, rho_max, rho_values)
+    return LinearReward(env)
 
 
 def reward_vectors(rewards: Any, infos: dict[str, Any], done: np.ndarray, n_objectives: int) -> np.ndarray:
@@ -112,6 +141,9 @@ class RolloutCollector:
         ``next_values`` of the buffer hold V of each transition's true successor:
         zero after termination, ``V(final_obs)`` after truncation.
         """
+        remote = getattr(vec_env, "collect_rollout", None)
+        if remote is not None:  # the envs live elsewhere (e.g. Ray actors) and collect the rollout themselves
+            return remote(agent, t_steps)
         cfg = agent.config
         if self.env is not vec_env or self.last_obs is None:
             self.reset(agent, vec_env)

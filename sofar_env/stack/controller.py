@@ -83,7 +83,9 @@ class OvertakingStack:
         self._step = 0
         self._last_pred: np.ndarray | None = None  # previous MPC prediction (for the heading error)
         self.counters = {"steps": 0, "mpc_failures": 0, "miqp_failures": 0, "miqp_solves": 0,
-                         "follow_steps": 0}
+                         "follow_steps": 0, "parked_checks": 0, "parked_passes": 0}
+        """Episode counters: control steps, MPC / MIQP failures, MIQP solves, steps in follow mode,
+        MIQP calls that tried / took a pass of near-stationary opponents (:mod:`~sofar_env.stack.follow`)."""
 
     @property
     def following(self) -> bool:
@@ -104,6 +106,8 @@ class OvertakingStack:
         self.counters["miqp_solves"] += 1
         if not plan.success:
             self.counters["miqp_failures"] += 1
+        self.counters["parked_checks"] = self.pass_or_follow.checks
+        self.counters["parked_passes"] = self.pass_or_follow.passes
         self._plan = plan
         self._plan_s = ego_s
         return elapsed

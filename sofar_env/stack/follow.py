@@ -22,6 +22,16 @@ braking at ``follow_decel`` allows) and caps the MPC speed reference at
   between only the follow plan is re-solved), with hysteresis: a pass is resumed only
   once its clearance violation has fallen to ``follow_release_slack``.
 
+* A near-stationary opponent (slower than ``parked_speed``: parked, crashed, crawling) is not
+  followed while there is room beside it: when every opponent the passing plan has to clear
+  is near-stationary, the pass is re-planned with the barrier's lateral clearance
+  ``parked_clearance`` over the cars' overlap ``parked_window`` instead of ``safe_lat`` over
+  ``safe_lon``, and the pass-or-follow decision is made on that plan: a car is followed only
+  if the plan keeps less than the barrier's lateral semi-axis b from it (violates
+  ``parked_clearance`` by more than ``parked_clearance - b``). Following such a car would
+  stop the ego behind it for good; a car that moves does not need this (its pace is at
+  least 0.1 x the speed profile in Table I). Counted in ``checks`` and ``passes``.
+
 With ``follow=False`` (the paper's algorithm) every call plans a pass of every opponent.
 """
 
@@ -50,6 +60,8 @@ class FollowTarget:
     """Arc length of the ego when the plan was made [m]."""
     step: int
     """Control step at which the plan was made."""
+    parked: bool = False
+    """Whether the plan was made with the parked clearance (every opponent it clears near-stationary)."""
 
 
 class PassOrFollow:
@@ -66,12 +78,21 @@ class PassOrFollow:
         self.predict = predict
         self.edges = edges
         self._node_t = np.arange(config.miqp.nodes) * config.miqp.node_dt
+        self._parked_planner = (PassingSidePlanner(dataclasses.replace(
+            config.miqp, safe_lat=config.parked_clearance, safe_lon=config.parked_window))
+                                if config.follow and config.parked_pass else None)
         self.reset()
 
     def reset(self) -> None:
         """Forget the followed opponents."""
         self.target: FollowTarget | None = None
         self._calls = 0  # MIQP calls since the pass was last examined while following
+        self.checks = 0
+        """MIQP calls that decided with the parked clearance (every opponent to clear near-stationary)."""
+        self.passes = 0
+        """Of those, the calls whose plan is a pass (not a follow plan)."""
+        if self._parked_planner is not None:
+            self._parked_planner.reset()
 
     def plan(self, ego_s: float, ego_n: float, ego_v: float, s_nodes: np.ndarray, opp_rel: np.ndarray,
              opp_s: np.ndarray, progress: float, step: int) -> PlanResult:
@@ -91,11 +112,17 @@ class PassOrFollow:
             # between two examinations of the pass: re-solve only the follow plan, same followed cars
             blocked = self._followed_rows(ego_s, opp_rel, was_following, step)
             if blocked is not None and self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s)[blocked].all():
-                follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked, progress)
-                if follow is not None and follow.max_slack <= cfg.follow_slack:
+                planner = self._parked_planner if was_following.parked else self.planner
+                follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked, progress,
+                                           planner)
+                limit = self._parked_tolerance if was_following.parked else cfg.follow_slack
+                if (follow is not None and follow.max_slack <= limit
+                        and (not was_following.parked or self._all_parked(opp_rel, (follow.sides != 0) | blocked))):
                     plan = follow
-                    self.target = FollowTarget(opp_rel[blocked].copy(), ego_s, step)
+                    self.target = FollowTarget(opp_rel[blocked].copy(), ego_s, step, was_following.parked)
                     self._calls += 1
+                    if was_following.parked:
+                        self.planner.restore_memory(planner.memory())
                 else:
                     self.planner.restore_memory(memory)
         if plan is None:
@@ -109,17 +136,46 @@ class PassOrFollow:
                 threshold = cfg.follow_release_slack if was_following is not None else cfg.follow_slack
                 blocked = ((plan.opponent_slack > threshold) & (opp_rel[:, 0] > 0.0)
                            & self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s))
-                if blocked.any():
+                planner = self.planner
+                constrained = plan.sides != 0
+                if self._parked_planner is not None and constrained.any() and self._all_parked(opp_rel, constrained):
+                    # every opponent the plan must clear is near-stationary: decide with the parked clearance
+                    self.checks += 1
                     passing_memory = self.planner.memory()
-                    self.planner.restore_memory(memory)
-                    follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked,
-                                               progress)
-                    if follow is not None and follow.max_slack < plan.max_slack:
-                        plan = follow
-                        self.target = FollowTarget(opp_rel[blocked].copy(), ego_s, step)
+                    self._parked_planner.restore_memory(memory)
+                    parked = self._parked_planner.plan(s_nodes, n_ref, n_min, n_max, ego_n, opp_rel,
+                                                       progress=progress, opponent_s=opp_s)
+                    if parked.success and parked.opponent_slack is not None:
+                        plan, planner = parked, self._parked_planner
+                        blocked = ((parked.opponent_slack > self._parked_tolerance) & (opp_rel[:, 0] > 0.0)
+                                   & self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s))
                     else:
                         self.planner.restore_memory(passing_memory)
+                if blocked.any():
+                    passing_memory = planner.memory()
+                    planner.restore_memory(memory)
+                    follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked,
+                                               progress, planner)
+                    if follow is not None and follow.max_slack < plan.max_slack:
+                        plan = follow
+                        self.target = FollowTarget(opp_rel[blocked].copy(), ego_s, step,
+                                                   planner is not self.planner)
+                    else:
+                        planner.restore_memory(passing_memory)
+                if planner is not self.planner:
+                    self.planner.restore_memory(planner.memory())  # the plan in force, for the next call
+                    self.passes += int(self.target is None)
         return plan
+
+    @property
+    def _parked_tolerance(self) -> float:
+        """Clearance violation [m] accepted in a plan with the parked clearance: it still keeps the
+        barrier's lateral semi-axis b from the near-stationary opponents it passes."""
+        return self.config.parked_clearance - self.config.mpc.barrier.b
+
+    def _all_parked(self, opp_rel: np.ndarray, rows: np.ndarray) -> bool:
+        """Whether every opponent of ``rows`` (a mask of ``opp_rel``) is slower than ``parked_speed``."""
+        return bool((opp_rel[np.asarray(rows, bool), 2] < self.config.parked_speed).all())
 
     def can_stay_behind(self, ego_v: float, gap: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
         """Whether the ego, braking at ``follow_reach_decel``, can stay (or get) behind each opponent.
@@ -154,7 +210,7 @@ class PassOrFollow:
 
     def _follow_plan(self, ego_s: float, ego_n: float, ego_v: float, s_nodes: np.ndarray, n_ref: np.ndarray,
                      opp_rel: np.ndarray, opp_s: np.ndarray, blocked: np.ndarray,
-                     progress: float) -> PlanResult | None:
+                     progress: float, planner: PassingSidePlanner) -> PlanResult | None:
         """The plan that follows the ``blocked`` opponents (None if it fails), sides per input row.
 
         Followed opponents are kept behind longitudinally (speed cap, barrier), not passed: the
@@ -169,8 +225,8 @@ class PassOrFollow:
         s_follow = np.maximum.accumulate(np.maximum(s_brake, np.minimum(s_nodes, cap)))
         n_min_f, n_max_f = self.edges(ego_s + s_follow)
         planned = ~blocked | (opp_rel[:, 0] < cfg.mpc.barrier.a0)
-        plan = self.planner.plan(s_follow, n_ref, n_min_f, n_max_f, ego_n, opp_rel[planned],
-                                 progress=progress, opponent_s=opp_s[planned])
+        plan = planner.plan(s_follow, n_ref, n_min_f, n_max_f, ego_n, opp_rel[planned],
+                            progress=progress, opponent_s=opp_s[planned])
         if not plan.success:
             return None
         sides = np.zeros(len(opp_rel), dtype=int)

@@ -8,6 +8,7 @@ the choice.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import subprocess
@@ -42,13 +43,21 @@ def _env_id() -> str:
     return REAL_ENV_ID if REAL_ENV_ID in gym.registry else "synthetic_envs:SOfARTest/SyntheticRace-v0"
 
 
-def _run(script: str, *args: str) -> subprocess.CompletedProcess[str]:
+def _run(script: str, *args: str, returncode: int = 0) -> subprocess.CompletedProcess[str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(HERE), env.get("PYTHONPATH")) if p)
     proc = subprocess.run([sys.executable, f"train/{script}", *args], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=600)
-    assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
+    assert proc.returncode == returncode, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
     return proc
+
+
+def _pasta_script():
+    spec = importlib.util.spec_from_file_location("train_pasta_smoke", ROOT / "train" / "pasta.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses resolve their annotations through sys.modules
+    spec.loader.exec_module(module)
+    return module
 
 
 def test_pasta_script_trains_logs_checkpoints_and_resumes(tmp_path: Path) -> None:
@@ -56,7 +65,13 @@ def test_pasta_script_trains_logs_checkpoints_and_resumes(tmp_path: Path) -> Non
     out = tmp_path / "run"
     common = ["--env-id", env_id, "--n-steps", "128", "--n-envs", "1", "--seed", "3", "--out", str(out),
               "--no-progress", "--n-epochs", "2"]
-    _run("pasta.py", "--total-steps", "256", "--save-every", "1", *common)
+    if env_id == REAL_ENV_ID:
+        common += ["--env-kwargs", '{"race": {"duration": 5.0}}']  # 50-step episodes: some finish
+    first = _run("pasta.py", "--total-steps", "256", "--save-every", "1", *common)
+    # one console line per update, returns labelled with the objective names
+    assert "update 2  steps 256/256  episodes +" in first.stderr
+    if env_id == REAL_ENV_ID:
+        assert "mean returns of the last" in first.stderr and "overtakes " in first.stderr
 
     events = list((out / "tb").glob("events.out.tfevents.*"))
     assert events and all(e.stat().st_size > 0 for e in events)
@@ -74,19 +89,63 @@ def test_pasta_script_trains_logs_checkpoints_and_resumes(tmp_path: Path) -> Non
     gamma = policy(np.zeros(12, np.float32))
     assert gamma.shape == (1,) and 0.05 <= gamma[0] <= 1.0
 
-    _run("pasta.py", "--total-steps", "384", "--resume", str(final), "--save-every", "0", *common)
+    before = final.read_bytes()
+    refused = _run("pasta.py", "--total-steps", "384", "--resume", str(final), *common, returncode=1)
+    assert "already holds a run" in refused.stderr and "--force" in refused.stderr
+    assert final.read_bytes() == before  # nothing overwritten
+
+    _run("pasta.py", "--total-steps", "384", "--resume", str(final), "--save-every", "0", "--force", *common)
     resumed = PASTA.load(final)
     assert resumed.num_timesteps == 384 and resumed.num_updates == 3
     assert json.loads(final.read_text())["training"]["resumed_from"] == str(final)
 
 
-def test_ppo_script_trains_and_saves(tmp_path: Path) -> None:
+def test_quick_preset_and_mu_decay_help() -> None:
+    script = _pasta_script()
+    args, overrides = script.parse_args(["--quick"])
+    assert (args.total_steps, args.out, args.save_every) == (16384, "runs/pasta_quick", 8)
+    assert overrides == {"n_steps": 512, "n_epochs": 4}
+    assert script.env_kwargs_of(args)["race"] == {"duration": script.QUICK_EPISODE_S}
+    args, overrides = script.parse_args(["--quick", "--total-steps", "1000", "--n-steps", "100",
+                                         "--env-kwargs", '{"race": {"duration": 12.0}}'])
+    assert args.total_steps == 1000 and overrides["n_steps"] == 100  # explicit options win
+    assert script.env_kwargs_of(args)["race"] == {"duration": 12.0}
+    args, overrides = script.parse_args([])
+    assert not args.quick and overrides == {} and args.n_envs == 1 and "race" not in script.env_kwargs_of(args)
+
+    help_text = subprocess.run([sys.executable, "train/pasta.py", "--help"], cwd=ROOT, capture_output=True,
+                               text=True, timeout=120, check=True, env={**os.environ, "COLUMNS": "2000"}).stdout
+    entries = ["--" + " ".join(e.split()) for e in help_text.split("\n  --")[1:]]  # one per option, unwrapped
+    lines = {e.split()[0].rstrip(","): e for e in entries}
+    mu_help = lines["--mu-decay-steps"]
+    assert "(default: --total-steps of a new run" in mu_help and "environment steps" in mu_help
+    assert "1000000" not in mu_help
+    assert "16384 steps" in lines["--quick"] and "already holds a run" in lines["--force"]
+
+
+def test_ppo_script_trains_saves_and_resumes(tmp_path: Path) -> None:
+    from stable_baselines3 import PPO
+
     from sofar_agents.policies import SB3Policy
 
     out = tmp_path / "ppo"
-    _run("ppo.py", "--env-id", _env_id(), "--total-steps", "128", "--n-steps", "64", "--batch-size", "32",
-         "--n-epochs", "1", "--out", str(out), "--save-every", "0")
+    common = ["--env-id", _env_id(), "--n-steps", "64", "--batch-size", "32", "--n-epochs", "1", "--out", str(out)]
+    first = _run("ppo.py", "--total-steps", "128", "--save-every", "0", *common)
+    assert "PPO: 100%" in first.stderr and "128/128" in first.stderr  # the progress bar
     assert list((out / "tb").rglob("events.out.tfevents.*"))
-    policy = SB3Policy(out / "ppo_final.zip")
+    final = out / "ppo_final.zip"
+    policy = SB3Policy(final)
     gamma = policy(np.zeros(12, np.float32))
     assert gamma.shape == (1,) and 0.05 <= gamma[0] <= 1.0
+    first_params = PPO.load(final, device="cpu").policy.state_dict()
+
+    refused = _run("ppo.py", "--total-steps", "256", "--resume", str(final), *common, returncode=1)
+    assert "already holds a run" in refused.stderr
+    _run("ppo.py", "--total-steps", "256", "--resume", str(final), "--force", "--no-progress", "--save-every", "64",
+         *common)
+    resumed = PPO.load(final, device="cpu")
+    assert resumed.num_timesteps == 256
+    assert sorted(p.name for p in (out / "checkpoints").glob("*.zip")) == ["ppo_192_steps.zip", "ppo_256_steps.zip"]
+    assert any(not np.array_equal(first_params[k].numpy(), v.numpy())
+               for k, v in resumed.policy.state_dict().items())  # it trained on
+    assert (out / "ppo_final_vecnormalize.pkl").is_file()

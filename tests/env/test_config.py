@@ -70,3 +70,15 @@ def test_env_and_make_reject_unknown_keys():
         SOfARRaceEnv(bogus=1)
     with pytest.raises(ValueError, match="race.bogus"):
         gym.make("SOfAR-LagunaSeca-v0", config={"race": {"bogus": 1}})
+
+
+def test_unknown_top_level_key_lists_the_fields_and_the_shortcuts():
+    with pytest.raises(ConfigError) as exc:
+        make_env_config({"rho": 0.4, "n_opponent": 2})
+    text = str(exc.value)
+    assert "unknown configuration key 'n_opponent'" in text
+    for key in ("decision_interval", "race", "stack", "track", "reward_mode"):
+        assert key in text.split("shortcuts:")[0]
+    for shortcut in ("n_opponents (= race.opponents.n_opponents)", "rho (= race.opponents.rho)", "offsets",
+                     "speed_factor (= stack.speed_factor)", "use_miqp"):
+        assert shortcut in text.split("shortcuts:")[1]

@@ -30,3 +30,11 @@ def test_demo_smoke(tmp_path, capsys):
     for word in ("overtakes", "closest approach", "smallest barrier", "slack", "collisions", "off-tracks", "laps",
                  "MPC", "MIQP"):
         assert word in printed
+
+
+def test_demo_shows_a_progress_bar_unless_told_not_to(capsys):
+    main(["--seconds", "1", "--no-video"])
+    err = capsys.readouterr().err
+    assert "racing" in err and "/10" in err  # 10 control steps
+    main(["--seconds", "1", "--no-video", "--no-progress"])
+    assert "racing" not in capsys.readouterr().err

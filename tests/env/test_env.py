@@ -25,7 +25,7 @@ def test_every_id_is_registered_with_a_string_entry_point_and_2000_steps():
     for env_id in ENV_IDS:
         spec = gym.spec(env_id)
         assert spec.max_episode_steps == 2000
-        assert spec.entry_point == "sofar_env.env:SOfARRaceEnv"
+        assert spec.entry_point == "sofar_env.factory:make_env"
         assert pickle.loads(pickle.dumps(spec)) == spec
 
 

@@ -76,3 +76,63 @@ def test_human_mode_draws_into_a_matplotlib_figure():
     assert image.shape[2] == 3 and image.dtype == np.uint8
     env.close()
     assert env.unwrapped._renderer is None
+
+
+def test_frames_carry_a_legend_of_every_mark():
+    from sofar_env.env import SOfARRaceEnv
+    from sofar_env.render import LEGEND, Renderer
+
+    env = SOfARRaceEnv(render_mode="rgb_array", race={"duration": 2.0})
+    env.reset(seed=0)
+    for _ in range(5):
+        env.step(np.array([0.5], np.float32))
+    frame = env.render()
+    left, top, right, bottom = env._renderer.legend_box
+    assert 0 <= left < right <= frame.shape[1] and 0 <= top < bottom <= frame.shape[0]
+    panel = frame[top:bottom, left:right].reshape(-1, 3)
+    drawn = {tuple(c) for c in np.unique(panel, axis=0).tolist()}
+    for label, _, colour in LEGEND:
+        assert tuple(colour) in drawn, label  # every mark is in the legend panel, in the colour the frame uses
+
+    def draw(legend: bool) -> np.ndarray:
+        r = Renderer(env.track, env.config.race.vehicle, env.config.stack.mpc.barrier, legend=legend)
+        return r.draw(env.race, env.last_output, gamma=0.5)
+
+    with_legend, without = draw(True), draw(False)
+    np.testing.assert_array_equal(with_legend, frame)  # the env's frame is this renderer's
+    inside = np.zeros(frame.shape[:2], bool)
+    inside[top:bottom, left:right] = True
+    np.testing.assert_array_equal(with_legend[~inside], without[~inside])  # the legend covers only its box
+    assert not np.array_equal(with_legend[inside], without[inside])
+    assert Renderer(env.track, legend=False).legend_box is None
+    env.close()
+
+
+def test_animation_progress_bar(tmp_path, capsys):
+    frames = [np.full((48, 64, 3), k, np.uint8) for k in (0, 80, 160)]
+    write_animation(frames, tmp_path / "quiet.gif")
+    assert "writing" not in capsys.readouterr().err
+    write_animation(frames, tmp_path / "bar.gif", progress=True)
+    assert "writing bar.gif" in capsys.readouterr().err
+
+
+def test_gif_delta_frames_decode_to_the_frames(tmp_path):
+    """Unchanged pixels are written as transparent: every decoded frame is still the frame given."""
+    from PIL import Image
+
+    frames = []
+    for k in range(6):
+        f = np.zeros((40, 60, 3), np.uint8)
+        f[:, :, 1] = 90  # background
+        f[5:15, 4 * k:4 * k + 10] = (230, 40, 40)  # a moving block
+        f[25:35, 40:50] = (40, 110, 230) if k % 2 else (250, 250, 250)  # a block that changes colour
+        frames.append(f)
+    frames.append(frames[-1].copy())  # an unchanged frame
+    path = write_animation(frames, tmp_path / "delta.gif")
+    with Image.open(path) as gif:
+        decoded = []
+        for k in range(gif.n_frames):
+            gif.seek(k)
+            decoded.append(np.asarray(gif.convert("RGB")))
+    for k, f in enumerate(frames[: len(decoded)]):
+        np.testing.assert_array_equal(decoded[k], f, err_msg=f"frame {k}")

@@ -41,7 +41,7 @@ def test_quick_table_completes_with_every_row(quick_run):
         assert float(r["sim_time"]) > 0 and int(r["steps"]) > 0 and r["success"] in ("0", "1")
         assert 0.05 <= float(r["mean_gamma"]) <= 1.0
         if r["success"] == "1":
-            assert float(r["sim_time"]) == pytest.approx(10.0, abs=0.051)
+            assert float(r["sim_time"]) == pytest.approx(30.0, abs=0.051)  # the --quick horizon
     # every rho/seed pair is shared by both strategies
     assert len({(r["track"], r["seed"]) for r in rows}) == 2
     md = (out / "table1.md").read_text()

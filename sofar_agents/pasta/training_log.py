@@ -1,0 +1,115 @@
+"""Console, TensorBoard and run-directory helpers of the PASTA training script.
+
+Kept out of ``train/pasta.py`` so the script stays a thin command line: the
+per-update TensorBoard scalars (losses, attention, regret and returns per objective,
+by name), the one console line per update, the objective names and count of a vector
+env, the refusal to overwrite a finished run, and the git commit of the source tree.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sofar_agents.pasta.agent import PASTA
+
+
+def objective_names(vec_env: gym.vector.VectorEnv) -> tuple[str, ...] | None:
+    """The objective names the env declares (``objective_names``), or None."""
+    try:
+        names = vec_env.get_attr("objective_names")[0]
+        return tuple(str(n) for n in names)
+    except (AttributeError, IndexError, TypeError):
+        return None
+
+
+def n_objectives(vec_env: gym.vector.VectorEnv) -> int:
+    """The number of objectives, from the env's ``reward_space``."""
+    try:
+        space = vec_env.get_attr("reward_space")[0]
+        return int(np.prod(space.shape))
+    except (AttributeError, IndexError, TypeError) as err:
+        raise SystemExit("the environment must declare env.unwrapped.reward_space") from err
+
+
+def log_update(writer: Any, agent: PASTA, stats: dict[str, Any]) -> None:
+    """Write one update's statistics to a TensorBoard ``SummaryWriter``, per objective by name."""
+    step = agent.num_timesteps
+    names = agent.objective_names
+    for key in ("policy_loss", "value_loss", "entropy", "approx_kl", "clipfrac", "log_std"):
+        writer.add_scalar(f"losses/{key}", stats[key], step)
+    writer.add_scalar("pasta/mu", stats["mu"], step)
+    writer.add_scalar("pasta/conflict_ratio", stats["conflict_ratio"], step)
+    writer.add_scalar("charts/sps", stats["sps"], step)
+    writer.add_scalar("charts/epochs", stats["epochs"], step)
+    for j, name in enumerate(names):
+        writer.add_scalar(f"attention/{name}", stats["attention"][j], step)
+        writer.add_scalar(f"regret/{name}", stats["regret"][j], step)
+        writer.add_scalar(f"return_scale/{name}", stats["return_scale"][j], step)
+        ev = stats["explained_variance"][j]
+        if np.isfinite(ev):
+            writer.add_scalar(f"explained_variance/{name}", ev, step)
+    buffer = stats["rollout"]
+    writer.add_histogram("actions/gamma", buffer.actions.reshape(-1), step)
+    writer.add_scalar("actions/gamma_mean", float(buffer.actions.mean()), step)
+    episodes = stats["episodes"]
+    if episodes:
+        returns = np.array([e["returns"] for e in episodes])
+        for j, name in enumerate(names):
+            writer.add_scalar(f"episode_return/{name}", returns[:, j].mean(), step)
+        writer.add_scalar("episode_return/preference_weighted", float((returns @ agent.preference).mean()), step)
+        writer.add_scalar("charts/episode_length", np.mean([e["length"] for e in episodes]), step)
+        writer.add_scalar("charts/episodes", len(episodes), step)
+        for key, tag in (("is_success", "success_rate"), ("overtakes", "overtakes"), ("laps", "laps"),
+                         ("collision", "collision_rate"), ("off_track", "off_track_rate")):
+            vals = [e[key] for e in episodes if key in e]
+            if vals:
+                writer.add_scalar(f"charts/{tag}", float(np.mean(vals)), step)
+
+
+def format_returns(names: tuple[str, ...], returns: np.ndarray) -> str:
+    """``safety -0.120  overtakes 1.000 ...``: per-objective returns labelled with the objective names."""
+    return "  ".join(f"{name} {value:.3f}" for name, value in zip(names, returns))
+
+
+def console_line(agent: PASTA, stats: dict[str, Any], total_steps: int) -> str:
+    """One line per update: progress, finished episodes and their mean returns per objective (by name)."""
+    recent = list(agent.ep_info_buffer)
+    line = (f"update {agent.num_updates}  steps {agent.num_timesteps}/{total_steps}  "
+            f"episodes +{len(stats['episodes'])}")
+    if recent:
+        returns = np.mean([e["returns"] for e in recent], axis=0)
+        line += f"  mean returns of the last {len(recent)}: " + format_returns(agent.objective_names, returns)
+    else:
+        line += "  (no episode finished yet)"
+    return line + f"  mu {stats['mu']:.2f}  conflict {stats['conflict_ratio']:.2f}  sps {stats['sps']:.0f}"
+
+
+def check_out(out: Path, force: bool) -> None:
+    """Refuse an ``--out`` that already holds a run unless ``force``."""
+    final = out / "pasta_final.json"
+    if final.exists() and not force:
+        try:
+            steps = f", {int(json.loads(final.read_text())['state']['num_timesteps'])} steps"
+        except (OSError, ValueError, KeyError, TypeError):
+            steps = ""
+        raise SystemExit(f"--out {out} already holds a run ({final}{steps}); pass --force to overwrite it "
+                         "or choose another --out")
+
+
+def code_commit(root: Path) -> str | None:
+    """The git commit of the source tree at ``root`` (``+dirty`` if modified), if known."""
+    import subprocess
+
+    try:
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                timeout=5, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=5, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return commit + ("+dirty" if dirty else "")

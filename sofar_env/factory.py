@@ -1,0 +1,98 @@
+"""Entry points of the registered ids: the Gymnasium environment, passive-checked in scalar mode.
+
+The ids of :mod:`sofar_env.registration` are registered with ``disable_env_checker=True``
+and point here, so that the passive checker follows the reward mode:
+
+* ``reward_mode="scalar"`` (default): the environment is wrapped in Gymnasium's
+  :class:`~gymnasium.wrappers.PassiveEnvChecker`, exactly where ``gymnasium.make`` puts it
+  for any other id (``TimeLimit<OrderEnforcing<PassiveEnvChecker<SOfARRaceEnv>>>``);
+* ``reward_mode="vector"``: no checker. The step returns the float32 reward vector of
+  ``env.unwrapped.reward_space`` (the MO-Gymnasium convention), which the checker, written for
+  scalar rewards, reports as "must be a float". ``mo_gymnasium.make`` turns the checker off for
+  the same reason; with these entry points ``gymnasium.make(id, reward_mode="vector")`` behaves
+  the same.
+
+Because the checker is applied here, ``gymnasium.make(..., disable_env_checker=...)`` does not
+change it; ``disable_env_checker=False`` adds Gymnasium's own checker on top (harmless, and it
+warns about the vector reward as requested).
+
+:func:`make_custom_env` is the entry point of ``SOfAR-Custom-v0``: a circuit of your own,
+given as ``track=`` a circuit folder (written by ``python -m sofar_env.tracks build``) or a
+:class:`~sofar_env.tracks.Track`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+
+from .env import SOfARRaceEnv
+from .registration import CUSTOM_ID
+from .tracks import Track
+
+__all__ = ["make_env", "make_custom_env", "load_custom_track"]
+
+
+_BUILD_HINT = ("build one with `python -m sofar_env.tracks build EDGES.csv --name NAME --out DIR` "
+               "(or pass a sofar_env.tracks.Track); the shipped circuits have their own ids, SOfAR-<Circuit>-v0")
+
+
+class _PassiveEnvChecker(gym.wrappers.PassiveEnvChecker):
+    """Gymnasium's passive checker, applied by the entry point: the spec keeps ``disable_env_checker=True``.
+
+    (Gymnasium's wrapper sets it to False in the spec, so ``gymnasium.make(env.spec)`` would add a second one.)
+    """
+
+    @property
+    def spec(self):
+        return self.env.spec
+
+
+def make_env(**kwargs: Any) -> gym.Env:
+    """A :class:`~sofar_env.env.SOfARRaceEnv` from ``kwargs``, passive-checked unless ``reward_mode="vector"``."""
+    env = SOfARRaceEnv(**kwargs)
+    if env.config.reward_mode == "vector":
+        return env
+    return _PassiveEnvChecker(env)
+
+
+make_env.metadata = SOfARRaceEnv.metadata  # read by gymnasium.make (render-mode wrappers)
+
+
+def load_custom_track(track: Any) -> Track:
+    """The :class:`~sofar_env.tracks.Track` of ``SOfAR-Custom-v0`` from a folder path or a Track.
+
+    Raises ``ValueError`` when ``track`` is missing (None), of the wrong type or not a folder, and
+    :class:`~sofar_env.tracks.TrackFormatError` (a ``ValueError`` naming the file) for a malformed folder.
+    """
+    if isinstance(track, Track):
+        return track
+    if track is None:
+        raise ValueError(f"{CUSTOM_ID} needs track=<circuit folder or Track>; {_BUILD_HINT}")
+    if not isinstance(track, (str, os.PathLike)):
+        raise ValueError(f"{CUSTOM_ID}: track must be a circuit folder path or a Track, got {type(track).__name__}")
+    folder = Path(track).expanduser()
+    if not folder.is_dir():
+        raise ValueError(f"{CUSTOM_ID}: track {os.fspath(track)!r} is not a circuit folder; {_BUILD_HINT}")
+    return Track.load(folder)
+
+
+def make_custom_env(track: Any = None, **kwargs: Any) -> gym.Env:
+    """Entry point of ``SOfAR-Custom-v0``: :func:`make_env` on the circuit ``track`` (see :func:`load_custom_track`).
+
+    The circuit is loaded (and checked) here, when the environment is made; ``track`` may also be given as
+    ``config={"track": ...}``.
+    """
+    config = kwargs.get("config")
+    if track is None and isinstance(config, Mapping) and "track" in config:
+        config = dict(config)
+        track = config.pop("track")
+        kwargs["config"] = config
+    return make_env(track=load_custom_track(track), **kwargs)
+
+
+make_custom_env.metadata = SOfARRaceEnv.metadata
