@@ -210,22 +210,38 @@ class ControlledRace:
     def build(self) -> None:
         """Load the circuit, build the world and the controllers (done by the first :meth:`reset`)."""
         from .race import Race
-        from .stack import OvertakingStack
         from .tracks import Track
 
         cfg = self.config
         self.track = cfg.track if isinstance(cfg.track, Track) else Track.load(cfg.track)
         self.race = Race(self.track, cfg.race, n_cars=self.n_cars)
-        if self.speed_factors is None:
-            configs = [cfg.stack] * self.n_cars
-        else:
-            configs = [apply_overrides(cfg.stack, {"speed_factor": sf}) for sf in self.speed_factors]
-        self.stacks = [OvertakingStack(self.track, c, vehicle=cfg.race.vehicle) for c in configs]
+        self.stacks = self._make_stacks(self.speed_factors)
         if cfg.race.sensor.enabled:
             from .sensing import Sensor
 
             self.sensors = [Sensor(cfg.race.sensor, self.track.length, cfg.race.dt) for _ in range(self.n_cars)]
             self._sensed = [np.zeros((0, 3)) for _ in range(self.n_cars)]
+
+    def _make_stacks(self, speed_factors) -> list:
+        from .stack import OvertakingStack
+
+        cfg = self.config
+        if speed_factors is None:
+            configs = [cfg.stack] * self.n_cars
+        else:
+            configs = [apply_overrides(cfg.stack, {"speed_factor": sf}) for sf in speed_factors]
+        return [OvertakingStack(self.track, c, vehicle=cfg.race.vehicle) for c in configs]
+
+    def set_speed_factors(self, speed_factors) -> None:
+        """Give car i the speed factor ``speed_factors[i]`` (cycled) from the next :meth:`reset` on.
+
+        The controllers are rebuilt with it (they are reset by every episode anyway).
+        """
+        factors = tuple(float(speed_factors[i % len(speed_factors)]) for i in range(self.n_cars))
+        if self.race is None:
+            self.build()
+        self.stacks = self._make_stacks(factors)  # raises (changing nothing) for an invalid factor
+        self.speed_factors = factors
 
     @property
     def built(self) -> bool:

@@ -5,15 +5,32 @@ A thin adapter over the same simulation core as the Gymnasium environment
 every car's opponents are the other active cars (``race.opponent_frenet(car)``).
 Each agent's action is its own gamma; observation, action, reward terms and info
 are those of :class:`~sofar_env.env.SOfARRaceEnv`, per car (wall-clock solve times
-only with ``timing_info=True``). Cars start
-``race.car_spacing`` (40 m) apart, car 0 in front on the raceline, the others at
-the lateral offsets ``race.car_offsets``. Give them different ``speed_factors`` for
-overtakes to happen.
+only with ``timing_info=True``).
+
+**Start.** A rolling start from a grid two abreast and staggered (:class:`~sofar_env.race.RaceConfig`,
+:meth:`~sofar_env.race.Race.grid_slot`): car 0 on pole at the drawn start arc length,
+``race.grid_lateral_offset`` (2 m) left of the raceline; car 1 ``race.grid_stagger`` (12 m) behind it
+and 2 m right; each further row of two ``race.grid_row_spacing`` (24 m) behind the previous one (so
+consecutive cars are 12 m apart, alternately left and right); a car alone in the last row starts on the
+raceline. Offsets are moved inwards where a footprint would come within 0.5 m of an edge. Every car
+starts at the same drawn fraction (``race.start_speed_fraction``) of the speed profile at its own place.
+
+**Pace.** At every reset each car's speed factor (its speed reference as a fraction of the speed
+profile) is drawn uniformly in ``race.pace_range`` (default U(0.9, 1.0)) from the environment's
+random generator, so the same seed gives the same factors and faster cars meet slower ones; the
+factors of the episode are in ``env.speed_factors``. ``speed_factors=`` (one per car, cycled) or
+``speed_factor=`` fixes them instead.
+
+Overtakes between controlled cars are counted for the passer only (``info["overtakes"]``): car i
+is credited once when a car that was ahead of it falls ``race.opponents.overtake_threshold`` (2 m)
+behind; it is credited again only after that car got ahead once more.
 
 A car that collides, leaves the track or stalls (the stall rule of
 :mod:`sofar_env.core`: slower than ``stall_speed`` for ``stall_seconds``, per car)
 terminates and leaves the race (it stops and no longer counts as an obstacle); in a
 collision between two cars both terminate. All remaining cars are truncated at the race duration.
+The ``scenario`` key of the interactive world (:mod:`sofar_env.scenarios`) applies here too, without
+its scripted opponents (the multi-agent race has none).
 
 ``reset(options=...)`` accepts ``start_s`` and ``start_speed``; other keys are
 ignored with a logged warning (PettingZoo's API test passes arbitrary options).
@@ -33,6 +50,7 @@ from pettingzoo import ParallelEnv
 from .config import OBJECTIVE_NAMES, EnvConfig, apply_overrides, make_env_config
 from .constants import GAMMA_MAX, GAMMA_MIN
 from .core import ControlledRace, parse_gamma
+from .race import MAX_SPEED_FACTOR, _is_real
 
 __all__ = ["SOfARParallelEnv", "parallel_env"]
 
@@ -62,12 +80,17 @@ class SOfARParallelEnv(ParallelEnv):
         self.possible_agents = [f"car_{i}" for i in range(self.n_agents)]
         self.agents: list[str] = []
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
-        if speed_factors is None:
+        if speed_factors is None and "speed_factor" in kwargs:
             speed_factors = (self.config.stack.speed_factor,)
+        self.draw_pace = speed_factors is None
+        """Whether each reset draws the cars' speed factors in ``race.pace_range``."""
+        if speed_factors is not None and not (len(speed_factors) and all(
+                _is_real(f) and 0.0 < f <= MAX_SPEED_FACTOR for f in speed_factors)):
+            raise ValueError(f"speed_factors must be numbers in (0, {MAX_SPEED_FACTOR:g}], one per car (cycled), "
+                             f"got {speed_factors!r}")
         self.core = ControlledRace(self.config, n_cars=self.n_agents, speed_factors=speed_factors,
                                    remove_crashed=True)
         """The simulation core: the race world and one controller per car."""
-        self.speed_factors = self.core.speed_factors
         self._observation_spaces = {a: spaces.Box(-1.0, 1.0, (12,), np.float32) for a in self.possible_agents}
         self._action_spaces = {a: spaces.Box(GAMMA_MIN, GAMMA_MAX, (1,), np.float32) for a in self.possible_agents}
         self.objective_names = OBJECTIVE_NAMES
@@ -92,6 +115,11 @@ class SOfARParallelEnv(ParallelEnv):
     def stacks(self) -> list:
         return self.core.stacks
 
+    @property
+    def speed_factors(self) -> tuple[float, ...] | None:
+        """Each car's speed factor in the current episode (None before the first reset when they are drawn)."""
+        return self.core.speed_factors
+
     # ------------------------------------------------------------------ API
     def reset(self, seed: int | None = None, options: dict | None = None):
         options = dict(options or {})
@@ -102,6 +130,9 @@ class SOfARParallelEnv(ParallelEnv):
         self.core.check_reset(**race_options)  # a failed reset leaves the env as it was
         if seed is not None or self._np_random is None:
             self._np_random, _ = seeding.np_random(seed)
+        if self.draw_pace:
+            lo, hi = self.config.race.pace_range
+            self.core.set_speed_factors(self._np_random.uniform(lo, hi, self.n_agents).tolist())
         first = self.core.reset(self._np_random, **race_options)
         self.agents = list(self.possible_agents)
         observations = {a: first[self._index[a]].observation for a in self.agents}
@@ -157,6 +188,7 @@ def parallel_env(track: str = "LagunaSeca", n_agents: int = 3, **kwargs: Any) ->
     """A :class:`SOfARParallelEnv` on ``track`` with ``n_agents`` cars.
 
     Other keyword arguments: ``config``, ``render_mode``, ``speed_factors`` (one per car,
-    cycled) and every key of :func:`~sofar_env.config.make_env_config` except ``n_opponents``.
+    cycled; default: drawn per episode in ``race.pace_range``) and every key of
+    :func:`~sofar_env.config.make_env_config` except ``n_opponents``.
     """
     return SOfARParallelEnv(n_agents=n_agents, track=track, **kwargs)

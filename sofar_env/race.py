@@ -20,6 +20,16 @@ races only). Every step it reports, per controlled car:
 All randomness comes from the ``numpy.random.Generator`` passed to
 :meth:`Race.reset`: the start arc length (uniform on the raceline) and the start
 speed (uniform in ``start_speed_fraction`` x the speed profile there).
+
+The start of a multi-car race is a rolling start from a grid two abreast and
+staggered (:meth:`Race.grid_slot`): row ``r`` holds cars ``2r`` and ``2r + 1``;
+its first car starts ``r x grid_row_spacing`` behind the pole (car 0, at the drawn
+start arc length) and ``grid_lateral_offset`` left of the raceline, its second car
+``grid_stagger`` further back and as far right; a car alone in its row (a single
+car, or the last car of an odd field) starts on the raceline. A car whose offset
+would bring its footprint within ``START_EDGE_MARGIN`` of an edge is moved inwards;
+since the stagger is longer than a car, no two footprints overlap. Every car starts
+at the drawn fraction of the speed profile at its own arc length.
 """
 
 from __future__ import annotations
@@ -31,91 +41,18 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.ndimage import minimum_filter1d
 
-from .dynamics import AV21_DYNAMIC, DynamicParams, DynamicPlant
+from .dynamics import DynamicPlant
 from .geometry import footprint_corner_list, footprint_corners, footprint_radius, rectangles_intersect
-from .opponents import OpponentConfig, Opponents
-from .sensing import SensorConfig
-from .vehicle import AV21, Plant, VehicleParams
+from .opponents import Opponents
+from .race_config import (GRID_MIN_GAP, MAX_SPEED_FACTOR, MAX_START_SPEED_FACTOR, PLANTS,  # noqa: F401
+                          START_EDGE_MARGIN, RaceConfig, _is_real)
+from .vehicle import Plant
 
 __all__ = ["RaceConfig", "CarEvents", "Race"]
 
 _EDGE_WINDOW = 15.0
 """Half width of the arc-length window of the off-track prefilter [m]: a footprint corner
 (within ~2.6 m of the reference point) projects within it unless 1 - kappa n < 0.2."""
-
-
-PLANTS = ("kinematic", "dynamic")
-"""Plant models of :attr:`RaceConfig.plant`."""
-START_EDGE_MARGIN = 0.5
-"""Distance kept between a controlled car's footprint and the track edge at the start [m]."""
-MAX_START_SPEED_FACTOR = 1.1
-"""A start speed may exceed the circuit's fastest speed-profile value by at most this factor."""
-
-
-def _is_real(x) -> bool:
-    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
-
-
-@dataclass(frozen=True)
-class RaceConfig:
-    """World parameters."""
-
-    dt: float = 0.1
-    """Control period of the plant [s]."""
-    duration: float = 200.0
-    """Episode horizon [s]."""
-    plant_substeps: int = 4
-    """RK4 sub-steps per control period."""
-    random_start: bool = True
-    """Draw the ego start arc length uniformly on the raceline; otherwise use ``start_s``."""
-    start_s: float = 0.0
-    """Start arc length when ``random_start`` is False [m]."""
-    start_speed_fraction: tuple[float, float] = (0.5, 0.9)
-    """Start speed drawn uniformly in this range times the speed profile at the start [-]."""
-    car_spacing: float = 40.0
-    """Arc-length spacing of the controlled cars at the start of a multi-car race [m]."""
-    car_offsets: tuple[float, ...] = (0.0, 2.5, -2.5)
-    """Lateral start offsets of controlled cars 1, 2, ... (cycled; car 0 starts on the raceline) [m]."""
-    vehicle: VehicleParams = AV21
-    """Parameters of every car."""
-    opponents: OpponentConfig = field(default_factory=OpponentConfig)
-    """The scripted opponent field."""
-    plant: str = "kinematic"
-    """``"kinematic"``: the bicycle with slip of :mod:`sofar_env.vehicle` (the MPC's own model, the paper's
-    world); ``"dynamic"``: the single-track model with Pacejka tyres and actuator lags of
-    :mod:`sofar_env.dynamics`, with a friction coefficient mu drawn per episode in ``dynamic.mu_range``."""
-    dynamic: DynamicParams = AV21_DYNAMIC
-    """Parameters of the dynamic plant (used with ``plant="dynamic"``)."""
-    sensor: SensorConfig = field(default_factory=SensorConfig)
-    """How the controllers and the observation see the opponents (off: perfect sensing)."""
-
-    def __post_init__(self) -> None:
-        for name in ("dt", "duration"):
-            value = getattr(self, name)
-            if not (_is_real(value) and math.isfinite(value) and value > 0):
-                raise ValueError(f"race.{name} must be a finite number > 0 [s], got {value!r}")
-        if self.duration < self.dt:
-            raise ValueError(f"race.duration ({self.duration} s) must be at least one step (dt = {self.dt} s)")
-        if not (isinstance(self.plant_substeps, (int, np.integer)) and self.plant_substeps >= 1):
-            raise ValueError(f"race.plant_substeps must be an integer >= 1, got {self.plant_substeps!r}")
-        if not _is_real(self.start_s) or not math.isfinite(self.start_s):
-            raise ValueError(f"race.start_s must be a finite number [m], got {self.start_s!r}")
-        if len(self.start_speed_fraction) != 2:
-            raise ValueError(f"race.start_speed_fraction must be a pair, got {self.start_speed_fraction!r}")
-        lo, hi = self.start_speed_fraction
-        if not (_is_real(lo) and _is_real(hi) and 0.0 <= lo <= hi <= 1.5):
-            raise ValueError("race.start_speed_fraction must be an ordered pair in [0, 1.5] (fractions of the "
-                             f"speed profile), got {self.start_speed_fraction!r}")
-        if not (_is_real(self.car_spacing) and math.isfinite(self.car_spacing) and self.car_spacing > 0):
-            raise ValueError(f"race.car_spacing must be a finite number > 0 [m], got {self.car_spacing!r}")
-        if self.plant not in PLANTS:
-            raise ValueError(f"race.plant must be one of {PLANTS}, got {self.plant!r}")
-        if not self.car_offsets or not all(_is_real(o) and math.isfinite(o) for o in self.car_offsets):
-            raise ValueError(f"race.car_offsets must be finite numbers [m], got {self.car_offsets!r}")
-
-    @property
-    def max_steps(self) -> int:
-        return int(round(self.duration / self.dt))
 
 
 @dataclass
@@ -138,6 +75,7 @@ class Race:
         if n_cars < 1:
             raise ValueError("n_cars must be >= 1")
         self.n_cars = int(n_cars)
+        self._check_grid_fits()
         self.dynamic = self.config.plant == "dynamic"
         if self.dynamic:
             self.plant = DynamicPlant(self.config.dynamic, self.config.vehicle, self.config.dt)
@@ -173,6 +111,17 @@ class Race:
         self._wl_min = minimum_filter1d(np.asarray(track.width_left(samples), float), 2 * half + 1, mode="wrap").tolist()
         self._wr_min = minimum_filter1d(np.asarray(track.width_right(samples), float), 2 * half + 1, mode="wrap").tolist()
         self._check_opponent_field()
+
+    def _check_grid_fits(self) -> None:
+        """Raise ``ValueError`` if the last grid slot would come round the lap to the pole."""
+        cfg = self.config
+        row, second = divmod(self.n_cars - 1, 2)
+        back = row * cfg.grid_row_spacing + second * cfg.grid_stagger
+        room = self.track.length - cfg.vehicle.length - GRID_MIN_GAP
+        if back >= room:
+            raise ValueError(f"a grid of {self.n_cars} cars ({back:.0f} m from the pole to the last car) does not fit "
+                             f"on {self.track.name} ({self.track.length:.0f} m): use fewer cars or a shorter "
+                             "race.grid_row_spacing")
 
     def _check_opponent_field(self) -> None:
         """Raise ``ValueError`` if the configured opponent field cannot be placed on this circuit."""
@@ -247,8 +196,7 @@ class Race:
         self.distance[:] = 0.0
         self.overtakes[:] = 0
         for k in range(self.n_cars):
-            s_k = float(self.track.wrap(start_s - k * cfg.car_spacing))
-            n_k = 0.0 if k == 0 else self._start_offset(s_k, float(cfg.car_offsets[(k - 1) % len(cfg.car_offsets)]))
+            s_k, n_k = self.grid_slot(start_s, k)
             v_k = float(start_speed) if start_speed is not None else frac * float(self.track.speed(s_k))
             if not math.isfinite(v_k) or v_k < 0:
                 raise ValueError(f"start speed must be finite and >= 0, got {v_k}")
@@ -268,17 +216,37 @@ class Race:
         self._car_rel = np.asarray(gaps, float).reshape(self.n_cars, self.n_cars)
         self._car_ahead = self._car_rel > 0.0
 
-    def _start_offset(self, s: float, n: float) -> float:
-        """A controlled car's lateral start offset ``n`` moved inside the edges where needed [m].
+    def grid_slot(self, start_s: float, car: int) -> tuple[float, float]:
+        """Start arc length and lateral offset (s, n) [m] of car ``car`` when the pole is at ``start_s``.
+
+        See the module docstring: rows of two, staggered, the first car of a row on the left. Where
+        one side of a row has too little room, the row moves sideways as a whole, so its two cars
+        stay ``2 grid_lateral_offset`` apart as far as the track width allows.
+        """
+        cfg = self.config
+        row, second = divmod(int(car), 2)
+        front = start_s - row * cfg.grid_row_spacing
+        s = float(self.track.wrap(front - second * cfg.grid_stagger))
+        if second == 0 and car == self.n_cars - 1:  # alone in its row: on the raceline
+            return s, 0.0
+        a = float(cfg.grid_lateral_offset)
+        lo1, hi1 = self._start_room(float(self.track.wrap(front)))
+        lo2, hi2 = self._start_room(float(self.track.wrap(front - cfg.grid_stagger)))
+        lo, hi = max(lo1, lo2), min(hi1, hi2)  # the room both cars of the row have
+        centre = min(max(0.0, lo + a), hi - a) if hi - lo >= 2.0 * a else 0.5 * (lo + hi)
+        lo_k, hi_k = (lo2, hi2) if second else (lo1, hi1)
+        return s, min(max(centre + (-a if second else a), lo_k), hi_k)
+
+    def _start_room(self, s: float) -> tuple[float, float]:
+        """Lateral offsets [lo, hi] [m] a controlled car may start at, at arc length ``s``.
 
         The footprint (aligned with the raceline) keeps ``START_EDGE_MARGIN`` from the narrowest edge
-        within +-15 m of ``s``, so no car starts off the track, whatever the start arc length.
+        within +-15 m of ``s``, so no car starts off the track, whatever the start arc length; the
+        raceline (0) is always inside.
         """
         i = bisect.bisect_right(self._samples, s) - 1
         half = 0.5 * self.config.vehicle.width + START_EDGE_MARGIN
-        hi = max(self._wl_min[i] - half, 0.0)
-        lo = min(half - self._wr_min[i], 0.0)
-        return min(max(n, lo), hi)
+        return min(half - self._wr_min[i], 0.0), max(self._wl_min[i] - half, 0.0)
 
     # ------------------------------------------------------------------ queries
     def opponent_frenet(self, car: int = 0) -> np.ndarray:

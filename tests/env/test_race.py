@@ -106,6 +106,7 @@ def test_collision_between_controlled_cars(track):
     s0 = straightest(track, span=20.0)
     race = Race(track, RaceConfig(random_start=False, opponents=OpponentConfig(n_opponents=0)), n_cars=2)
     race.reset(np.random.default_rng(0), start_s=s0, start_speed=0.0)
+    place(race, s0, car=0)
     place(race, s0 + 4.0, car=1)
     events = race.step(np.zeros((2, 2)))
     assert events[0].collision and events[1].collision
@@ -202,3 +203,96 @@ def test_more_opponents_than_gaps_spawn_apart(track):
     assert np.min(np.diff(rel)) >= 50.0
     with pytest.raises(ValueError, match="largest gap"):
         OpponentConfig(n_opponents=2, gaps=(-10.0,))
+
+
+# ---------------------------------------------------------------------- the multi-car grid
+GRID_TRACKS = ["LagunaSeca", "Monza", "Indianapolis", "Kentucky"]
+
+
+@pytest.mark.parametrize("name", GRID_TRACKS)
+def test_grid_start_inside_the_edges_without_overlaps(name):
+    """200 seeded grid starts of 5 cars per circuit: every footprint corner at least 0.3 m inside both
+    edges (projected exactly), no two footprints intersecting, consecutive cars 2 grid slots apart."""
+    from sofar_env.geometry import footprint_corners, rectangles_intersect
+
+    track = Track.load(name)
+    cfg = RaceConfig(opponents=OpponentConfig(n_opponents=0))
+    race = Race(track, cfg, n_cars=5)
+    lateral = []
+    for seed in range(200):
+        race.reset(np.random.default_rng(seed))
+        st = race.states
+        corners = footprint_corners(st[:, 0], st[:, 1], st[:, 2], cfg.vehicle)  # (5, 4, 2)
+        cs, cn = track.to_frenet(corners[..., 0].ravel(), corners[..., 1].ravel(),
+                                 s_hint=np.repeat(race.frenet[:, 0], 4))
+        assert np.all(cn <= track.width_left(cs) - 0.3), (name, seed)
+        assert np.all(cn >= -track.width_right(cs) + 0.3), (name, seed)
+        overlap = rectangles_intersect(corners[:, None], corners[None, :])
+        assert not np.any(overlap[~np.eye(5, dtype=bool)]), (name, seed)
+        gaps = track.gap(race.frenet[:-1, 0], race.frenet[1:, 0])  # each car behind the one before it
+        np.testing.assert_allclose(gaps, [12.0, 12.0, 12.0, 12.0], atol=1e-9)
+        assert race.frenet[4, 1] == 0.0  # alone in the last row: on the raceline
+        lateral += [race.frenet[0, 1] - race.frenet[1, 1], race.frenet[2, 1] - race.frenet[3, 1]]
+    lateral = np.array(lateral)
+    assert np.all(lateral > 0.0)  # the first car of a row is always left of the second
+    assert np.mean(np.isclose(lateral, 4.0)) > 0.8  # two abreast, 2 x grid_lateral_offset apart where it fits
+
+
+def test_grid_layout_where_the_track_is_wide(track):
+    # a stretch with room for 2 m offsets either side (footprint half-width 0.95 m + 0.5 m margin)
+    s = np.arange(0.0, track.length, 1.0)
+    wide = (track.width_left(s) > 3.6) & (track.width_right(s) > 3.6)
+    pole = next(float(x) for x in s if np.all(wide[(np.arange(int(x) - 60, int(x) + 20)) % len(s)]))
+    race = Race(track, RaceConfig(random_start=False, start_s=pole), n_cars=4)
+    race.reset(np.random.default_rng(0), start_speed=20.0)
+    np.testing.assert_allclose(race.frenet[:, 0], track.wrap(pole - np.array([0.0, 12.0, 24.0, 36.0])))
+    np.testing.assert_allclose(race.frenet[:, 1], [2.0, -2.0, 2.0, -2.0])
+    np.testing.assert_allclose(race.frenet[:, 3], 20.0)
+    s0 = straightest(track, span=60.0)
+    single = Race(track, RaceConfig(random_start=False, start_s=s0), n_cars=1)
+    single.reset(np.random.default_rng(0))
+    assert single.frenet[0, 0] == pytest.approx(s0) and single.frenet[0, 1] == 0.0  # a lone car: on the raceline
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("grid_stagger", 5.0, "at least the car length"),
+    ("grid_row_spacing", 18.0, "at least the car length"),
+    ("grid_lateral_offset", -1.0, "grid_lateral_offset"),
+    ("grid_row_spacing", float("nan"), "grid_row_spacing"),
+    ("pace_range", (1.0, 0.9), "pace_range"),
+    ("pace_range", (0.0, 0.9), "pace_range"),
+    ("pace_range", (0.9,), "pace_range"),
+])
+def test_grid_and_pace_are_validated(field, value, match):
+    with pytest.raises(ValueError, match=match):
+        RaceConfig(**{field: value})
+
+
+def test_a_grid_longer_than_the_lap_is_rejected(track):
+    with pytest.raises(ValueError, match="does not fit"):
+        Race(track, RaceConfig(grid_row_spacing=1000.0, grid_stagger=12.0), n_cars=10)
+
+
+def test_an_overtake_between_controlled_cars_is_counted_once_for_the_passer(track):
+    s0 = straightest(track, span=80.0, need_left=4.0)
+    race = Race(track, RaceConfig(random_start=False, start_s=s0 + 10.0), n_cars=2)
+    race.reset(np.random.default_rng(0), start_speed=0.0)
+    place(race, s0 + 10.0, n=-2.0, car=0)  # car 0 parked 10 m ahead, car 1 passes on its left
+    counts = []
+    for k in range(30):
+        place(race, s0 + 1.0 * k, n=2.0, v=10.0, car=1)
+        place(race, s0 + 10.0, n=-2.0, car=0)
+        events = race.step(np.zeros((2, 2)))
+        assert not events[1].collision
+        counts.append((events[0].overtakes, events[1].overtakes))
+    counts = np.array(counts)
+    assert counts[:, 0].sum() == 0 and counts[:, 1].sum() == 1  # the passer only, once
+    # credited when car 0 is overtake_threshold (2 m) behind: car 1 at s0 + 12
+    assert int(np.argmax(counts[:, 1])) == 12
+    for k in range(30):  # car 0 re-passes car 1, parked 19 m further: credited to car 0, once
+        place(race, s0 + 10.0 + 1.0 * k, n=-2.0, v=10.0, car=0)
+        place(race, s0 + 29.0, n=2.0, car=1)
+        events = race.step(np.zeros((2, 2)))
+        counts = np.vstack([counts, [events[0].overtakes, events[1].overtakes]])
+    assert counts[:, 0].sum() == 1 and counts[:, 1].sum() == 1
+    assert race.overtakes.tolist() == [1, 1]
