@@ -97,7 +97,8 @@ class PASTAPolicy:
         x = np.asarray(obs, dtype=np.float32)
         if x.shape[-1:] != (self.obs_dim,) or x.ndim > 2:
             raise ValueError(f"expected an observation of shape ({self.obs_dim},) or (n, {self.obs_dim}), "
-                             f"got {x.shape}")
+                             f"got {x.shape} (a policy of the paper world's 12 values runs in the interactive "
+                             f"world with observation='paper')")
         h = np.tanh(x @ self._w0_obs + self._b0_eff)
         for w, b in self._rest[:-1]:
             h = np.tanh(h @ w + b)

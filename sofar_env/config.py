@@ -111,6 +111,10 @@ class EnvConfig:
     or a :class:`~sofar_env.tracks.Track` (used as is; see the ``SOfAR-Custom-v0`` id)."""
     decision_interval: int = 1
     """The policy acts every this many control steps; gamma is held in between and the rewards are summed."""
+    observation: str = "paper"
+    """Observation layout (:mod:`sofar_env.observation`): ``"paper"``, the 12 values of the paper world, or
+    ``"extended"``, 16 values that add the two nearest opponents' sensed lateral rates, the heading error and
+    the smallest barrier value (the default of the interactive world)."""
     reward_mode: str = "scalar"
     """``"scalar"``: reward = weights . vector (a float); ``"vector"``: the float32 reward vector."""
     reward_weights: RewardWeights = field(default_factory=RewardWeights)
@@ -138,6 +142,8 @@ class EnvConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.decision_interval, (int, np.integer)) or self.decision_interval < 1:
             raise ConfigError(f"decision_interval must be an integer >= 1, got {self.decision_interval!r}")
+        if self.observation not in ("paper", "extended"):
+            raise ConfigError(f"observation must be 'paper' or 'extended', got {self.observation!r}")
         if self.reward_mode not in REWARD_MODES:
             raise ConfigError(f"reward_mode must be one of {REWARD_MODES}, got {self.reward_mode!r}")
         if not (0.0 < self.initial_gamma <= 1.0):

@@ -32,14 +32,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
 from .config import EnvConfig, apply_overrides
 from .constants import GAMMA_MAX, GAMMA_MIN
-from .control.barrier import barrier_expr
+from .control.barrier import min_barrier
 from .observation import observe
 from .rewards import reward_vector, safety_cost, scalarize
 
@@ -64,22 +63,6 @@ def parse_gamma(action: Any) -> float:
     if not math.isfinite(g):
         raise ValueError(f"non-finite action {g!r}: gamma must be a finite number in [{GAMMA_MIN}, {GAMMA_MAX}]")
     return min(max(g, GAMMA_MIN), GAMMA_MAX)
-
-
-_MATH_OPS = SimpleNamespace(abs=abs, exp=math.exp, log1p=math.log1p, tanh=math.tanh)
-
-
-def min_barrier(track, ego_frenet: np.ndarray, opponents: np.ndarray, params) -> float:
-    """Smallest barrier value h of the ego against the opponent rows (s, n, v) now; inf without opponents.
-
-    The barrier of :mod:`sofar_env.control.barrier` evaluated on Python floats (the field is
-    small), with s taken relative to the ego.
-    """
-    s, n, v = float(ego_frenet[0]), float(ego_frenet[1]), float(ego_frenet[3])
-    h = math.inf
-    for s_o, n_o, v_o in opponents.tolist():
-        h = min(h, barrier_expr(0.0, n, v, track.gap(s_o, s), n_o, v_o, params, _MATH_OPS))
-    return h
 
 
 class DecisionTally:
@@ -200,6 +183,9 @@ class ControlledRace:
         self._sensed: list[np.ndarray] = self._opponents
         """What each car's controller and observation see of its opponents (without a sensor: the same list
         as the true rows)."""
+        self._sensed_rows: list[np.ndarray] = self._opponents
+        """What each car's controller gets: the seen rows, with the sensor's lateral-rate estimate as a
+        fourth column when a sensor is on (:meth:`~sofar_env.stack.OvertakingStack.step`)."""
         self._sensed_ids: list[np.ndarray] = [np.zeros(0, int)] * self.n_cars
         self.sensors: list | None = None
         """One :class:`~sofar_env.sensing.Sensor` per car when ``race.sensor.enabled``."""
@@ -221,6 +207,7 @@ class ControlledRace:
 
             self.sensors = [Sensor(cfg.race.sensor, self.track.length, cfg.race.dt) for _ in range(self.n_cars)]
             self._sensed = [np.zeros((0, 3)) for _ in range(self.n_cars)]
+            self._sensed_rows = [np.zeros((0, 4)) for _ in range(self.n_cars)]
 
     def _make_stacks(self, speed_factors) -> list:
         from .stack import OvertakingStack
@@ -276,7 +263,7 @@ class ControlledRace:
             tally.min_h = min_barrier(self.track, self.race.frenet[i], opp, bp)
             tally.gamma = self.previous_gamma[i]
             tally.nearest = self.race.nearest_distance(i)
-            out[i] = CarStep(observe(self.race, i, self._sensed[i]), None, False, False, self._info(tally, i))
+            out[i] = CarStep(self._observe(i), None, False, False, self._info(tally, i))
         return out
 
     def step(self, gammas: dict[int, float]) -> dict[int, CarStep]:
@@ -294,7 +281,7 @@ class ControlledRace:
             for i in running:
                 gamma = gammas[i]
                 assert GAMMA_MIN <= gamma <= GAMMA_MAX, "gamma is validated by parse_gamma at the API boundary"
-                outs[i] = self.stacks[i].step(race.frenet[i], self._sensed[i], gamma)
+                outs[i] = self.stacks[i].step(race.frenet[i], self._sensed_rows[i], gamma)
                 controls[i] = outs[i].u
             profile = {i: track.speed(float(race.frenet[i, 0])) for i in running}
             events = race.step(controls)
@@ -330,14 +317,15 @@ class ControlledRace:
             info = self._info(tally, i)
             if terminated or truncated:
                 info["is_success"] = not terminated
-            out[i] = CarStep(observe(race, i, self._sensed[i]), self._reward(tally.vector), terminated,
+            out[i] = CarStep(self._observe(i), self._reward(tally.vector), terminated,
                              truncated, info)
         self.live = [i for i in live if not (out[i].terminated or out[i].truncated)]
         return out
 
     # ------------------------------------------------------------------ per car
     def _sense(self, car: int, again: bool = False) -> None:
-        """Update what car ``car`` sees of its opponents: the sensor's (s, n, v) estimates of the true rows.
+        """Update what car ``car`` sees of its opponents: the sensor's (s, n, v) estimates of the true rows
+        (and, for its controller, the estimated lateral rates).
 
         Without a sensor the seen rows are the true rows (the same list), and this does nothing.
         Collisions, track limits, overtakes and the barrier-margin reward are always judged on the
@@ -349,12 +337,20 @@ class ControlledRace:
         if again:
             keep = np.isin(self._sensed_ids[car], self.race.opponent_ids(car))
             self._sensed[car] = self._sensed[car][keep]
+            self._sensed_rows[car] = self._sensed_rows[car][keep]
             self._sensed_ids[car] = self._sensed_ids[car][keep]
             return
         ids = self.race.opponent_ids(car)
         rows = self.sensors[car].measure(self._opponents[car], ids)
+        self._sensed_rows[car] = rows
         self._sensed[car] = np.ascontiguousarray(rows[:, :3])
         self._sensed_ids[car] = ids
+
+    def _observe(self, car: int) -> np.ndarray:
+        """Car ``car``'s observation from what it senses (the layout of ``EnvConfig.observation``)."""
+        if self.config.observation == "paper":
+            return observe(self.race, car, self._sensed[car])
+        return observe(self.race, car, self._sensed_rows[car], "extended", self.config.stack.mpc.barrier)
 
     def _reward(self, vector: np.ndarray):
         if self.config.reward_mode == "vector":
@@ -366,4 +362,5 @@ class ControlledRace:
 
     def render_frame(self, renderer, car: int):
         """Draw car ``car``'s view with ``renderer`` (:class:`~sofar_env.render.Renderer`)."""
-        return renderer.draw(self.race, self.outputs[car], gamma=float(self.previous_gamma[car]), car=car)
+        seen = self._sensed[car] if self.sensors is not None else None
+        return renderer.draw(self.race, self.outputs[car], gamma=float(self.previous_gamma[car]), car=car, seen=seen)

@@ -16,6 +16,7 @@ from gymnasium import spaces
 from .config import OBJECTIVE_NAMES, EnvConfig, make_env_config
 from .constants import GAMMA_MAX, GAMMA_MIN
 from .core import ControlledRace, parse_gamma
+from .observation import observation_size
 
 __all__ = ["SOfARRaceEnv", "GAMMA_MIN", "GAMMA_MAX", "RESET_OPTIONS"]
 
@@ -73,6 +74,19 @@ class SOfARRaceEnv(gym.Env):
     of gap (a car alongside or just behind comes first). Opponent speeds are arc-length
     speeds ds/dt. The curvature is averaged over 16 points from s to s + 1.5 s x max(v, 5 m/s).
     See :mod:`sofar_env.observation`.
+
+    With ``observation="extended"`` (the default of the ``-Interactive-v0`` ids) the space is
+    ``Box(-1, 1, (16,), float32)``: the 12 values above and
+
+    | Num | Observation                                        | Unit | Range [lo, hi] | Scaled value |
+    |-----|----------------------------------------------------|------|----------------|--------------|
+    | 12  | sensed lateral rate of opponent 1                  | m/s  | [-3, 3]        | r / 3        |
+    | 13  | sensed lateral rate of opponent 2                  | m/s  | [-3, 3]        | r / 3        |
+    | 14  | heading error e (ego heading - raceline heading)   | rad  | [-0.5, 0.5]    | e / 0.5      |
+    | 15  | smallest barrier value h over the sensed opponents | -    | [-1, 9]        | (h + 1) / 5 - 1 |
+
+    what a good gamma depends on in a world of moving, noisily sensed cars: whether the nearest
+    cars are moving across, how the ego is pointed, and the instantaneous safety margin.
 
     ## Rewards
 
@@ -165,7 +179,8 @@ class SOfARRaceEnv(gym.Env):
 
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version. The ``observation`` key (``"extended"``: 16 values) came with the interactive
+      world; the paper world's 12 values are unchanged.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
@@ -179,7 +194,7 @@ class SOfARRaceEnv(gym.Env):
         cfg = self.config
         k = cfg.decision_interval
         self.action_space = spaces.Box(GAMMA_MIN, GAMMA_MAX, (1,), np.float32)
-        self.observation_space = spaces.Box(-1.0, 1.0, (12,), np.float32)
+        self.observation_space = spaces.Box(-1.0, 1.0, (observation_size(cfg.observation),), np.float32)
         self.objective_names = OBJECTIVE_NAMES
         self.reward_space = spaces.Box(
             low=np.array([-1.0, 0.0, -2.0 * k, -1.0 * k, -1.0], np.float32),

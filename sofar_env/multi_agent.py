@@ -50,6 +50,7 @@ from pettingzoo import ParallelEnv
 from .config import OBJECTIVE_NAMES, EnvConfig, apply_overrides, make_env_config
 from .constants import GAMMA_MAX, GAMMA_MIN
 from .core import ControlledRace, parse_gamma
+from .observation import observation_size
 from .race import MAX_SPEED_FACTOR, _is_real
 
 __all__ = ["SOfARParallelEnv", "parallel_env"]
@@ -91,7 +92,8 @@ class SOfARParallelEnv(ParallelEnv):
         self.core = ControlledRace(self.config, n_cars=self.n_agents, speed_factors=speed_factors,
                                    remove_crashed=True)
         """The simulation core: the race world and one controller per car."""
-        self._observation_spaces = {a: spaces.Box(-1.0, 1.0, (12,), np.float32) for a in self.possible_agents}
+        obs_size = observation_size(self.config.observation)
+        self._observation_spaces = {a: spaces.Box(-1.0, 1.0, (obs_size,), np.float32) for a in self.possible_agents}
         self._action_spaces = {a: spaces.Box(GAMMA_MIN, GAMMA_MAX, (1,), np.float32) for a in self.possible_agents}
         self.objective_names = OBJECTIVE_NAMES
         self._np_random = None

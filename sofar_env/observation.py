@@ -24,13 +24,31 @@ index   quantity               unit    range [lo, hi]  definition
 
 "Opponents" are whatever the car must avoid: the scripted opponents and, in the
 multi-agent environment, the other active cars (:meth:`Race.opponent_frenet`).
+
+The **extended** observation (``EnvConfig.observation = "extended"``, the default of the
+interactive world) appends four values a good gamma depends on when opponents move and are
+sensed with noise (16 in all):
+
+======  =====================  ======  ==============  =================================================
+index   quantity               unit    range [lo, hi]  definition
+======  =====================  ======  ==============  =================================================
+12, 13  n_dot 1, n_dot 2       m/s     [-3, 3]         lateral rates of opponents 1 and 2 (the tracker
+                                                       estimate of :mod:`sofar_env.sensing`; 0 without a
+                                                       sensor or if absent)
+14      heading error e        rad     [-0.5, 0.5]     ego heading minus the raceline's
+15      smallest barrier h     -       [-1, 9]         the barrier value of the nearest-in-h opponent
+                                                       as sensed (:func:`~sofar_env.control.barrier.
+                                                       min_barrier`): the instantaneous safety margin;
+                                                       9 (far) if absent
+======  =====================  ======  ==============  =================================================
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["OBS_NAMES", "OBS_LOW", "OBS_HIGH", "GAP_RANGE", "LOOKAHEAD_TIME", "observe", "scale"]
+__all__ = ["OBS_NAMES", "OBS_LOW", "OBS_HIGH", "EXTENDED_NAMES", "EXTENDED_LOW", "EXTENDED_HIGH", "GAP_RANGE",
+           "LOOKAHEAD_TIME", "OBSERVATIONS", "observation_size", "observe", "scale"]
 
 OBS_NAMES = (
     "ego_n", "ego_v", "steering", "gap_1", "gap_2", "n_1", "n_2", "dv_1", "dv_2",
@@ -48,6 +66,21 @@ OBS_LOW = np.array([-15.0, 0.0, -0.25, GAP_RANGE[0], GAP_RANGE[0], -15.0, -15.0,
 OBS_HIGH = np.array([15.0, 100.0, 0.25, GAP_RANGE[1], GAP_RANGE[1], 15.0, 15.0, 50.0, 50.0, 0.05, 15.0, 15.0])
 """Physical upper ends of the clip ranges, per index."""
 _SPAN = OBS_HIGH - OBS_LOW
+OBSERVATIONS: tuple[str, ...] = ("paper", "extended")
+"""Names of the observation layouts (``EnvConfig.observation``)."""
+EXTENDED_NAMES = OBS_NAMES + ("n_dot_1", "n_dot_2", "heading_error", "barrier_min")
+EXTENDED_LOW = np.concatenate([OBS_LOW, [-3.0, -3.0, -0.5, -1.0]])
+"""Physical lower ends of the extended observation's clip ranges."""
+EXTENDED_HIGH = np.concatenate([OBS_HIGH, [3.0, 3.0, 0.5, 9.0]])
+"""Physical upper ends of the extended observation's clip ranges."""
+_EXT_LOW, _EXT_SPAN = EXTENDED_LOW[12:], EXTENDED_HIGH[12:] - EXTENDED_LOW[12:]
+
+
+def observation_size(layout: str) -> int:
+    """Number of values of the observation ``layout`` (``"paper"``: 12, ``"extended"``: 16)."""
+    if layout not in OBSERVATIONS:
+        raise ValueError(f"unknown observation {layout!r}; valid: {', '.join(OBSERVATIONS)}")
+    return len(OBS_NAMES) if layout == "paper" else len(EXTENDED_NAMES)
 _TAU = np.linspace(0.0, LOOKAHEAD_TIME, _CURV_SAMPLES)
 
 
@@ -81,11 +114,39 @@ def raw_observation(track, ego_frenet, opponents) -> np.ndarray:
     return np.array([n, v, delta, g1, g2, n1, n2, dv1, dv2, kappa, track.width_left(s), track.width_right(s)])
 
 
-def observe(race, car: int = 0, opponents: np.ndarray | None = None) -> np.ndarray:
-    """Observation (12,) float32 of controlled car ``car`` of ``race``.
+def extra_observation(track, ego_frenet, opponents, barrier_params) -> np.ndarray:
+    """The four physical values (float64) the extended observation appends, for opponent rows (s, n, v[, n_dot])."""
+    from .control.barrier import min_barrier
 
-    ``opponents`` may pass ``race.opponent_frenet(car)`` when the caller has it already.
+    s = float(ego_frenet[0])
+    lo, hi = GAP_RANGE
+    rows = np.asarray(opponents, float)
+    rows = rows.reshape(-1, rows.shape[-1] if rows.ndim == 2 and rows.shape[-1] == 4 else 3)
+    seen = []
+    for row in rows.tolist():
+        g = track.gap(row[0], s)
+        if lo <= g <= hi:
+            seen.append((g, row[3] if len(row) == 4 else 0.0))
+    seen.sort(key=lambda r: r[0])
+    seen += [(hi, 0.0)] * (2 - len(seen))
+    h = min_barrier(track, ego_frenet, rows, barrier_params) if len(rows) else np.inf
+    return np.array([seen[0][1], seen[1][1], float(ego_frenet[2]), min(h, EXTENDED_HIGH[15])])
+
+
+def observe(race, car: int = 0, opponents: np.ndarray | None = None, layout: str = "paper",
+            barrier_params=None) -> np.ndarray:
+    """Observation (12,) or, with ``layout="extended"``, (16,) float32 of controlled car ``car`` of ``race``.
+
+    ``opponents`` may pass ``race.opponent_frenet(car)`` when the caller has it already (rows (s, n, v), or
+    (s, n, v, n_dot) with a sensor's lateral rates); ``barrier_params`` (the MPC's
+    :class:`~sofar_env.control.barrier.BarrierParams`) are needed for the extended layout.
     """
     if opponents is None:
         opponents = race.opponent_frenet(car)
-    return scale(raw_observation(race.track, race.frenet[car], opponents))
+    opponents = np.asarray(opponents, float)
+    obs = scale(raw_observation(race.track, race.frenet[car], opponents[:, :3] if opponents.ndim == 2 else opponents))
+    if layout == "paper":
+        return obs
+    extra = extra_observation(race.track, race.frenet[car], opponents, barrier_params)
+    extra = 2.0 * (np.clip(extra, _EXT_LOW, EXTENDED_HIGH[12:]) - _EXT_LOW) / _EXT_SPAN - 1.0
+    return np.concatenate([obs, extra.astype(np.float32)])

@@ -9,7 +9,9 @@ track edges (the edges of the off-track test, ``n = +width_left(s)`` and
 level set ``h = 0`` of the velocity-aware barrier: an ellipse in the Frenet frame mapped
 to Cartesian coordinates, drawn with the longitudinal semi-axis of the side the ego would
 approach from), the MIQP lateral plan (orange dots), the MPC prediction (cyan line), the
-opponents (red) and the ego (blue) as their 4.9 m x 1.9 m footprints, a text panel
+opponents (red; in the interactive world purple while a car makes or holds a defensive move and
+pink while it lifts) and the ego (blue) as their 4.9 m x 1.9 m footprints, with a sensor
+the opponents where the controller sees them (white outlines), a text panel
 with time, speed, gamma and overtakes (top left) and a legend of these marks (bottom left;
 ``Renderer(legend=False)`` leaves it out). Frames are drawn with PIL (~5-8 ms at 640 x 480).
 """
@@ -35,6 +37,9 @@ _EDGE = (235, 235, 235)
 _RACELINE = (150, 150, 160)
 _EGO = (40, 110, 230)
 _OPPONENT = (215, 50, 45)
+_DEFENDING = (150, 40, 200)
+_LIFTING = (245, 150, 170)
+_SEEN = (250, 250, 250)
 _BARRIER = (255, 200, 60)
 _PLAN = (255, 140, 0)
 _MPC = (0, 230, 230)
@@ -46,6 +51,9 @@ _GIF_COLOURS = 127
 LEGEND = (
     ("ego", "car", _EGO),
     ("opponent", "car", _OPPONENT),
+    ("defending", "car", _DEFENDING),
+    ("lifting", "car", _LIFTING),
+    ("sensed position", "outline", _SEEN),
     ("barrier h = 0", "ring", _BARRIER),
     ("MIQP lateral plan", "dots", _PLAN),
     ("MPC prediction", "line", _MPC),
@@ -74,6 +82,8 @@ def _legend_image(font) -> Image.Image:
         x0, x1 = pad, pad + mark_w
         if mark == "car":
             d.rectangle((x0 + 4, y - 3, x1 - 4, y + 3), fill=colour, outline=(0, 0, 0))
+        elif mark == "outline":
+            d.rectangle((x0 + 4, y - 3, x1 - 4, y + 3), outline=colour)
         elif mark == "ring":
             d.ellipse((x0, y - 4, x1, y + 4), outline=colour, width=1)
         elif mark == "dots":
@@ -146,8 +156,10 @@ class Renderer:
         x, y = self.track.to_cartesian(s_o + a * c, n_o + self.barrier.b * np.sin(_THETA))
         return np.column_stack([x, y])
 
-    def draw(self, race, output=None, gamma: float | None = None, car: int = 0) -> np.ndarray:
-        """One frame (height, width, 3) uint8 centred on controlled car ``car``."""
+    def draw(self, race, output=None, gamma: float | None = None, car: int = 0,
+             seen: np.ndarray | None = None) -> np.ndarray:
+        """One frame (height, width, 3) uint8 centred on controlled car ``car``; ``seen``: rows (s, n, v) of
+        the opponents as the car's sensor reports them (drawn as outlines), None without a sensor."""
         img = Image.new("RGB", (self.width, self.height), _GRASS)
         d = ImageDraw.Draw(img)
         ego = race.states[car]
@@ -182,9 +194,20 @@ class Renderer:
         # cars
         p = self.vehicle
         corners = race.obstacle_corners(car)
-        for quad in corners:
+        colours = (_OPPONENT, _DEFENDING, _LIFTING)
+        doing = race.opponents.behaviour()  # the scripted field comes first among the obstacles
+        for k, quad in enumerate(corners):
             if self._visible(quad.mean(axis=0), centre).all():
-                d.polygon(self._to_px(quad, centre), fill=_OPPONENT, outline=(0, 0, 0))
+                fill = colours[doing[k]] if k < doing.size else _OPPONENT
+                d.polygon(self._to_px(quad, centre), fill=fill, outline=(0, 0, 0))
+        if seen is not None and len(seen):
+            s_seen, n_seen = np.asarray(seen, float)[:, 0], np.asarray(seen, float)[:, 1]
+            x, y = self.track.to_cartesian(s_seen, n_seen)
+            psi = np.asarray(self.track.heading(s_seen), float)
+            for quad in footprint_corners(np.asarray(x, float), np.asarray(y, float), psi, p):
+                if self._visible(quad.mean(axis=0), centre).all():
+                    pts = self._to_px(quad, centre)
+                    d.line(pts + pts[:1], fill=_SEEN, width=1)
         ego_quad = footprint_corners(ego[0], ego[1], ego[2], p)
         d.polygon(self._to_px(ego_quad, centre), fill=_EGO, outline=(255, 255, 255))
 

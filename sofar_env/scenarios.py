@@ -23,7 +23,12 @@ combine freely.
       ego is alongside (a quarter of the cars never defend); they never leave the track or overlap.
     * **Sensing** (:mod:`sofar_env.sensing`): the controllers and the observation see the opponents with
       correlated noise (1.0 m along, 0.3 m across, 0.5 m/s; 0.3 s correlation time) and 0.2 s of latency.
-      Collisions, track limits and overtakes are judged on the true state.
+      Collisions, track limits and overtakes are judged on the true state. The stack predicts each car's
+      lateral motion from its sensed lateral rate (``StackConfig.lateral_prediction``).
+    * **Observation**: the extended 16-value layout of :mod:`sofar_env.observation` (``observation="extended"``):
+      the paper's 12 values plus the two nearest opponents' sensed lateral rates, the heading error and the
+      smallest barrier value. ``observation="paper"`` gives the 12 values, e.g. for a policy trained in the
+      paper world.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ SCENARIOS: tuple[str, ...] = ("paper", "interactive")
 """Names accepted by the ``scenario`` key."""
 
 _INTERACTIVE: dict[str, Any] = {
+    "observation": "extended",
     "race": {
         "sensor": {"enabled": True},
         "opponents": {

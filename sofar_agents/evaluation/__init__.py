@@ -16,6 +16,8 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
 * :mod:`~sofar_agents.evaluation.tables`: totals per group and the Markdown of Tables I/II;
 * :mod:`~sofar_agents.evaluation.experiments`: Tables I and II end to end (``run_table1``,
   ``run_miqp_ablation``);
+* :mod:`~sofar_agents.evaluation.pareto`: success against overtaking of fixed gammas and of a
+  preference-conditioned policy, fronts and their hypervolumes (``run_pareto``; ``eval/pareto.py``);
 * :mod:`~sofar_agents.evaluation.latency`: Table III (``measure_latency``);
 * :mod:`~sofar_agents.evaluation.figures`: Fig. 5 (``plot_gamma_figures``);
 * :mod:`~sofar_agents.evaluation.training_curves`: learning curves from TensorBoard logs
@@ -30,6 +32,8 @@ from sofar_agents.evaluation.experiments import TableReport, run_miqp_ablation, 
 from sofar_agents.evaluation.figures import plot_gamma_figures
 from sofar_agents.evaluation.latency import (PAPER_LATENCY_MS, format_latency, latency_stats, machine_info,
                                              measure_latency, write_json)
+from sofar_agents.evaluation.pareto import (ParetoPoint, ParetoReport, hypervolume, pareto_front,
+                                            preference_family, run_pareto, strategy_points)
 from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FULL_TABLE1_STEPS, RHOS,
                                               TRACK_ABBREVIATIONS, TRACKS, EpisodeTask, Strategy,
                                               build_strategies, episode_seed, miqp_ablation_tasks,
@@ -53,6 +57,13 @@ __all__ = [
     "PAPER_TABLE1_SUCCESS",
     "PAPER_LATENCY_MS",
     "Strategy",
+    "ParetoPoint",
+    "ParetoReport",
+    "hypervolume",
+    "pareto_front",
+    "preference_family",
+    "run_pareto",
+    "strategy_points",
     "EpisodeTask",
     "EpisodeResult",
     "Summary",

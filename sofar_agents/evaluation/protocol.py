@@ -56,6 +56,9 @@ class Strategy:
     path: str | None = None
     policy_id: str = ""
     """Short content hash of the policy file ("" for fixed gammas); part of the resume key."""
+    preference: tuple[float, ...] | None = None
+    """Preference given to a PASTA policy instead of its stored deployment preference (None: the stored one).
+    A strategy with its own preference needs its own ``name`` (the name is part of the resume key)."""
 
     def __post_init__(self) -> None:
         if self.kind not in ("fixed", "policy", "sb3"):
@@ -64,18 +67,26 @@ class Strategy:
             raise ValueError(f"a fixed strategy needs gamma in (0, 1], got {self.gamma!r}")
         if self.kind != "fixed" and not self.path:
             raise ValueError(f"a {self.kind} strategy needs a path")
+        if self.preference is not None and self.kind != "policy":
+            raise ValueError("only a policy strategy takes a preference")
 
     @classmethod
     def fixed(cls, gamma: float) -> Strategy:
         return cls(name=f"gamma={gamma:.2f}", kind="fixed", gamma=float(gamma))
 
     @classmethod
-    def adaptive(cls, path: str | os.PathLike, name: str = "adaptive") -> Strategy:
-        """A PASTA checkpoint (``stem``, ``stem.json`` or ``stem.pt``); its id hashes the JSON and the weights."""
-        from sofar_agents.policies import read_checkpoint_metadata
+    def adaptive(cls, path: str | os.PathLike, name: str = "adaptive",
+                 preference: Sequence[float] | None = None) -> Strategy:
+        """A PASTA checkpoint (``stem``, ``stem.json`` or ``stem.pt``); its id hashes the JSON and the weights.
+        ``preference``: run it at this preference instead of its stored one (checked against the checkpoint)."""
+        from sofar_agents.policies import load_policy, read_checkpoint_metadata
 
         _, json_path, pt_path = read_checkpoint_metadata(path)
-        return cls(name=name, kind="policy", path=str(json_path), policy_id=_file_id(json_path, pt_path))
+        if preference is not None:
+            preference = tuple(float(w) for w in preference)
+            load_policy(json_path, preference=preference)  # raises now for a preference the policy cannot take
+        return cls(name=name, kind="policy", path=str(json_path), policy_id=_file_id(json_path, pt_path),
+                   preference=preference)
 
     @classmethod
     def sb3(cls, path: str | os.PathLike, name: str = "sb3") -> Strategy:
@@ -103,7 +114,7 @@ class Strategy:
             return SB3Policy(self.path)
         from sofar_agents import load_policy
 
-        return load_policy(self.path)
+        return load_policy(self.path, preference=self.preference)
 
 
 def _file_id(*paths: str | os.PathLike) -> str:

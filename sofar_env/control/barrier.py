@@ -41,13 +41,16 @@ Choices and why
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
-__all__ = ["BarrierParams", "barrier_expr", "barrier", "casadi_barrier", "casadi_ops", "semi_axis_s", "softplus"]
+__all__ = ["BarrierParams", "barrier_expr", "barrier", "casadi_barrier", "casadi_ops", "min_barrier", "semi_axis_s",
+           "softplus"]
 
 
 @dataclass(frozen=True)
@@ -135,3 +138,20 @@ def casadi_barrier(p: BarrierParams = BarrierParams()):
     o = ca.SX.sym("o", 3)
     h = barrier_expr(x[0], x[1], x[3], o[0], o[1], o[2], p, casadi_ops())
     return ca.Function("barrier", [x, o], [h], ["x", "o"], ["h"])
+
+
+_MATH_OPS = SimpleNamespace(abs=abs, exp=math.exp, log1p=math.log1p, tanh=math.tanh)
+
+
+def min_barrier(track, ego_frenet: np.ndarray, opponents: np.ndarray, params: BarrierParams) -> float:
+    """Smallest barrier value h of the ego (s, n, e, v, delta) against the opponent rows (s, n, v[, ...]) now;
+    inf without opponents.
+
+    :func:`barrier_expr` evaluated on Python floats (the field is small), with s taken relative to the ego.
+    """
+    s, n, v = float(ego_frenet[0]), float(ego_frenet[1]), float(ego_frenet[3])
+    h = math.inf
+    for row in np.asarray(opponents, float).tolist():
+        s_o, n_o, v_o = row[0], row[1], row[2]
+        h = min(h, barrier_expr(0.0, n, v, track.gap(s_o, s), n_o, v_o, params, _MATH_OPS))
+    return h

@@ -39,7 +39,7 @@ import numpy as np
 
 from ..vehicle import AV21, VehicleParams
 from .config import OpponentConfig
-from .defence import Defence
+from .defence import IDLE, Defence
 from .lateral import EdgeBand
 from .lines import Lines
 from .pace import LiftSchedule, draw_paces
@@ -252,6 +252,21 @@ class Opponents:
         ep.defence.forget(i)
 
     # ------------------------------------------------------------------ poses
+    def behaviour(self) -> np.ndarray:
+        """What each opponent is doing now (for display): 0 racing on its line, 1 defending (a defensive
+        move toward the ego's line, or holding it), 2 lifting (below its pace). All 0 with the
+        behaviours off."""
+        out = np.zeros(self.count, dtype=int)
+        ep = self._episode
+        if ep is None:
+            return out
+        for i in range(self.count):
+            if ep.defence.mode[i] != IDLE:
+                out[i] = 1
+            elif ep.lifts.factor(i, self.time) < 1.0:
+                out[i] = 2
+        return out
+
     def poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Cartesian position and yaw of every opponent: (x, y, psi).
 

@@ -18,6 +18,7 @@ longer produced.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 from ..control.barrier import BarrierParams
@@ -104,6 +105,21 @@ class StackConfig:
     """Predict the opponents along the speed profile at their current pace ratio
     (:class:`~sofar_env.stack.prediction.OpponentPredictor`) instead of at constant speed: the MIQP gets
     the predicted positions, the MPC (constant-speed opponents) the mean speed over its horizon."""
+    lateral_prediction: bool = True
+    """Predict the opponents' lateral motion from the sensed lateral rate (the fourth column of the
+    rows given to :meth:`~sofar_env.stack.OvertakingStack.step`, e.g. the tracker estimate of
+    :mod:`sofar_env.sensing`; rows of three columns are predicted at a constant offset): over
+    ``lateral_prediction_time`` a car keeps moving at its rate less ``lateral_rate_deadband``, inside the
+    edges; the MPC's barrier rows get that motion, the MIQP and the follow logic the offset where it ends
+    (:func:`~sofar_env.stack.prediction.lateral_motion`)."""
+    lateral_prediction_time: float = 1.5
+    """How long a sensed lateral rate is carried forward [s], > 0: the MPC's horizon. A lateral move of
+    a racing car lasts about this long (a defensive move across 2 m at 1.5 m/s); carried further, a move
+    that has ended would still be extrapolated across the track."""
+    lateral_rate_deadband: float = 0.3
+    """Lateral rates are shrunk toward zero by this much before they are used [m/s], >= 0 (a soft
+    threshold, continuous in the rate): about the rate noise of the default sensor's tracker (0.33 m/s),
+    so a car on a steady line is not predicted to wander, while a defensive move (1.5 m/s) is."""
     footprint_edges: bool = True
     """Give the planners the narrowest edge within the car's length, and tighten the MPC's by
     the heading error (:mod:`sofar_env.stack.edges`)."""
@@ -128,6 +144,11 @@ class StackConfig:
         for name in ("follow_decel", "follow_reach_decel"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0")
+        if not (math.isfinite(self.lateral_prediction_time) and self.lateral_prediction_time > 0.0):
+            raise ValueError(f"lateral_prediction_time must be a positive number of seconds, "
+                             f"got {self.lateral_prediction_time!r}")
+        if not (math.isfinite(self.lateral_rate_deadband) and self.lateral_rate_deadband >= 0.0):
+            raise ValueError(f"lateral_rate_deadband must be >= 0 [m/s], got {self.lateral_rate_deadband!r}")
         if not self.parked_speed >= 0.0:
             raise ValueError(f"parked_speed must be >= 0 [m/s], got {self.parked_speed!r}")
         if not 0.0 < self.parked_window <= self.miqp.safe_lon:
@@ -156,6 +177,7 @@ def stack_preset(name: str) -> StackConfig:
       as any other (it only matters with the follow mode, which is off anyway);
     * ``pace_prediction=False``: opponents are predicted at constant speed along the
       track, the paper's constant-velocity model;
+    * ``lateral_prediction=False``: at a constant lateral offset, whatever lateral rate is sensed;
     * ``footprint_edges=False``: the planners' track edges are the edges at the
       predicted reference point, not the narrowest within the car's length, and the MPC's
       are not tightened by the heading error;
@@ -181,6 +203,6 @@ def stack_preset(name: str) -> StackConfig:
         if key == "paper":
             base = StackConfig()
             return dataclasses.replace(base, follow=False, parked_pass=False, pace_prediction=False,
-                                       footprint_edges=False,
+                                       lateral_prediction=False, footprint_edges=False,
                                        miqp=dataclasses.replace(base.miqp, closing_decel=0.0))
     raise ValueError(f"unknown stack preset {name!r}; valid presets: {', '.join(STACK_PRESETS)}")

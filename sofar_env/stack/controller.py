@@ -22,7 +22,7 @@ from ..vehicle import AV21, VehicleParams
 from .config import StackConfig
 from .edges import TrackEdges
 from .follow import PassOrFollow
-from .prediction import OpponentPredictor, ego_node_positions, relative_opponents
+from .prediction import OpponentPredictor, ego_node_positions, lateral_motion, relative_opponents
 
 __all__ = ["StackOutput", "OvertakingStack"]
 
@@ -140,7 +140,8 @@ class OvertakingStack:
         """One control step.
 
         ``ego_frenet`` = (s, n, e, v, delta) of the ego; ``opponents`` = rows (s, n, v) with absolute
-        arc length [m] and arc-length speed [m/s]; ``gamma`` in (0, 1] the barrier decay.
+        arc length [m] and arc-length speed [m/s], optionally with a fourth column, the lateral rate
+        n_dot [m/s] (used with ``lateral_prediction``); ``gamma`` in (0, 1] the barrier decay.
         """
         gamma = float(gamma)
         if not math.isfinite(gamma) or not (0.0 < gamma <= 1.0):
@@ -148,6 +149,17 @@ class OvertakingStack:
         cfg = self.config
         s, n, e, v, delta = np.asarray(ego_frenet, float).tolist()
         opp_rel = relative_opponents(self.track, s, opponents, cfg.look_behind, cfg.look_ahead)
+        lateral_rate = None
+        if opp_rel.shape[1] == 4:
+            if cfg.lateral_prediction and len(opp_rel):
+                # the planners see each car where its lateral move ends; the MPC gets the move itself
+                n_end, lateral_rate = lateral_motion(self.track, s, opp_rel, cfg.lateral_prediction_time,
+                                                     cfg.lateral_rate_deadband, 0.5 * self.vehicle.width)
+                n_now = opp_rel[:, 1]
+                opp_rel = opp_rel[:, :3].copy()
+                opp_rel[:, 1] = n_end
+            else:
+                opp_rel = opp_rel[:, :3]
         miqp_ran = False
         miqp_time = 0.0
         if cfg.use_miqp and (self._plan is None or self._step % cfg.miqp_interval == 0):
@@ -161,6 +173,11 @@ class OvertakingStack:
             s_end = self.predict(s, opp_rel, np.array([t_end]))[:, 0]
             opp_mpc = opp_rel.copy()
             opp_mpc[:, 2] = (s_end - opp_rel[:, 0]) / t_end
+        if lateral_rate is not None:
+            # the MPC (constant lateral rate) gets the sensed offset and the mean rate over its horizon
+            t_end = float(self._mpc_t[-1])
+            rate = lateral_rate * (min(t_end, cfg.lateral_prediction_time) / t_end)
+            opp_mpc = np.column_stack([opp_mpc[:, 0], n_now, opp_mpc[:, 2], rate])
         result = self.mpc.solve(np.array([0.0, n, e, v, delta]), stage, opp_mpc, gamma)
         if not result.success:
             self.counters["mpc_failures"] += 1

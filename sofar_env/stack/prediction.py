@@ -7,6 +7,8 @@
   each opponent keeps its current pace ratio to the circuit's speed profile instead: cars
   slow down for corners, which a constant-speed prediction misses by several metres over
   a second at a corner entry;
+* :func:`lateral_motion`: where a car that is moving across the track will be, from its sensed
+  lateral rate (an addition of ours, ``StackConfig.lateral_prediction``);
 * :func:`ego_node_positions` and :func:`braking_positions`: the ego's arc length at the
   MIQP nodes, following its speed reference within the acceleration limits, or braking.
 
@@ -19,14 +21,18 @@ import numpy as np
 
 from ..vehicle import VehicleParams
 
-__all__ = ["relative_opponents", "OpponentPredictor", "ego_node_positions", "braking_positions"]
+__all__ = ["relative_opponents", "lateral_motion", "OpponentPredictor", "ego_node_positions",
+           "braking_positions"]
 
 
 def relative_opponents(track, ego_s: float, opponents: np.ndarray, look_behind: float,
                        look_ahead: float) -> np.ndarray:
-    """Rows (gap, n, v) of the opponents from ``look_behind`` [m] behind to ``look_ahead`` [m]
-    ahead of the ego at arc length ``ego_s``, nearest first; ``opponents`` are rows (s, n, v)."""
-    opp = np.asarray(opponents, float).reshape(-1, 3)
+    """Rows (gap, n, v[, n_dot]) of the opponents from ``look_behind`` [m] behind to ``look_ahead`` [m]
+    ahead of the ego at arc length ``ego_s``, nearest first; ``opponents`` are rows (s, n, v[, n_dot])
+    (the lateral rate column, if given, is kept)."""
+    opp = np.asarray(opponents, float)
+    cols = opp.shape[-1] if opp.ndim == 2 and opp.shape[-1] == 4 else 3
+    opp = opp.reshape(-1, cols)
     if opp.shape[0] == 0:
         return np.zeros((0, 3))
     gap = np.asarray(track.gap(opp[:, 0], ego_s), float).reshape(-1)
@@ -34,6 +40,25 @@ def relative_opponents(track, ego_s: float, opponents: np.ndarray, look_behind: 
     rel = opp[keep]  # a copy (boolean indexing)
     rel[:, 0] = gap[keep]
     return rel[np.argsort(np.abs(rel[:, 0]))]
+
+
+def lateral_motion(track, ego_s: float, opp_rel: np.ndarray, horizon: float, deadband: float,
+                   half_width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Lateral offset [m] at the end of ``horizon`` [s], and the mean lateral rate [m/s] to it, of the
+    opponents ``opp_rel`` (rows (gap, n, v, n_dot) relative to the ego at ``ego_s``).
+
+    Each car keeps moving at its sensed rate shrunk by ``deadband`` [m/s] (a soft threshold:
+    ``sign(r) max(|r| - deadband, 0)``), and stops at the edge: its centre stays ``half_width`` [m]
+    inside the track at its current arc length (and where it already is, if it is closer to an edge).
+    """
+    n = opp_rel[:, 1]
+    rate = opp_rel[:, 3]
+    rate = np.sign(rate) * np.maximum(np.abs(rate) - deadband, 0.0)
+    s_abs = track.wrap(ego_s + opp_rel[:, 0])
+    hi = np.maximum(np.asarray(track.width_left(s_abs), float) - half_width, n)
+    lo = np.minimum(half_width - np.asarray(track.width_right(s_abs), float), n)
+    n_end = np.clip(n + rate * horizon, lo, hi)
+    return n_end, (n_end - n) / horizon
 
 
 class OpponentPredictor:

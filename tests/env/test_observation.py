@@ -68,3 +68,40 @@ def test_scaled_values_of_known_quantities():
     raw = np.array([7.5, 75.0, -0.125, 35.0, 200.0, 0.0, -15.0, 25.0, -50.0, 0.025, 7.5, 0.0])
     expected = [0.5, 0.5, -0.5, -0.5, 1.0, 0.0, -1.0, 0.5, -1.0, 0.5, 0.0, -1.0]
     np.testing.assert_allclose(scale(raw), expected, atol=1e-6)
+
+
+def test_extended_values_on_a_ring():
+    from sofar_env.control.barrier import BarrierParams, barrier
+    from sofar_env.observation import extra_observation
+
+    track = RingTrack()
+    ego = np.array([100.0, 1.5, 0.02, 40.0, 0.1])
+    opponents = np.array([[160.0, -2.0, 30.0, 0.8],      # 60 m ahead, moving left
+                          [90.0, 3.0, 45.0, -1.2],       # 10 m behind: first
+                          [400.0, 0.0, 20.0, 2.0]])      # outside the window
+    bp = BarrierParams()
+    raw = extra_observation(track, ego, opponents, bp)
+    rel = np.array([[-10.0, 3.0, 45.0], [60.0, -2.0, 30.0], [300.0, 0.0, 20.0]])
+    h = barrier(np.array([[0.0, 1.5, 0.02, 40.0, 0.1]]), rel, bp).min()
+    np.testing.assert_allclose(raw, [-1.2, 0.8, 0.02, min(h, 9.0)])
+    # without a rate column the rates read 0; without opponents the barrier reads far
+    np.testing.assert_allclose(extra_observation(track, ego, opponents[:, :3], bp)[:2], 0.0)
+    assert extra_observation(track, ego, np.zeros((0, 3)), bp)[3] == 9.0
+
+
+def test_interactive_ids_observe_sixteen_values_and_paper_ids_twelve():
+    import gymnasium as gym
+
+    import sofar_env  # noqa: F401
+
+    short = {"duration": 2.0}
+    inter = gym.make("SOfAR-Monza-Interactive-v0", race=short)
+    assert inter.observation_space.shape == (16,)
+    obs, _ = inter.reset(seed=1)
+    assert obs.shape == (16,) and inter.observation_space.contains(obs)
+    assert gym.make("SOfAR-Monza-Interactive-v0", observation="paper", race=short).observation_space.shape == (12,)
+    paper = gym.make("SOfAR-Monza-v0", race=short)
+    assert paper.observation_space.shape == (12,)
+    # the first twelve values are the paper layout of the same state
+    flat = gym.make("SOfAR-Monza-Interactive-v0", observation="paper", race=short)
+    assert np.array_equal(flat.reset(seed=1)[0], obs[:12])

@@ -66,11 +66,32 @@ def test_noise_has_the_configured_spread_and_correlation():
 
 def test_latency_is_exactly_k_steps():
     for k_lat in (0, 1, 3):
-        sen = sensor(0, sigma_s=0.0, sigma_n=0.0, sigma_v=0.0, latency_steps=k_lat)
+        sen = sensor(0, sigma_s=0.0, sigma_n=0.0, sigma_v=0.0, latency_steps=k_lat, latency_compensation=False)
         truth = [np.array([[100.0 + 3.0 * t, 0.1 * t, 30.0 + t]]) for t in range(12)]
         outs = [sen.measure(row, [9])[0, :3] for row in truth]
         for t in range(12):
             assert np.allclose(outs[t], truth[max(t - k_lat, 0)][0], atol=1e-12)
+
+
+def test_latency_compensation_carries_the_measurement_forward_over_its_age():
+    # a car at a constant 42 m/s and a constant lateral rate: without compensation it is seen
+    # v * latency = 8.4 m behind; with it, exactly where it is once the tracker has the rate
+    v, rate, k_lat = 42.0, 0.4, 2
+    truth = [np.array([[100.0 + v * DT * t, -1.0 + rate * DT * t, v]]) for t in range(80)]
+    raw = sensor(0, sigma_s=0.0, sigma_n=0.0, sigma_v=0.0, latency_steps=k_lat, latency_compensation=False)
+    comp = sensor(0, sigma_s=0.0, sigma_n=0.0, sigma_v=0.0, latency_steps=k_lat)
+    out_raw = np.array([raw.measure(row, [3])[0] for row in truth])
+    out_comp = np.array([comp.measure(row, [3])[0] for row in truth])
+    true = np.array([row[0] for row in truth])
+    assert np.allclose(out_raw[10:, 0] - true[10:, 0], -v * k_lat * DT, atol=1e-9)
+    assert np.allclose(out_comp[10:, 0], true[10:, 0], atol=1e-9)  # s: the measured speed is exact
+    assert np.abs(out_comp[-1, 1] - true[-1, 1]) < 1e-3  # n: once the tracker has converged
+    assert np.abs(out_raw[-1, 1] - true[-1, 1]) == pytest.approx(rate * k_lat * DT, abs=1e-3)
+    # a young track (fewer measurements than the latency) is carried over its actual age
+    young = sensor(0, sigma_s=0.0, sigma_n=0.0, sigma_v=0.0, latency_steps=k_lat)
+    first = young.measure(truth[0], [3])[0]
+    second = young.measure(truth[1], [3])[0]
+    assert first[0] == pytest.approx(true[0, 0]) and second[0] == pytest.approx(true[0, 0] + v * DT)
 
 
 def test_the_tracker_picks_up_a_constant_lateral_rate():

@@ -41,8 +41,9 @@ def test_sofar_preset_is_the_default():
 def test_paper_preset_switches_off_exactly_the_additions():
     sofar, paper = stack_preset("sofar"), stack_preset("paper")
     changed = {f.name for f in dataclasses.fields(StackConfig) if getattr(sofar, f.name) != getattr(paper, f.name)}
-    assert changed == {"follow", "parked_pass", "pace_prediction", "footprint_edges", "miqp"}
+    assert changed == {"follow", "parked_pass", "pace_prediction", "lateral_prediction", "footprint_edges", "miqp"}
     assert not paper.follow and not paper.pace_prediction and not paper.footprint_edges
+    assert not paper.lateral_prediction
     assert paper.miqp == dataclasses.replace(sofar.miqp, closing_decel=0.0)
 
 

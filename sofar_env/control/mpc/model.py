@@ -172,10 +172,14 @@ def track_limits(cfg: MPCConfig, arrays: np.ndarray) -> tuple[np.ndarray, np.nda
 
 
 def predict_opponents(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(len(t), M, 3) constant-velocity prediction ``(s + v t, n, v)`` of the (M, 3) ``rows`` at times ``t``."""
+    """(len(t), M, 3) constant-velocity prediction ``(s + v t, n, v)`` of the (M, 3) ``rows`` at times ``t``;
+    rows (M, 4) ``(s, n, v, n_dot)`` also move across the track, ``n + n_dot t``."""
     out = np.empty((len(t), len(rows), 3))
     out[:, :, 0] = rows[:, 0] + rows[:, 2] * t[:, None]
-    out[:, :, 1] = rows[:, 1]
+    if rows.shape[1] == 4:
+        out[:, :, 1] = rows[:, 1] + rows[:, 3] * t[:, None]
+    else:
+        out[:, :, 1] = rows[:, 1]
     out[:, :, 2] = rows[:, 2]
     return out
 

@@ -153,7 +153,8 @@ class MPCDCBF:
         """One real-time iteration (see the module docstring). Never raises for numerical trouble.
 
         ``x0 = (0, n, e, v, delta)`` (s is taken as 0); ``opponents`` (M, 3) rows
-        ``(s_rel, n, v)`` at time 0, any M >= 0; ``gamma`` in [0, 1].
+        ``(s_rel, n, v)`` at time 0, or (M, 4) rows ``(s_rel, n, v, n_dot)`` of opponents that also move
+        across the track at ``n_dot``, any M >= 0; ``gamma`` in [0, 1].
         """
         t_start = time.perf_counter()
         cfg = self.config
@@ -162,7 +163,7 @@ class MPCDCBF:
         dt0 = float(self._dts[0])
         if abs(x0[4]) > p.steer_max + dt0 * p.steer_rate_max or x0[3] < -dt0 * p.a_max:
             # the hard bounds on delta_1 (or v_1 >= 0) cannot be met: the QP would be infeasible
-            bmin = float(barrier(x0[None, :], opp, cfg.barrier).min()) if len(opp) else math.inf
+            bmin = float(barrier(x0[None, :], opp[:, :3], cfg.barrier).min()) if len(opp) else math.inf
             return self._fallback(x0, "state outside the reach of the hard bounds", t_start, 0, 0, bmin, 0)
         cold = self._xg is None
         xbar, ubar = self._guess(x0, opp)
@@ -224,7 +225,7 @@ class MPCDCBF:
             break
 
         if len(opp) > n_cand:  # opponents outside the window: evaluate h numerically
-            barrier_min = min(barrier_min, float(barrier(x0[None, :], opp, cfg.barrier).min()))
+            barrier_min = min(barrier_min, float(barrier(x0[None, :], opp[:, :3], cfg.barrier).min()))
         if z is None or not (np.isfinite(xbar).all() and np.isfinite(ubar).all()):
             return self._fallback(x0, message or "non-finite iterate", t_start, qp_iters, sqp_iters,
                                   barrier_min, m)
@@ -381,7 +382,7 @@ class MPCDCBF:
         m = len(sel)
         if self._reference is None:
             self._reference = IpoptReference(cfg, self.vehicle, self._lin.stage)
-        barrier_min = float(barrier(x0[None, :], opp, cfg.barrier).min()) if len(opp) else math.inf
+        barrier_min = float(barrier(x0[None, :], opp[:, :3], cfg.barrier).min()) if len(opp) else math.inf
         sol = self._reference.solve(x0, arrays, sel, gamma, xbar, ubar)
         if not sol.success:
             return self._fallback(x0, f"ipopt: {sol.message}", t_start, sol.iterations, 1, barrier_min, m)

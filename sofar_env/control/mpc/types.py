@@ -177,8 +177,8 @@ def validate_arguments(x0, stage, opponents, gamma, horizon: int):
     """Checked copies ``(x0, arrays, opponents, gamma)`` of the arguments of a solve.
 
     ``x0`` becomes a (5,) float array with s set to 0, ``arrays`` the (5, N+1) rows
-    (kappa, n_ref, v_ref, n_min, n_max) of ``stage``, ``opponents`` an (M, 3) float
-    array. Raises ``ValueError`` for malformed arguments.
+    (kappa, n_ref, v_ref, n_min, n_max) of ``stage``, ``opponents`` an (M, 3) or (M, 4)
+    float array. Raises ``ValueError`` for malformed arguments.
     """
     try:
         gamma = float(gamma)
@@ -201,6 +201,7 @@ def validate_arguments(x0, stage, opponents, gamma, horizon: int):
     opp = np.asarray(opponents, dtype=float)
     if opp.size == 0:
         opp = np.zeros((0, 3))
-    if opp.ndim != 2 or opp.shape[1] != 3 or not np.isfinite(opp).all():
-        raise ValueError(f"opponents must be an (M, 3) array of finite (s_rel, n, v), got shape {opp.shape}")
+    if opp.ndim != 2 or opp.shape[1] not in (3, 4) or not np.isfinite(opp).all():
+        raise ValueError(f"opponents must be an (M, 3) array of finite (s_rel, n, v) or an (M, 4) array of "
+                         f"finite (s_rel, n, v, n_dot), got shape {opp.shape}")
     return x0, arrays, opp, gamma

@@ -1,0 +1,96 @@
+"""A Pareto view: success against overtakes per hour for every fixed gamma and a preference-conditioned policy.
+
+    python eval/pareto.py                                  # Table I protocol, shipped policy at 5 preferences
+    python eval/pareto.py --scenario interactive --policy runs/pasta_int/pasta_final --workers 2
+    python eval/pareto.py --quick                          # a quick look (~1 min): 1 circuit, 1 episode of 30 s
+
+Each strategy is evaluated on the same seeded episodes and reported as (aggregate success %,
+overtakes per hour of racing); the hypervolume of each family's front (fixed gammas; the policy's
+preference sweep) comes from pymoo's HV indicator. Writes <out>/pareto.md, pareto.json, pareto.png and the
+per-episode CSV (rerunning the same command resumes it). The logic is in sofar_agents.evaluation.pareto.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from sofar_agents import evaluation as ev
+
+QUICK_DURATION = 30.0
+"""Episode horizon of --quick [s]."""
+DEFAULT_SAFETY_WEIGHTS = (0.1, 0.3, 0.5, 0.7, 0.9)
+"""Safety weights of the default preference sweep (overtakes get 0.9 minus it, the other three 0.1 / 3 each)."""
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default=None,
+                   help="output folder (default results/pareto, results/<scenario>/pareto for another world, "
+                        "or results/quick with --quick)")
+    p.add_argument("--policy", default=None,
+                   help="PASTA checkpoint (default: the one shipped for --stack / --scenario, if any)")
+    p.add_argument("--no-policy", action="store_true", help="only the fixed gammas")
+    p.add_argument("--safety-weights", nargs="+", type=float, default=None,
+                   help="safety weights of the policy's preferences, each in [0, 0.9] "
+                        f"(default {' '.join(f'{w:g}' for w in DEFAULT_SAFETY_WEIGHTS)}); the overtakes weight is "
+                        "0.9 minus it and progress, barrier margin and gamma smoothness get 0.1 / 3 each")
+    p.add_argument("--gammas", nargs="+", type=float, default=None,
+                   help=f"fixed gammas (default {' '.join(f'{g:.2f}' for g in ev.FIXED_GAMMAS)})")
+    p.add_argument("--tracks", nargs="+", default=None, help=f"circuits (default {' '.join(ev.TRACKS)})")
+    p.add_argument("--rhos", nargs="+", type=float, default=None,
+                   help=f"opponent pace ratios (default {' '.join(f'{r:g}' for r in ev.RHOS)})")
+    p.add_argument("--episodes", type=int, default=None, help="episodes per (track, rho) (default 5)")
+    p.add_argument("--duration", type=float, default=None,
+                   help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
+    p.add_argument("--scenario", default="paper", choices=("paper", "interactive"), help="world (default paper)")
+    p.add_argument("--stack", default="sofar", choices=("sofar", "paper"), help="controller preset (default sofar)")
+    p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")
+    p.add_argument("--workers", type=int, default=None, help="worker processes (default: os.cpu_count())")
+    p.add_argument("--backend", default="local", choices=("local", "ray"), help="local process pool or Ray actors")
+    p.add_argument("--address", default=None, help="with --backend ray: 'auto' or HOST:6379")
+    p.add_argument("--quick", action="store_true",
+                   help=f"a quick look: Laguna Seca, rho 0.5, 1 episode of {QUICK_DURATION:g} s, gammas 0.3 and "
+                        "0.7, safety weights 0.2 and 0.8, to results/quick; explicit options override")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--log-level", default="WARNING")
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
+    policy = None if args.no_policy else ev.resolve_policy_path(
+        args.policy, fallback="only the fixed gammas are evaluated", stack=args.stack, scenario=args.scenario)
+    try:
+        preferences = ev.preference_family(args.safety_weights or ((0.2, 0.8) if args.quick else DEFAULT_SAFETY_WEIGHTS))
+    except ValueError as exc:
+        print(f"error: --safety-weights: {exc}", file=sys.stderr)
+        return 2
+    gammas = args.gammas or ([0.3, 0.7] if args.quick else list(ev.FIXED_GAMMAS))
+    tracks = args.tracks or (["LagunaSeca"] if args.quick else list(ev.TRACKS))
+    rhos = args.rhos or ([0.5] if args.quick else list(ev.RHOS))
+    episodes = args.episodes or (1 if args.quick else 5)
+    duration = args.duration or (QUICK_DURATION if args.quick else ev.DEFAULT_DURATION)
+    default_out = "results/pareto" if args.scenario == "paper" else f"results/{args.scenario}/pareto"
+    out = args.out or ("results/quick" if args.quick else default_out)
+    try:
+        report = ev.run_pareto(policy, preferences, gammas, out, tracks=tracks, rhos=rhos, episodes=episodes,
+                               base_seed=args.seed, duration=duration, workers=args.workers,
+                               progress=not args.no_progress, stack=args.stack, scenario=args.scenario,
+                               backend=args.backend, address=args.address)
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: finished episodes are in {out}; rerun the same command to resume", file=sys.stderr)
+        return 130
+    except (ImportError, ValueError) as exc:  # --backend ray without Ray; a preference the policy cannot take
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(report.markdown)
+    print("Wrote " + ", ".join(str(p) for p in report.paths.values()))
+    return 1 if report.stats.failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

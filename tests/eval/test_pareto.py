@@ -1,0 +1,85 @@
+"""The Pareto view: fronts, hypervolume (pymoo) against hand computations, preferences, the script's quick mode."""
+
+import json
+
+import numpy as np
+import pytest
+
+from sofar_agents import default_policy_path
+from sofar_agents import evaluation as ev
+from sofar_agents.evaluation.pareto import ParetoPoint, plot_fronts
+
+
+def test_hypervolume_of_a_staircase_equals_the_hand_computed_area():
+    # the union of [0,1]x[0,3], [0,2]x[0,2], [0,3]x[0,1]: 1*3 + 1*2 + 1*1
+    pts = np.array([[1.0, 3.0], [2.0, 2.0], [3.0, 1.0]])
+    assert ev.hypervolume(pts) == pytest.approx(6.0)
+    # a dominated point adds nothing; a point not above the reference counts for nothing
+    assert ev.hypervolume(np.vstack([pts, [[1.5, 1.5], [-1.0, 5.0]]])) == pytest.approx(6.0)
+    # another reference point shifts the area: [1,2]x[1,2] + [1,3]x[1,...]
+    assert ev.hypervolume(pts, reference=(1.0, 1.0)) == pytest.approx(1.0 * 1.0)
+    assert ev.hypervolume(np.zeros((0, 2))) == 0.0
+
+
+def test_pareto_front_keeps_the_non_dominated_points_sorted():
+    v = np.array([[50.0, 10.0], [90.0, 5.0], [60.0, 4.0], [90.0, 5.0], [40.0, 12.0], [40.0, 11.0]])
+    assert ev.pareto_front(v).tolist() == [4, 0, 1]
+
+
+def test_preference_family_is_a_simplex_path():
+    prefs = ev.preference_family([0.0, 0.45, 0.9])
+    assert all(len(p) == 5 and sum(p) == pytest.approx(1.0) for p in prefs)
+    assert [p[0] for p in prefs] == [0.0, 0.45, 0.9]
+    assert [p[1] for p in prefs] == pytest.approx([0.9, 0.45, 0.0])
+    for bad in ([0.95], [-0.1], [float("nan")]):
+        with pytest.raises(ValueError, match="safety weight"):
+            ev.preference_family(bad)
+
+
+def test_strategy_points_aggregate_success_and_overtaking_rate():
+    strategies = [ev.Strategy.fixed(0.3), ev.Strategy.fixed(0.7)]
+    rows = [dict(strategy="gamma=0.30", success=True, sim_time=1800.0, overtakes=10),
+            dict(strategy="gamma=0.30", success=False, sim_time=1800.0, overtakes=20),
+            dict(strategy="gamma=0.70", success=True, sim_time=360.0, overtakes=3)]
+    pts = ev.strategy_points(rows, strategies)
+    assert [(p.name, p.success, p.overtakes_per_hour, p.episodes) for p in pts] == [
+        ("gamma=0.30", 50.0, 30.0, 2), ("gamma=0.70", 100.0, 30.0, 1)]
+
+
+def test_a_policy_strategy_takes_a_preference_it_can_use():
+    path = default_policy_path()
+    pref = ev.preference_family([0.5])[0]
+    strat = ev.Strategy.adaptive(path, name="pasta w", preference=pref)
+    policy = strat.build()
+    assert policy.preference.tolist() == pytest.approx(pref)
+    with pytest.raises(ValueError):
+        ev.Strategy.adaptive(path, name="short", preference=(1.0, 0.0))  # five objectives expected
+    with pytest.raises(ValueError, match="only a policy"):
+        ev.Strategy(name="x", kind="fixed", gamma=0.5, preference=pref)
+
+
+def test_plot_fronts_writes_a_png(tmp_path):
+    pts = [ParetoPoint("a", "fixed", 90.0, 10.0, 5), ParetoPoint("b", "fixed", 80.0, 20.0, 5),
+           ParetoPoint("p", "policy", 95.0, 15.0, 5, (0.5, 0.4, 0.1 / 3, 0.1 / 3, 0.1 / 3))]
+    out = plot_fronts(pts, tmp_path / "f.png")
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_pareto_script_quick_mode(tmp_path, monkeypatch):
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("pareto_cli", Path(__file__).parents[2] / "eval" / "pareto.py")
+    cli = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cli)
+    out = tmp_path / "q"
+    code = cli.main(["--quick", "--duration", "3", "--workers", "1", "--no-progress", "--out", str(out)])
+    assert code == 0
+    data = json.loads((out / "pareto.json").read_text())
+    names = [p["name"] for p in data["points"]]
+    assert names[:2] == ["gamma=0.30", "gamma=0.70"] and len(names) == 4  # 2 gammas + 2 preferences
+    assert set(data["hypervolume"]) == {"fixed", "policy"}
+    assert (out / "pareto.png").exists() and "hypervolume" in (out / "pareto.md").read_text()
+    # resumed: nothing is run again
+    assert cli.main(["--quick", "--duration", "3", "--workers", "1", "--no-progress", "--out", str(out)]) == 0
+    assert cli.main(["--quick", "--safety-weights", "2", "--out", str(out)]) == 2
