@@ -9,6 +9,7 @@ vector reward) and of the PettingZoo race, and writes all arrays to one ``.npz``
     python eval/trajectories.py record --out /tmp/before.npz        # on the old code
     python eval/trajectories.py record --out /tmp/after.npz         # on the new code
     python eval/trajectories.py compare /tmp/before.npz /tmp/after.npz
+    python eval/trajectories.py record --worlds paper interactive --out /tmp/both.npz   # also the interactive ids
 
 Wall-clock timings are never recorded (``timing_info=False``).
 """
@@ -87,12 +88,13 @@ def record_multi(episodes: int, steps: int) -> dict[str, np.ndarray]:
 
 
 def record(args: argparse.Namespace) -> int:
-    from sofar_env.registration import ENV_IDS
+    from sofar_env.registration import ENV_IDS, INTERACTIVE_IDS
 
     t0 = time.perf_counter()
     data: dict[str, np.ndarray] = {}
     variants = [{}] + [dict(v.split("=", 1) for v in args.variant)] if args.variant else [{}]
-    for env_id in ENV_IDS:
+    ids = (ENV_IDS if "paper" in args.worlds else ()) + (INTERACTIVE_IDS if "interactive" in args.worlds else ())
+    for env_id in ids:
         for extra in variants:
             data.update(record_single(env_id, args.episodes, args.steps, extra))
     data.update(record_multi(args.episodes, min(args.steps, 200)))
@@ -131,6 +133,8 @@ def main(argv: list[str] | None = None) -> int:
     rec.add_argument("--out", required=True, help="output .npz file")
     rec.add_argument("--episodes", type=int, default=3, help="episodes per id (default 3)")
     rec.add_argument("--steps", type=int, default=300, help="control steps per episode (default 300)")
+    rec.add_argument("--worlds", nargs="+", default=["paper"], choices=("paper", "interactive"),
+                     help="record the ids of these worlds (default: paper; the PettingZoo race is always recorded)")
     rec.add_argument("--variant", nargs="*", default=[], metavar="KEY=VALUE",
                      help="also record every id with these gym.make keyword arguments (strings)")
     cmp_ = sub.add_parser("compare", help="compare two recordings bit for bit")
