@@ -39,7 +39,7 @@ import numpy as np
 from .._gradient import GridGradient
 from .config import MIQPConfig
 
-__all__ = ["ClearanceWindow", "side_clusters"]
+__all__ = ["ClearanceWindow", "side_clusters", "ellipse_violation"]
 
 
 class ClearanceWindow:
@@ -116,10 +116,15 @@ class ClearanceWindow:
                                            np.maximum(ext_b[:, :-1], ext_b[:, 1:]))], axis=1)
             # safe_lat inside the box, the elliptic taper safe_lat sqrt(1 - (over / ext)^2) in the
             # extension (0 <= over < ext; 1 - r^2 <= 1), 0 beyond
-            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                r = over / ext
-                cap = safe_lat * np.sqrt(np.maximum(1.0 - r * r, 0.0))
-            out = np.where(over < 0.0, safe_lat, np.where(over < ext, cap, 0.0))
+            if cfg.window_shape == "ellipse":
+                out = self._ellipse(g, L + ext)
+            else:
+                with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                    r = over / ext
+                    cap = safe_lat * np.sqrt(np.maximum(1.0 - r * r, 0.0))
+                out = np.where(over < 0.0, safe_lat, np.where(over < ext, cap, 0.0))
+        elif cfg.window_shape == "ellipse":
+            out = self._ellipse(g, L)
         else:
             out = np.where(over < 0.0, safe_lat, 0.0)
         w = out[:, :N]
@@ -129,6 +134,11 @@ class ClearanceWindow:
         if cfg.closing_stride > 1 and closing:
             w = self._thin_extension(w, over[:, :N] < 0.0)
         return np.ascontiguousarray(w)
+
+    def _ellipse(self, g: np.ndarray, semi: np.ndarray | float) -> np.ndarray:
+        """``safe_lat sqrt(1 - (g / semi)^2)`` inside the ellipse of longitudinal semi-axis ``semi``, 0 outside."""
+        r = g / semi
+        return self.config.safe_lat * np.sqrt(np.maximum(1.0 - r * r, 0.0))
 
     def _thin_extension(self, w: np.ndarray, box: np.ndarray) -> np.ndarray:
         """Keep every ``closing_stride``-th constrained node outside the box window, counted outwards
@@ -187,3 +197,33 @@ def side_clusters(pos: np.ndarray, act_rel: np.ndarray, cluster_gap: float) -> t
                     stack.append(k)
         n += 1
     return n, np.asarray(labels, dtype=int)
+
+
+def ellipse_violation(t: np.ndarray, s_nodes: np.ndarray, d: np.ndarray, opp_s: np.ndarray, opp_n: np.ndarray,
+                      a0: float, b: float, a_brake: float, substeps: int = 8) -> np.ndarray:
+    """(M,) how far [m] the lateral plan ``d`` enters each opponent's barrier ellipse, laterally (0: never).
+
+    The ego at ``(s_nodes_k, d_k)`` and opponent i at ``(opp_s[i, k], opp_n[i])`` at the node times ``t``
+    (arc lengths relative to the same origin), both linear between nodes, sampled ``substeps`` times per
+    node interval. The ellipse is the MPC's barrier: lateral semi-axis ``b``, longitudinal semi-axis ``a0
+    + v_close^2 / (2 a_brake)`` on the side the cars close in (``v_close`` from the nodes' gaps) and
+    ``a0`` on the other. The violation at a sample is ``b sqrt(1 - (gap / a)^2) - |d - n_i|`` where
+    positive, i.e. how much more lateral distance the ellipse requires there.
+    """
+    M, N = opp_s.shape
+    if M == 0:
+        return np.zeros(0)
+    gap = opp_s - s_nodes[None, :]
+    dv = -np.gradient(gap, t, axis=1)  # closing speed when the opponent is ahead
+    tau = np.arange(substeps) / substeps
+    # samples of every interval [k, k + 1) plus the last node
+    def fine(x):
+        x = np.atleast_2d(x)
+        body = x[:, :-1, None] + (x[:, 1:, None] - x[:, :-1, None]) * tau[None, None, :]
+        return np.concatenate([body.reshape(x.shape[0], -1), x[:, -1:]], axis=1)
+    g, v, lat = fine(gap), fine(dv), fine(d)[0]
+    closing = np.where(g > 0.0, np.maximum(v, 0.0), np.maximum(-v, 0.0))
+    a = a0 + closing ** 2 / (2.0 * a_brake)
+    r = g / a
+    need = b * np.sqrt(np.maximum(1.0 - r * r, 0.0))
+    return np.maximum(need - np.abs(lat[None, :] - np.asarray(opp_n, float)[:, None]), 0.0).max(axis=1)

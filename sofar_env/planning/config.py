@@ -52,6 +52,12 @@ class MIQPConfig:
     the dropped nodes beyond it would): the extension spans up to ~20 nodes at high
     closing speed, and every pair adds two rows to the MIQP (solve time grows with
     them). The box window keeps every node; 1 keeps every node of the extension too."""
+    window_shape: str = "box"
+    """Shape of the side-constraint window: ``"box"`` (``safe_lat`` wherever ``|gap| < safe_lon``,
+    tapering elliptically over the braking-distance extension beyond it) or ``"ellipse"`` (``safe_lat
+    sqrt(1 - (gap / A)^2)`` for ``|gap| < A``, ``A = safe_lon`` plus the braking-distance extension on the
+    side the cars close in): the shape of the MPC's barrier, with ``safe_lon`` its longitudinal semi-axis
+    at zero closing speed."""
     track_margin: float = 1.2
     """Distance kept from each track edge [m]."""
     continuity: float = 0.3
@@ -77,5 +83,7 @@ class MIQPConfig:
                 raise ValueError(f"{name} must be >= 0")
         if int(self.closing_stride) != self.closing_stride or self.closing_stride < 1:
             raise ValueError("closing_stride must be an integer >= 1")
+        if self.window_shape not in ("box", "ellipse"):
+            raise ValueError(f"unknown window_shape {self.window_shape!r} (use 'box' or 'ellipse')")
         if self.solver not in ("daqp", "enumerate"):
             raise ValueError(f"unknown solver {self.solver!r} (use 'daqp' or 'enumerate')")

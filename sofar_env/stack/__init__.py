@@ -23,7 +23,8 @@ switches them all off):
   constant speed.
 * **Footprint-aware track edges** (:mod:`~sofar_env.stack.edges`): the planners' edges
   are the narrowest within the car's length, and the MPC's are tightened by how far
-  the car's ends swing out at its heading error.
+  the car's ends swing out at its heading error (measured against the edges' directions
+  while a parked car is passed).
 * **Consistent clearances** (:mod:`~sofar_env.stack.config`): the MIQP's side
   constraints use the braking-distance window of the MPC's barrier ellipse.
 

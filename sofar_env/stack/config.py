@@ -78,29 +78,31 @@ class StackConfig:
     parked_pass: bool = True
     """Pass a near-stationary opponent with the barrier's clearance when the passing clearance does not fit
     (:mod:`sofar_env.stack.follow`): instead of following a car slower than ``parked_speed``, which would
-    stop the ego behind it for good, the pass is re-planned with the lateral clearance ``parked_clearance``
-    over ``parked_window``, and a car is followed only if that plan keeps less than the barrier's lateral
-    semi-axis b from it. Only with ``follow``, and only when every opponent the passing plan has to clear
-    is near-stationary."""
+    stop the ego behind it for good, the pass is re-planned with a side-constraint window shaped like the
+    MPC's barrier ellipse (lateral semi-axis ``parked_clearance``, longitudinal ``parked_window`` plus the
+    braking distance of the closing speed), and a car is followed only if that plan enters the barrier's
+    own ellipse around it. While such a plan is in force the MPC measures the swing of the car's ends
+    against the edges' directions (:meth:`~sofar_env.stack.edges.TrackEdges.for_mpc`). Only with
+    ``follow``, and only when every opponent the passing plan has to clear is near-stationary."""
     parked_speed: float = 1.0
     """An opponent slower than this counts as near-stationary (parked) [m/s]. Below the slowest opponent of
     the paper's world at the lowest pace ratio of Table I (0.1 x Monza's 17.5 m/s profile minimum = 1.75 m/s),
     so moving fields never trigger the parked pass; equal to the environment's default ``stall_speed``, so a
     car slow enough to stall the ego when followed is one the stack tries to pass."""
     parked_clearance: float = 3.0
-    """Lateral clearance [m] of the passing plan from a near-stationary opponent (instead of ``miqp.safe_lat``):
-    the barrier's lateral semi-axis b = 2.7 m plus 0.3 m. A parked car does not move towards the ego, so the
+    """Lateral semi-axis [m] of the passing plan's elliptic window around a near-stationary opponent (instead
+    of the box window ``miqp.safe_lat``): the barrier's lateral semi-axis b = 2.7 m plus 0.3 m, the margin the
+    plan aims for; the decision to follow only needs b. A parked car does not move towards the ego, so the
     margin of ``safe_lat`` for a moving car (``follow_slack``) is not needed; 3.0 m leaves 1.1 m between the
     two 1.9 m wide footprints."""
-    parked_window: float = 3.0
-    """Longitudinal half-window [m] of that plan's side constraints (instead of ``miqp.safe_lon``; the
-    closing-speed extension of ``miqp.closing_decel`` is kept on the approach). The MIQP holds the clearance
-    at both end nodes of every node interval touching the window, so it reaches up to one node spacing
-    further. Within |gap| <= 3 m the barrier ellipse (a0 = 7 m) needs at least 0.9 b laterally; beyond it the
-    MPC's barrier keeps the ego clear over the rest of the 4.9 m overlap (the ellipse contains the collision
-    rectangle), and ahead of a parked car the ellipse opens as the ego drives on. With 5 m, 3 of 24 runs at
-    rho = 0 (4 circuits x seeds 0-5, 60 s) still stopped behind a car with room beside it; with 3 m, one (a
-    chicane entry on Monza, seed 5)."""
+    parked_window: float = 7.0
+    """Longitudinal semi-axis [m] of that window at zero closing speed (it grows by the braking distance of
+    the closing speed, ``miqp.closing_decel``, on the approach): the barrier's a0 = 7 m, so the plan has the
+    shape of the ellipse the MPC keeps the ego out of. A box window (the full clearance over ``|gap| <
+    3 m``, and at both end nodes of every node interval touching it) asked for the full clearance up to a
+    node spacing beyond the cars' overlap, where the barrier needs 0.9 b or less: in a chicane, whose edges
+    converge on the raceline by up to 0.5 m per metre, that stopped the ego behind cars with room beside
+    them (rho = 0, 4 circuits x seeds 0-5: Monza seed 5)."""
     pace_prediction: bool = True
     """Predict the opponents along the speed profile at their current pace ratio
     (:class:`~sofar_env.stack.prediction.OpponentPredictor`) instead of at constant speed: the MIQP gets

@@ -48,18 +48,36 @@ class TrackEdges:
         return -wr, wl
 
     def for_mpc(self, s_abs: np.ndarray, x_prev: np.ndarray | None, t: np.ndarray,
-                shift: float) -> tuple[np.ndarray, np.ndarray]:
+                shift: float, edge_relative: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The MPC's bounds at ``s_abs`` [m]: :meth:`__call__`, with ``footprint_aware`` tightened on
         both sides by how far the car's ends swing out at the heading error along the horizon.
 
         The heading error is guessed from the previous MPC prediction ``x_prev`` (rows
         (s, n, e, ...) at the times ``t`` [s]; None: no tightening) shifted by ``shift`` [s],
         one control period.
+
+        With ``edge_relative`` the swing is measured against each edge's direction: an end of the car
+        ``l`` ahead of (behind) the reference point is ``l sin e`` to the side, where the edge, of slope
+        ``k`` along the track, has moved by ``l k``, so the reference point must keep ``l |sin e - k|``
+        (``l = max(l_f, l_r)``) from the edge at its own position. The narrowest edge within the
+        car's length already takes ``l |k|`` off, so only ``l max(0, |sin e - k| - |k|)`` is taken
+        off it: the same as ``l |sin e|`` along parallel edges, less for a car that follows an edge
+        converging on the reference line (a chicane, where the raceline crosses the track) and has a
+        heading error to the reference line while its ends stay clear of that edge.
         """
         n_min, n_max = self(s_abs)
         if self.footprint_aware and x_prev is not None:
-            e_abs = np.abs(np.interp(t + shift, t, x_prev[:, 2]))
-            swing = self._reach * np.sin(np.minimum(e_abs, 0.5 * math.pi))
+            e = np.interp(t + shift, t, x_prev[:, 2])
+            if edge_relative:
+                h = 0.5  # [m] half-step of the edges' slope
+                lo_ahead, hi_ahead = self(s_abs + h)
+                lo_behind, hi_behind = self(s_abs - h)
+                sin_e = np.sin(np.clip(e, -0.5 * math.pi, 0.5 * math.pi))
+                swing = []
+                for slope in ((lo_ahead - lo_behind) / (2.0 * h), (hi_ahead - hi_behind) / (2.0 * h)):
+                    swing.append(self._reach * np.maximum(np.abs(sin_e - slope) - np.abs(slope), 0.0))
+                return n_min + swing[0], n_max - swing[1]
+            swing = self._reach * np.sin(np.minimum(np.abs(e), 0.5 * math.pi))
             n_min = n_min + swing
             n_max = n_max - swing
         return n_min, n_max

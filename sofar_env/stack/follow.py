@@ -24,13 +24,20 @@ braking at ``follow_decel`` allows) and caps the MPC speed reference at
 
 * A near-stationary opponent (slower than ``parked_speed``: parked, crashed, crawling) is not
   followed while there is room beside it: when every opponent the passing plan has to clear
-  is near-stationary, the pass is re-planned with the barrier's lateral clearance
-  ``parked_clearance`` over the cars' overlap ``parked_window`` instead of ``safe_lat`` over
-  ``safe_lon``, and the pass-or-follow decision is made on that plan: a car is followed only
-  if the plan keeps less than the barrier's lateral semi-axis b from it (violates
-  ``parked_clearance`` by more than ``parked_clearance - b``). Following such a car would
-  stop the ego behind it for good; a car that moves does not need this (its pace is at
-  least 0.1 x the speed profile in Table I). Counted in ``checks`` and ``passes``.
+  is near-stationary, the pass is re-planned with a side-constraint window shaped like the
+  MPC's barrier ellipse (lateral semi-axis ``parked_clearance``, longitudinal ``parked_window``
+  plus the braking distance of the closing speed on the approach) instead of the box
+  ``safe_lat`` over ``safe_lon``, and the pass-or-follow decision is made on that plan: a car
+  is followed only if the plan, sampled between its nodes, enters the barrier's own ellipse
+  around it (:func:`~sofar_env.planning.clearance.ellipse_violation`). While such a plan is in
+  force (:attr:`PassOrFollow.parked_plan`) the MPC measures the swing of the car's ends against
+  the edges' directions, so that it can drive along an edge that converges on the raceline
+  (:meth:`~sofar_env.stack.edges.TrackEdges.for_mpc`). When the plan enters the ellipse of a
+  car the ego can no longer stop behind (the pass is held), the nearest car beyond it that the
+  ego can stop behind is followed, so that a side switch between two close parked cars is made
+  at a speed at which it fits. Following such a car would stop the ego behind it for good; a
+  car that moves does not need this (its pace is at least 0.1 x the speed profile in Table I).
+  Counted in ``checks`` and ``passes``.
 
 With ``follow=False`` (the paper's algorithm) every call plans a pass of every opponent.
 """
@@ -42,6 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..planning.clearance import ellipse_violation
 from ..planning.miqp import PassingSidePlanner, PlanResult
 from .config import StackConfig
 from .edges import TrackEdges
@@ -79,13 +87,18 @@ class PassOrFollow:
         self.edges = edges
         self._node_t = np.arange(config.miqp.nodes) * config.miqp.node_dt
         self._parked_planner = (PassingSidePlanner(dataclasses.replace(
-            config.miqp, safe_lat=config.parked_clearance, safe_lon=config.parked_window))
+            config.miqp, safe_lat=config.parked_clearance, safe_lon=config.parked_window,
+            window_shape="ellipse"))
                                 if config.follow and config.parked_pass else None)
         self.reset()
 
     def reset(self) -> None:
         """Forget the followed opponents."""
         self.target: FollowTarget | None = None
+        self.parked_plan = False
+        """Whether the plan last returned was made with the parked clearance (a pass of near-stationary
+        opponents, or a follow plan that passes some): the MPC then measures the swing of the car's ends
+        against the track edges' directions (:meth:`~sofar_env.stack.edges.TrackEdges.for_mpc`)."""
         self._calls = 0  # MIQP calls since the pass was last examined while following
         self.checks = 0
         """MIQP calls that decided with the parked clearance (every opponent to clear near-stationary)."""
@@ -107,6 +120,7 @@ class PassOrFollow:
         n_ref = np.zeros_like(s_nodes)
         memory = self.planner.memory()
         was_following, self.target = self.target, None
+        self.parked_plan = False
         plan = None
         if was_following is not None and self._calls + 1 < cfg.follow_recheck:
             # between two examinations of the pass: re-solve only the follow plan, same followed cars
@@ -115,11 +129,16 @@ class PassOrFollow:
                 planner = self._parked_planner if was_following.parked else self.planner
                 follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked, progress,
                                            planner)
-                limit = self._parked_tolerance if was_following.parked else cfg.follow_slack
-                if (follow is not None and follow.max_slack <= limit
+                if follow is not None and was_following.parked:
+                    planned = ~blocked | (opp_rel[:, 0] < cfg.mpc.barrier.a0)
+                    clear = bool((self._ellipse_violation(follow, opp_rel, opp_s)[planned] <= 0.0).all())
+                else:
+                    clear = follow is not None and follow.max_slack <= cfg.follow_slack
+                if (clear
                         and (not was_following.parked or self._all_parked(opp_rel, (follow.sides != 0) | blocked))):
                     plan = follow
                     self.target = FollowTarget(opp_rel[blocked].copy(), ego_s, step, was_following.parked)
+                    self.parked_plan = was_following.parked
                     self._calls += 1
                     if was_following.parked:
                         self.planner.restore_memory(planner.memory())
@@ -147,8 +166,7 @@ class PassOrFollow:
                                                        progress=progress, opponent_s=opp_s)
                     if parked.success and parked.opponent_slack is not None:
                         plan, planner = parked, self._parked_planner
-                        blocked = ((parked.opponent_slack > self._parked_tolerance) & (opp_rel[:, 0] > 0.0)
-                                   & self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s))
+                        blocked = self._parked_blocked(parked, ego_v, opp_rel, opp_s)
                     else:
                         self.planner.restore_memory(passing_memory)
                 if blocked.any():
@@ -165,13 +183,35 @@ class PassOrFollow:
                 if planner is not self.planner:
                     self.planner.restore_memory(planner.memory())  # the plan in force, for the next call
                     self.passes += int(self.target is None)
+                    self.parked_plan = True
         return plan
 
-    @property
-    def _parked_tolerance(self) -> float:
-        """Clearance violation [m] accepted in a plan with the parked clearance: it still keeps the
-        barrier's lateral semi-axis b from the near-stationary opponents it passes."""
-        return self.config.parked_clearance - self.config.mpc.barrier.b
+    def _parked_blocked(self, plan: PlanResult, ego_v: float, opp_rel: np.ndarray,
+                        opp_s: np.ndarray) -> np.ndarray:
+        """The near-stationary opponents to follow given ``plan``, the plan with the parked clearance.
+
+        Those ahead the plan enters the barrier ellipse of and behind which the ego can stay. When the
+        plan enters the ellipse of a car the ego can no longer stay behind (its pass is held), the
+        nearest car beyond it that the ego can stay behind is followed too: the room the plan lacks may
+        be what a side switch to that car takes at this speed, and the follow plan passes the held car
+        alone while slowing down.
+        """
+        ahead = opp_rel[:, 0] > 0.0
+        violated = (self._ellipse_violation(plan, opp_rel, opp_s) > 0.0) & ahead
+        followable = self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s) & ahead
+        blocked = violated & followable
+        held = violated & ~followable
+        if held.any():
+            beyond = followable & (opp_rel[:, 0] > opp_rel[held, 0].min())
+            if beyond.any():
+                blocked[np.flatnonzero(beyond)[np.argmin(opp_rel[beyond, 0])]] = True
+        return blocked
+
+    def _ellipse_violation(self, plan: PlanResult, opp_rel: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
+        """(M,) how far [m] ``plan`` enters the MPC's barrier ellipse of each opponent, laterally
+        (:func:`~sofar_env.planning.clearance.ellipse_violation`)."""
+        p = self.config.mpc.barrier
+        return ellipse_violation(self._node_t, plan.s, plan.d, opp_s, opp_rel[:, 1], p.a0, p.b, p.a_brake)
 
     def _all_parked(self, opp_rel: np.ndarray, rows: np.ndarray) -> bool:
         """Whether every opponent of ``rows`` (a mask of ``opp_rel``) is slower than ``parked_speed``."""

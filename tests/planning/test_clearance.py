@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sofar_env.planning import MIQPConfig
-from sofar_env.planning.clearance import ClearanceWindow, side_clusters
+from sofar_env.planning.clearance import ClearanceWindow, ellipse_violation, side_clusters
 
 from .instances import CFG, N
 
@@ -27,6 +27,9 @@ def reference_clearance(cfg: MIQPConfig, t: np.ndarray, s_nodes: np.ndarray, opp
 
     def required(g, e_ahead, e_behind):
         ext = np.where(g > 0.0, e_ahead, e_behind)
+        if cfg.window_shape == "ellipse":  # safe_lat sqrt(1 - (g / A)^2) inside, A = safe_lon + ext
+            r = g / (L + ext)
+            return cfg.safe_lat * np.sqrt(np.maximum(1.0 - r * r, 0.0))
         a = np.abs(g)
         out = np.where(a < L, cfg.safe_lat, 0.0)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -58,9 +61,11 @@ def reference_clearance(cfg: MIQPConfig, t: np.ndarray, s_nodes: np.ndarray, opp
     return w
 
 
-@pytest.mark.parametrize("closing_decel, stride", [(0.0, 3), (10.0, 1), (10.0, 3), (4.0, 2)])
-def test_clearance_matches_the_direct_form_exactly(closing_decel, stride):
-    cfg = MIQPConfig(closing_decel=closing_decel, closing_stride=stride)
+@pytest.mark.parametrize("closing_decel, stride, shape", [(0.0, 3, "box"), (10.0, 1, "box"), (10.0, 3, "box"),
+                                                          (4.0, 2, "box"), (0.0, 3, "ellipse"),
+                                                          (10.0, 1, "ellipse"), (10.0, 3, "ellipse")])
+def test_clearance_matches_the_direct_form_exactly(closing_decel, stride, shape):
+    cfg = MIQPConfig(closing_decel=closing_decel, closing_stride=stride, window_shape=shape)
     window = ClearanceWindow(cfg)
     rng = np.random.default_rng(3)
     t = CFG.node_dt * np.arange(N)
@@ -104,6 +109,48 @@ def test_window_extends_ahead_of_an_approached_car_only():
     away = 5.0 + 60.0 * window.t  # a faster car alongside, pulling away: no extension
     np.testing.assert_array_equal(window.clearance(s_nodes, away[None, :]),
                                   ClearanceWindow(MIQPConfig()).clearance(s_nodes, away[None, :]))
+
+
+def test_elliptic_window_around_a_parked_car_has_the_barrier_shape():
+    """A parked car passed at walking pace (closing extension < 0.1 m): the clearance at the nodes
+    follows safe_lat sqrt(1 - (g / safe_lon)^2) (up to the node-interval coverage, which only raises it,
+    by less than a node spacing of gap), is safe_lat next to the car and 0 beyond the semi-axis."""
+    cfg = MIQPConfig(safe_lat=3.0, safe_lon=7.0, closing_decel=10.0, closing_stride=1, window_shape="ellipse")
+    window = ClearanceWindow(cfg)
+    s_nodes = 1.0 * window.t  # 1 m/s: nodes 0.15 m apart
+    parked = np.full((1, N), 5.0)
+    w = window.clearance(s_nodes, parked)[0]
+    gap = 5.0 - s_nodes
+    exact = 3.0 * np.sqrt(np.maximum(1.0 - (gap / 7.0) ** 2, 0.0))
+    assert np.all(w >= exact - 1e-12)
+    near = np.maximum(np.abs(gap) - 0.15, 0.0)
+    assert np.all(w <= 3.0 * np.sqrt(np.maximum(1.0 - (near / 7.1) ** 2, 0.0)) + 1e-12)
+    assert w[np.argmin(np.abs(gap))] == pytest.approx(3.0, abs=1e-3)
+    assert np.all(w[gap < -7.2] == 0.0)
+    box = ClearanceWindow(MIQPConfig(safe_lat=3.0, safe_lon=7.0)).clearance(s_nodes, parked)[0]
+    assert np.all(w <= box)  # the box of the same extent asks for more everywhere
+
+
+def test_ellipse_violation_is_the_missing_lateral_distance():
+    """A straight plan past a parked car at a lateral distance: inside the barrier ellipse by b - distance
+    (sampled where the gap is 0), 0 from b on; and the closing speed lengthens the ellipse ahead."""
+    t = 0.15 * np.arange(40)
+    s_nodes = 2.0 * t  # 2 m/s, nodes 0.3 m apart: a sample at gap 0 exactly (the car at 6 m)
+    parked = np.full((1, t.size), 6.0)
+    for offset, expected in [(0.0, 2.7), (1.0, 1.7), (2.7, 0.0), (3.5, 0.0)]:
+        got = ellipse_violation(t, s_nodes, np.full(t.size, offset), parked, np.array([0.0]),
+                                a0=7.0, b=2.7, a_brake=10.0)
+        assert got[0] == pytest.approx(expected, abs=1e-9)
+    # swinging out only 5 m before the car: inside a0 = 7 m already, not at 8 m
+    d = np.where(6.0 - s_nodes > 5.0, 0.0, 2.7)
+    assert ellipse_violation(t, s_nodes, d, parked, np.array([0.0]), 7.0, 2.7, 10.0)[0] > 0.5
+    far = np.full((1, t.size), 20.0)  # the car 12.4-20 m ahead: outside the zero-speed ellipse ...
+    assert ellipse_violation(t, s_nodes, np.zeros(t.size), far, np.array([0.0]), 7.0, 2.7, 10.0)[0] == 0.0
+    fast = 15.0 * t  # ... but inside the braking-distance ellipse at 15 m/s (a = 7 + 11.25 m)
+    assert ellipse_violation(t, fast, np.zeros(t.size), np.full((1, t.size), 20.0), np.array([0.0]),
+                             7.0, 2.7, 10.0)[0] > 2.0
+    assert ellipse_violation(t, s_nodes, np.zeros(t.size), np.zeros((0, t.size)), np.zeros(0),
+                             7.0, 2.7, 10.0).shape == (0,)
 
 
 def test_side_clusters_link_opponents_the_ego_cannot_thread():

@@ -42,6 +42,42 @@ def test_parked_cars_are_passed(circuit, seed):
     assert info["parked_checks"] > 0
 
 
+def _longest_standstill(circuit: str, seed: int, duration: float):
+    """Race a parked field; the info at the end and the longest time [s] the ego was slower than 1 m/s."""
+    env = gym.make(f"SOfAR-{circuit}-v0", config={"race": {"duration": duration}})
+    env.reset(seed=seed, options={"rho": 0.0})
+    info, terminated, truncated, slow, standstill, t_prev = {}, False, False, 0.0, 0.0, 0.0
+    while not (terminated or truncated):
+        _, _, terminated, truncated, info = env.step(np.array([0.5], np.float32))
+        slow = slow + info["sim_time"] - t_prev if env.unwrapped.race.frenet[0, 3] < 1.0 else 0.0
+        standstill, t_prev = max(standstill, slow), info["sim_time"]
+    return env, info, terminated, standstill
+
+
+def test_a_car_parked_where_the_raceline_crosses_a_chicane_is_passed():
+    """Monza, seed 5: a car parked on the raceline at the first chicane's entry (s = 611 m), where the
+    raceline crosses the track and both edges converge on it by up to 0.5 m per metre. There is room
+    beside it (4.3 m on either side), but the ego used to stop 11.5 m behind it, from 43 s on, for the
+    rest of the race: a box window asked for the full clearance up to a node spacing beyond the cars'
+    overlap, where the barrier needs far less, and the MPC's bound against the converging edge was
+    tightened by the heading error to the raceline that following that edge takes."""
+    env, info, terminated, standstill = _longest_standstill("Monza", 5, 60.0)
+    assert not terminated and info["is_success"] and not info["collision"] and not info["off_track"]
+    assert standstill < 2.0, f"stood still for {standstill:.1f} s"
+    assert info["laps"] * env.unwrapped.track.length > 1900.0  # past the chicane (1724 m when stopped)
+
+
+def test_a_side_switch_the_held_pass_leaves_no_room_for_is_made_slowly():
+    """Indianapolis, seed 5: two parked cars 60 m apart, the first passable on the right only (where the
+    ego already is) and the second on the left only. At 30 m/s the switch does not fit between them,
+    and once the ego can no longer stop behind the first car, that pass is held; the second car is then
+    followed (the ego slows down while passing the first) until the switch fits. Without that, the ego
+    ended at the second car's barrier on the wrong side of it and stalled there."""
+    _, info, terminated, standstill = _longest_standstill("Indianapolis", 5, 30.0)
+    assert not terminated and info["is_success"] and not info["collision"] and not info["off_track"]
+    assert standstill < 2.0, f"stood still for {standstill:.1f} s"
+
+
 def test_without_parked_pass_the_ego_stops_behind_the_parked_car():
     """The same Laguna Seca run with the parked pass off: the old behaviour, stuck and stalled."""
     _, info, terminated = _race("LagunaSeca", 0, 0.0, stack={"parked_pass": False})
