@@ -149,3 +149,26 @@ def test_ppo_script_trains_saves_and_resumes(tmp_path: Path) -> None:
     assert any(not np.array_equal(first_params[k].numpy(), v.numpy())
                for k, v in resumed.policy.state_dict().items())  # it trained on
     assert (out / "ppo_final_vecnormalize.pkl").is_file()
+
+
+def test_pasta_script_trains_in_the_interactive_world(tmp_path: Path) -> None:
+    """``--scenario interactive``: a checkpoint of the 16-value observation that loads and drives the world."""
+    import sofar_env  # noqa: F401
+
+    out = tmp_path / "int"
+    _run("pasta.py", "--scenario", "interactive", "--total-steps", "128", "--n-steps", "64", "--n-envs", "1",
+         "--seed", "5", "--out", str(out), "--no-progress", "--n-epochs", "1",
+         "--env-kwargs", '{"race": {"duration": 3.0}}')
+    final = out / "pasta_final.json"
+    meta = json.loads(final.read_text())
+    assert meta["obs_dim"] == 16
+    policy = load_policy(final, obs_dim=16)
+    env = gym.make("SOfAR-LagunaSeca-Interactive-v0", race={"duration": 3.0})
+    obs, _ = env.reset(seed=0)
+    done = False
+    while not done:
+        gamma = policy(obs)
+        assert env.action_space.contains(gamma)
+        obs, _, terminated, truncated, info = env.step(gamma)
+        done = terminated or truncated
+    assert info["sim_time"] > 0.0
