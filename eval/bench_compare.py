@@ -1,0 +1,165 @@
+"""Interleaved A/B of env throughput: the working tree against a git revision.
+
+Run through ``python eval/bench_env.py --compare REV [--rounds 5] [other bench_env options]``.
+
+The revision ``REV`` is exported (``git archive``) into a temporary directory. Then
+``--rounds`` rounds alternate one timed pass of each side, the order flipping every round
+(old-new, new-old, ...), so that a drift of the host's speed (other tenants, thermal
+state) falls on both sides alike. Every pass is a fresh subprocess running this
+directory's ``bench_env.py`` (``--repeats 1``) with ``PYTHONPATH`` set to the side's tree,
+so the only difference between the sides is the ``sofar_env`` package that is imported.
+Each pass also records the per-component breakdown (unless ``--no-breakdown``) and,
+with ``--vector N``, the AsyncVectorEnv throughput.
+
+Reported per side: the median steps/s over the rounds, the min-max spread, the median
+breakdown per component; and the ratio new/old of the medians together with the
+median and range of the per-round ratios (adjacent passes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tarfile
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+_HERE = Path(__file__).resolve().parent
+# options of bench_env.py that belong to the comparison, not to the passes (name -> takes a value)
+_OWN_OPTIONS = {"--compare": True, "--rounds": True, "--json": True, "--repeats": True}
+
+
+def _git(repo: Path, *args: str) -> str:
+    return subprocess.run(["git", "-C", str(repo), *args], check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
+def export_revision(repo: Path, rev: str, dest: Path) -> str:
+    """Export the tree of ``rev`` into ``dest`` (``git archive``); returns the full commit hash."""
+    commit = _git(repo, "rev-parse", "--verify", f"{rev}^{{commit}}")
+    archive = dest / "rev.tar"
+    with open(archive, "wb") as fh:
+        subprocess.run(["git", "-C", str(repo), "archive", "--format=tar", commit], check=True, stdout=fh)
+    with tarfile.open(archive) as tar:
+        tar.extractall(dest / "tree", filter="data")
+    archive.unlink()
+    return commit
+
+
+def pass_arguments(argv: list[str]) -> list[str]:
+    """``argv`` without the options that belong to the comparison (both ``--opt v`` and ``--opt=v``)."""
+    out, skip = [], False
+    for arg in argv:
+        if skip:
+            skip = False
+            continue
+        name = arg.split("=", 1)[0]
+        if name in _OWN_OPTIONS:
+            skip = _OWN_OPTIONS[name] and "=" not in arg
+            continue
+        out.append(arg)
+    return out
+
+
+def run_pass(tree: Path, args: list[str], scratch: Path) -> dict:
+    """One timed pass of ``bench_env.py`` with the package of ``tree``, in a fresh subprocess."""
+    out = scratch / "pass.json"
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(tree)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+    cmd = [sys.executable, str(_HERE / "bench_env.py"), *args, "--repeats", "1", "--json", str(out)]
+    proc = subprocess.run(cmd, cwd=str(tree), env=env, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"benchmark pass in {tree} failed:\n{proc.stderr[-4000:]}")
+    with open(out) as fh:
+        return json.load(fh)
+
+
+def _summary(values: list[float]) -> dict:
+    a = np.asarray(values, float)
+    return {"median": float(np.median(a)), "min": float(a.min()), "max": float(a.max()),
+            "values": [float(v) for v in a]}
+
+
+def _side_summary(passes: list[dict]) -> dict:
+    out = {"steps_per_s": _summary([p["steps_per_s"] for p in passes]),
+           "step_ms_median": _summary([p["step_ms"]["median"] for p in passes]),
+           "reference_workload_ms": _summary([p["reference_workload_ms"]["after"] for p in passes])}
+    names = []
+    for p in passes:
+        names += [n for n in p.get("breakdown_ms_per_step", {}) if n not in names]
+    if names:
+        out["breakdown_ms_per_step"] = {n: float(np.median([p["breakdown_ms_per_step"].get(n, 0.0) for p in passes]))
+                                        for n in names}
+        out["instrumented_ms_per_step"] = float(np.median([p["instrumented_ms_per_step"] for p in passes]))
+    if all("vector" in p for p in passes):
+        out["vector_steps_per_s"] = _summary([p["vector"]["steps_per_s"] for p in passes])
+        out["vector_over_single"] = _summary([p["vector"]["steps_per_s"] / p["steps_per_s"] for p in passes])
+    return out
+
+
+def compare_revisions(args: argparse.Namespace, argv: list[str]) -> dict:
+    """Interleaved A/B of ``args.compare`` (old) against the working tree (new); prints and returns the result."""
+    if args.rounds < 1:
+        raise SystemExit("--rounds must be >= 1")
+    repo = Path(_git(_HERE, "rev-parse", "--show-toplevel"))
+    head = _git(repo, "rev-parse", "HEAD")
+    dirty = bool(_git(repo, "status", "--porcelain", "--untracked-files=no"))
+    child = pass_arguments(argv)
+    passes: dict[str, list[dict]] = {"old": [], "new": []}
+    with tempfile.TemporaryDirectory(prefix="sofar-ab-") as tmp:
+        scratch = Path(tmp)
+        old_commit = export_revision(repo, args.compare, scratch)
+        trees = {"old": scratch / "tree", "new": repo}
+        for r in range(args.rounds):
+            order = ("old", "new") if r % 2 == 0 else ("new", "old")
+            for side in order:
+                passes[side].append(run_pass(trees[side], child, scratch))
+            print(f"  round {r + 1}/{args.rounds}: old {passes['old'][-1]['steps_per_s']:.0f}, "
+                  f"new {passes['new'][-1]['steps_per_s']:.0f} env steps/s", flush=True)
+    ratios = [n["steps_per_s"] / o["steps_per_s"] for o, n in zip(passes["old"], passes["new"])]
+    result = {
+        "track": args.track, "scenario": args.scenario, "rho": args.rho, "opponents": args.opponents,
+        "gamma": args.gamma, "steps": args.steps, "rounds": args.rounds, "seed": args.seed,
+        "old": {"rev": args.compare, "commit": old_commit, **_side_summary(passes["old"])},
+        "new": {"rev": "working tree", "commit": head, "dirty": dirty, **_side_summary(passes["new"])},
+        "ratio_of_medians": float(np.median([p["steps_per_s"] for p in passes["new"]])
+                                  / np.median([p["steps_per_s"] for p in passes["old"]])),
+        "ratio_per_round": _summary(ratios),
+        "cpu_count": os.cpu_count(),
+    }
+    _print(result)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(result, fh, indent=2)
+    return result
+
+
+def _print(res: dict) -> None:
+    old, new = res["old"], res["new"]
+    print(f"{res['track']} ({res['scenario']} world), {res['opponents']} opponents at rho={res['rho']}, "
+          f"gamma={res['gamma']}, {res['steps']} steps per pass, {res['rounds']} interleaved rounds")
+    print(f"  old {old['rev']} ({old['commit'][:9]}): {old['steps_per_s']['median']:.0f} env steps/s median "
+          f"[{old['steps_per_s']['min']:.0f}, {old['steps_per_s']['max']:.0f}]")
+    print(f"  new working tree ({new['commit'][:9]}{', modified' if new['dirty'] else ''}): "
+          f"{new['steps_per_s']['median']:.0f} env steps/s median "
+          f"[{new['steps_per_s']['min']:.0f}, {new['steps_per_s']['max']:.0f}]")
+    rr = res["ratio_per_round"]
+    print(f"  ratio new/old: {res['ratio_of_medians']:.2f}x of the medians; per round median {rr['median']:.2f}x "
+          f"[{rr['min']:.2f}, {rr['max']:.2f}]")
+    if "breakdown_ms_per_step" in old and "breakdown_ms_per_step" in new:
+        print(f"  per-step breakdown, ms (medians of the instrumented passes: old "
+              f"{old['instrumented_ms_per_step']:.3f}, new {new['instrumented_ms_per_step']:.3f}):")
+        for name in old["breakdown_ms_per_step"]:
+            a, b = old["breakdown_ms_per_step"][name], new["breakdown_ms_per_step"].get(name, 0.0)
+            print(f"    {name:40s} {a:6.3f} -> {b:6.3f}")
+    if "vector_steps_per_s" in old:
+        for side in ("old", "new"):
+            v = res[side]
+            print(f"  AsyncVectorEnv ({side}): {v['vector_steps_per_s']['median']:.0f} env steps/s median "
+                  f"[{v['vector_steps_per_s']['min']:.0f}, {v['vector_steps_per_s']['max']:.0f}], "
+                  f"{v['vector_over_single']['median']:.2f}x one process")
