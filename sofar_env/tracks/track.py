@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .._interp import interp
 from .curve import PeriodicCurve
 from .format import (
     EDGE_COLUMNS,
@@ -222,7 +223,7 @@ class Track:
             return self._interp_scalar(closed_list, sc)
         # No wrap of s = L to 0 is needed here (unlike wrap()): the closed table holds the
         # first sample again at s = L, and np.interp returns exactly fp[-1] there.
-        return np.interp(np.mod(np.asarray(s, dtype=float), self.length), self._knots, closed)
+        return interp(np.mod(np.asarray(s, dtype=float), self.length), self._knots, closed)  # np.interp
 
     def _interp_scalar(self, closed_list: list, s: float) -> float:
         """:meth:`_interp` at a scalar ``s``, on Python floats.
