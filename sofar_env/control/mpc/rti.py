@@ -81,9 +81,9 @@ _ROWS_CHECK_TOL = 1e-6
 
 
 def _all_finite(a: np.ndarray) -> bool:
-    """``np.isfinite(a).all()``: a sum is finite only if every term is, so the sum decides
-    unless it overflowed (then the elementwise test does); one reduction, no temporary."""
-    return math.isfinite(np.add.reduce(a, axis=None)) or bool(np.isfinite(a).all())
+    """``np.isfinite(a).all()``, without the Python wrapper of the ndarray method."""
+    return bool(np.logical_and.reduce(np.isfinite(a), axis=None))
+
 
 class MPCDCBF:
     """MPC-DCBF solved by an SQP real-time iteration (see the module docstring).
