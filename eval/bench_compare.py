@@ -89,6 +89,9 @@ def _side_summary(passes: list[dict]) -> dict:
     out = {"steps_per_s": _summary([p["steps_per_s"] for p in passes]),
            "step_ms_median": _summary([p["step_ms"]["median"] for p in passes]),
            "reference_workload_ms": _summary([p["reference_workload_ms"]["after"] for p in passes])}
+    loads = [p["load_average_1min"]["after"] for p in passes]
+    if all(v is not None for v in loads):
+        out["load_average_1min"] = _summary(loads)
     names = []
     for p in passes:
         names += [n for n in p.get("breakdown_ms_per_step", {}) if n not in names]
@@ -130,6 +133,8 @@ def compare_revisions(args: argparse.Namespace, argv: list[str]) -> dict:
         "ratio_of_medians": float(np.median([p["steps_per_s"] for p in passes["new"]])
                                   / np.median([p["steps_per_s"] for p in passes["old"]])),
         "ratio_per_round": _summary(ratios),
+        "ratio_of_best": float(max(p["steps_per_s"] for p in passes["new"])
+                               / max(p["steps_per_s"] for p in passes["old"])),
         "cpu_count": os.cpu_count(),
     }
     _print(result)
@@ -150,7 +155,12 @@ def _print(res: dict) -> None:
           f"[{new['steps_per_s']['min']:.0f}, {new['steps_per_s']['max']:.0f}]")
     rr = res["ratio_per_round"]
     print(f"  ratio new/old: {res['ratio_of_medians']:.2f}x of the medians; per round median {rr['median']:.2f}x "
-          f"[{rr['min']:.2f}, {rr['max']:.2f}]")
+          f"[{rr['min']:.2f}, {rr['max']:.2f}]; best passes {res['ratio_of_best']:.2f}x")
+    if "load_average_1min" in old:
+        print(f"  host: 1-min load average {old['load_average_1min']['min']:.1f}-{old['load_average_1min']['max']:.1f} "
+              f"(old passes), {new['load_average_1min']['min']:.1f}-{new['load_average_1min']['max']:.1f} (new) "
+              f"on {res['cpu_count']} CPUs; reference workload median {old['reference_workload_ms']['median']:.1f} / "
+              f"{new['reference_workload_ms']['median']:.1f} ms")
     if "breakdown_ms_per_step" in old and "breakdown_ms_per_step" in new:
         print(f"  per-step breakdown, ms (medians of the instrumented passes: old "
               f"{old['instrumented_ms_per_step']:.3f}, new {new['instrumented_ms_per_step']:.3f}):")
