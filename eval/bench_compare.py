@@ -99,10 +99,30 @@ def _side_summary(passes: list[dict]) -> dict:
         out["breakdown_ms_per_step"] = {n: float(np.median([p["breakdown_ms_per_step"].get(n, 0.0) for p in passes]))
                                         for n in names}
         out["instrumented_ms_per_step"] = float(np.median([p["instrumented_ms_per_step"] for p in passes]))
+    kernels = [n for n in passes[0].get("compiled_ms_per_step", {})]
+    if kernels:
+        out["compiled_ms_per_step"] = {n: float(np.median([p["compiled_ms_per_step"][n] for p in passes]))
+                                       for n in kernels}
     if all("vector" in p for p in passes):
         out["vector_steps_per_s"] = _summary([p["vector"]["steps_per_s"] for p in passes])
         out["vector_over_single"] = _summary([p["vector"]["steps_per_s"] / p["steps_per_s"] for p in passes])
     return out
+
+
+def interleave(repo: Path, rev: str, rounds: int, run, describe) -> tuple[str, dict[str, list]]:
+    """Export ``rev`` of ``repo`` and run ``rounds`` rounds of ``run(side, tree, scratch, round)`` for the
+    sides "old" (the revision) and "new" (the working tree), the order flipping every round; prints
+    ``describe(old_result, new_result)`` per round. Returns the revision's commit and the results per side."""
+    results: dict[str, list] = {"old": [], "new": []}
+    with tempfile.TemporaryDirectory(prefix="sofar-ab-") as tmp:
+        scratch = Path(tmp)
+        commit = export_revision(repo, rev, scratch)
+        trees = {"old": scratch / "tree", "new": repo}
+        for r in range(rounds):
+            for side in (("old", "new") if r % 2 == 0 else ("new", "old")):
+                results[side].append(run(side, trees[side], scratch, r))
+            print(f"  round {r + 1}/{rounds}: {describe(results['old'][-1], results['new'][-1])}", flush=True)
+    return commit, results
 
 
 def compare_revisions(args: argparse.Namespace, argv: list[str]) -> dict:
@@ -113,17 +133,10 @@ def compare_revisions(args: argparse.Namespace, argv: list[str]) -> dict:
     head = _git(repo, "rev-parse", "HEAD")
     dirty = bool(_git(repo, "status", "--porcelain", "--untracked-files=no"))
     child = pass_arguments(argv)
-    passes: dict[str, list[dict]] = {"old": [], "new": []}
-    with tempfile.TemporaryDirectory(prefix="sofar-ab-") as tmp:
-        scratch = Path(tmp)
-        old_commit = export_revision(repo, args.compare, scratch)
-        trees = {"old": scratch / "tree", "new": repo}
-        for r in range(args.rounds):
-            order = ("old", "new") if r % 2 == 0 else ("new", "old")
-            for side in order:
-                passes[side].append(run_pass(trees[side], child, scratch))
-            print(f"  round {r + 1}/{args.rounds}: old {passes['old'][-1]['steps_per_s']:.0f}, "
-                  f"new {passes['new'][-1]['steps_per_s']:.0f} env steps/s", flush=True)
+    old_commit, passes = interleave(repo, args.compare, args.rounds,
+                                    lambda side, tree, scratch, r: run_pass(tree, child, scratch),
+                                    lambda old, new: f"old {old['steps_per_s']:.0f}, new {new['steps_per_s']:.0f} "
+                                                     "env steps/s")
     ratios = [n["steps_per_s"] / o["steps_per_s"] for o, n in zip(passes["old"], passes["new"])]
     result = {
         "track": args.track, "scenario": args.scenario, "rho": args.rho, "opponents": args.opponents,
@@ -167,6 +180,10 @@ def _print(res: dict) -> None:
         for name in old["breakdown_ms_per_step"]:
             a, b = old["breakdown_ms_per_step"][name], new["breakdown_ms_per_step"].get(name, 0.0)
             print(f"    {name:40s} {a:6.3f} -> {b:6.3f}")
+        if "compiled_ms_per_step" in old and "compiled_ms_per_step" in new:
+            print("  of which compiled kernels, ms per step:")
+            for name, a in old["compiled_ms_per_step"].items():
+                print(f"    {name:40s} {a:6.3f} -> {new['compiled_ms_per_step'].get(name, 0.0):6.3f}")
     if "vector_steps_per_s" in old:
         for side in ("old", "new"):
             v = res[side]

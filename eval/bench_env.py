@@ -16,7 +16,10 @@ Two passes over the same seeded episodes:
    calls it), plant (``Plant.step``), world (``Race.step`` without the plant and track
    calls inside it), observation (``observe``) and the rest (env + stack glue, reward
    terms, info). Times are exclusive: a component's time excludes the timed
-   components it calls. The timers cost ~0.5 us per call.
+   components it calls. The timers cost ~0.5 us per call. Inside these, the compiled kernels are
+   timed as well (not part of the exclusive sum): the QP solver of the MPC (PIQP set-up, update
+   and solve, with their Python call), its generated-C linearisation, and DAQP's branch and
+   bound in the MIQP; what is left is Python (and numpy calls on small arrays).
 
 With ``--vector N`` a third pass times a gymnasium ``AsyncVectorEnv`` of N worker
 processes (the set-up ``train/pasta.py`` uses) and reports its total env steps/s.
@@ -81,13 +84,30 @@ class ComponentTimer:
         return timed
 
 
-def instrument(env: SOfARRaceEnv, timer: ComponentTimer):
+COMPILED = ("compiled: PIQP (MPC QP)", "compiled: linearisation (generated C)", "compiled: DAQP (MIQP B&B)")
+
+
+class _TimedModule:
+    """A stand-in for a module whose ``solve`` is timed (the other attributes are the module's)."""
+
+    def __init__(self, module, solve) -> None:
+        self._module = module
+        self.solve = solve
+
+    def __getattr__(self, name):
+        return getattr(self._module, name)
+
+
+def instrument(env: SOfARRaceEnv, timer: ComponentTimer, kernels: ComponentTimer | None = None):
     """Wrap the components of a built env (after its first reset) with ``timer``; returns an undo function.
 
     Everything is wrapped on the env's own instances, except ``observe``, which the package's
     modules look up as a global: it is wrapped in every loaded ``sofar_env`` module that imported
-    it, and the undo function restores them.
+    it, and the undo function restores them. ``kernels`` (optional) times the compiled kernels
+    (:data:`COMPILED`): the QP solver call of the MPC and DAQP are module globals too, wrapped and
+    restored the same way; the linearisation is the MPC's own instance.
     """
+    undo_kernels = _instrument_kernels(env, kernels) if kernels is not None else (lambda: None)
     env.stack.mpc.solve = timer.wrap(env.stack.mpc.solve, "mpc")
     env.stack.planner.plan = timer.wrap(env.stack.planner.plan, "miqp")
     env.race.plant.step = timer.wrap(env.race.plant.step, "plant")
@@ -103,6 +123,25 @@ def instrument(env: SOfARRaceEnv, timer: ComponentTimer):
     def undo() -> None:
         for module in users:
             module.observe = observe
+        undo_kernels()
+
+    return undo
+
+
+def _instrument_kernels(env: SOfARRaceEnv, kernels: ComponentTimer):
+    from sofar_env.control.mpc import backends
+    from sofar_env.planning import solvers
+
+    lin = env.stack.mpc._lin
+    lin._eval = kernels.wrap(lin._eval, COMPILED[1])
+    piqp_call, daqp_module = backends._solve_piqp, solvers.daqp
+    backends._solve_piqp = kernels.wrap(piqp_call, COMPILED[0])
+    if daqp_module is not None:
+        solvers.daqp = _TimedModule(daqp_module, kernels.wrap(daqp_module.solve, COMPILED[2]))
+
+    def undo() -> None:
+        backends._solve_piqp = piqp_call
+        solvers.daqp = daqp_module
 
     return undo
 
@@ -258,11 +297,11 @@ def main(argv: list[str] | None = None) -> dict:
     load_after = _load_average()
     rates = [args.steps / t.sum() for t, _ in passes]
     times, stats = passes[int(np.argsort(rates)[len(rates) // 2])]  # the median pass
-    breakdown, wall = {}, math.nan
+    breakdown, compiled, wall = {}, {}, math.nan
     if not args.no_breakdown:
-        timer = ComponentTimer()
+        timer, kernels = ComponentTimer(), ComponentTimer()
         env2 = make()
-        undo = instrument(env2, timer)
+        undo = instrument(env2, timer, kernels)
         try:
             t0 = time.perf_counter()
             run(env2, args.steps, args.gamma, args.seed)
@@ -272,6 +311,7 @@ def main(argv: list[str] | None = None) -> dict:
         accounted = sum(timer.total.values())
         breakdown = {k: 1e3 * v / args.steps for k, v in sorted(timer.total.items(), key=lambda kv: -kv[1])}
         breakdown["other (env + stack glue, rewards, info)"] = 1e3 * max(wall - accounted, 0.0) / args.steps
+        compiled = {k: 1e3 * kernels.total.get(k, 0.0) / args.steps for k in COMPILED}
 
     result = {
         "track": args.track, "scenario": args.scenario, "rho": args.rho, "opponents": args.opponents,
@@ -282,6 +322,7 @@ def main(argv: list[str] | None = None) -> dict:
                     "mean": 1e3 * float(times.mean())},
         **stats,
         "breakdown_ms_per_step": breakdown,
+        "compiled_ms_per_step": compiled,
         "instrumented_ms_per_step": 1e3 * wall / args.steps,
         "cpu_count": os.cpu_count(),
         "load_average_1min": {"before": load_before, "after": load_after},
@@ -305,6 +346,10 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"  per-step breakdown (instrumented run, {result['instrumented_ms_per_step']:.2f} ms/step):")
     for name, ms in breakdown.items():
         print(f"    {name:40s} {ms:6.3f} ms  {100 * ms / result['instrumented_ms_per_step']:5.1f} %")
+    if compiled:
+        print("  of which compiled kernels (inside the components above):")
+        for name, ms in compiled.items():
+            print(f"    {name:40s} {ms:6.3f} ms  {100 * ms / result['instrumented_ms_per_step']:5.1f} %")
     if args.vector:
         vec = result["vector"]
         print(f"  AsyncVectorEnv, {vec['workers']} workers: {vec['steps_per_s']:.0f} env steps/s in total "

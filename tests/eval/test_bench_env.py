@@ -26,6 +26,11 @@ def test_bench_env_reports_every_pass(tmp_path):
     assert ref["before"] > 0 and ref["after"] > 0
     # the component breakdown accounts for the controller's two solvers
     assert result["breakdown_ms_per_step"]["mpc"] > 0 and result["breakdown_ms_per_step"]["miqp"] > 0
+    # the compiled kernels inside them are timed too, and take part of their time
+    kernels = result["compiled_ms_per_step"]
+    assert kernels["compiled: PIQP (MPC QP)"] > 0 and kernels["compiled: linearisation (generated C)"] > 0
+    assert kernels["compiled: PIQP (MPC QP)"] < result["breakdown_ms_per_step"]["mpc"]
+    assert 0 <= kernels["compiled: DAQP (MIQP B&B)"] < result["breakdown_ms_per_step"]["miqp"]
 
 
 def test_bench_env_times_an_async_vector_env(tmp_path):
