@@ -74,3 +74,9 @@ def test_compare_runs_interleaved_passes_of_both_revisions(tmp_path):
     assert res["ratio_of_medians"] == pytest.approx(new["median"] / old["median"])
     assert res["old"]["commit"] == subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True,
                                                   text=True).stdout.strip()
+
+
+def test_bench_train_rejects_zero_rounds():
+    proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_train.py"), "--compare", "HEAD", "--rounds", "0"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0 and "--rounds" in proc.stderr
