@@ -4,6 +4,7 @@ Usage::
 
     python eval/bench_env.py [--steps 1000] [--track LagunaSeca] [--rho 0.5] [--opponents 4]
                              [--gamma 0.5] [--seed 0] [--repeats 3] [--vector N] [--json PATH]
+                             [--scenario paper|interactive] [--compare REV [--rounds 5]]
 
 Two passes over the same seeded episodes:
 
@@ -15,10 +16,19 @@ Two passes over the same seeded episodes:
    calls it), plant (``Plant.step``), world (``Race.step`` without the plant and track
    calls inside it), observation (``observe``) and the rest (env + stack glue, reward
    terms, info). Times are exclusive: a component's time excludes the timed
-   components it calls. The timers cost ~0.5 us per call.
+   components it calls. The timers cost ~0.5 us per call. Inside these, the compiled kernels are
+   timed as well (not part of the exclusive sum): the QP solver of the MPC (PIQP set-up, update
+   and solve, with their Python call), its generated-C linearisation, and DAQP's branch and
+   bound in the MIQP; what is left is Python (and numpy calls on small arrays).
 
 With ``--vector N`` a third pass times a gymnasium ``AsyncVectorEnv`` of N worker
 processes (the set-up ``train/pasta.py`` uses) and reports its total env steps/s.
+With ``--compare REV`` the script instead runs an interleaved A/B against the git revision
+``REV`` (see :mod:`bench_compare`, next to this script): the revision is exported into a
+temporary directory, and rounds of one timed pass of the old code and one of the working
+tree alternate, each in a fresh subprocess whose ``PYTHONPATH`` selects the package; the
+medians, spreads, per-component breakdowns and their ratio are reported.
+
 The host's 1-minute load average and the time of a fixed reference workload
 (:func:`reference_workload_ms`, independent of the package) are printed and stored: on
 a shared or virtual machine the same code runs slower while other tenants load the
@@ -74,13 +84,30 @@ class ComponentTimer:
         return timed
 
 
-def instrument(env: SOfARRaceEnv, timer: ComponentTimer):
+COMPILED = ("compiled: PIQP (MPC QP)", "compiled: linearisation (generated C)", "compiled: DAQP (MIQP B&B)")
+
+
+class _TimedModule:
+    """A stand-in for a module whose ``solve`` is timed (the other attributes are the module's)."""
+
+    def __init__(self, module, solve) -> None:
+        self._module = module
+        self.solve = solve
+
+    def __getattr__(self, name):
+        return getattr(self._module, name)
+
+
+def instrument(env: SOfARRaceEnv, timer: ComponentTimer, kernels: ComponentTimer | None = None):
     """Wrap the components of a built env (after its first reset) with ``timer``; returns an undo function.
 
     Everything is wrapped on the env's own instances, except ``observe``, which the package's
     modules look up as a global: it is wrapped in every loaded ``sofar_env`` module that imported
-    it, and the undo function restores them.
+    it, and the undo function restores them. ``kernels`` (optional) times the compiled kernels
+    (:data:`COMPILED`): the QP solver call of the MPC and DAQP are module globals too, wrapped and
+    restored the same way; the linearisation is the MPC's own instance.
     """
+    undo_kernels = _instrument_kernels(env, kernels) if kernels is not None else (lambda: None)
     env.stack.mpc.solve = timer.wrap(env.stack.mpc.solve, "mpc")
     env.stack.planner.plan = timer.wrap(env.stack.planner.plan, "miqp")
     env.race.plant.step = timer.wrap(env.race.plant.step, "plant")
@@ -96,6 +123,25 @@ def instrument(env: SOfARRaceEnv, timer: ComponentTimer):
     def undo() -> None:
         for module in users:
             module.observe = observe
+        undo_kernels()
+
+    return undo
+
+
+def _instrument_kernels(env: SOfARRaceEnv, kernels: ComponentTimer):
+    from sofar_env.control.mpc import backends
+    from sofar_env.planning import solvers
+
+    lin = env.stack.mpc._lin
+    lin._eval = kernels.wrap(lin._eval, COMPILED[1])
+    piqp_call, daqp_module = backends._solve_piqp, solvers.daqp
+    backends._solve_piqp = kernels.wrap(piqp_call, COMPILED[0])
+    if daqp_module is not None:
+        solvers.daqp = _TimedModule(daqp_module, kernels.wrap(daqp_module.solve, COMPILED[2]))
+
+    def undo() -> None:
+        backends._solve_piqp = piqp_call
+        solvers.daqp = daqp_module
 
     return undo
 
@@ -134,7 +180,7 @@ def run_vector(args: argparse.Namespace) -> dict:
 
     n = args.vector
     factory = functools.partial(SOfARRaceEnv, track=args.track, rho=args.rho, n_opponents=args.opponents,
-                                timing_info=True)
+                                timing_info=True, **_scenario_kwargs(args))
     envs = gym.vector.AsyncVectorEnv([factory] * n)
     try:
         actions = np.full((n, 1), args.gamma, np.float32)
@@ -153,6 +199,11 @@ def run_vector(args: argparse.Namespace) -> dict:
         envs.close()
     return {"workers": n, "vector_steps": args.steps, "env_steps": counted, "wall_s": wall,
             "steps_per_s": counted / wall, "episodes_ended": episodes}
+
+
+def _scenario_kwargs(args: argparse.Namespace) -> dict:
+    """Keyword arguments selecting the world: none for the paper world (so older revisions run too)."""
+    return {} if args.scenario == "paper" else {"scenario": args.scenario}
 
 
 def reference_workload_ms(repeats: int = 5) -> float:
@@ -181,7 +232,13 @@ def reference_workload_ms(repeats: int = 5) -> float:
 
 
 def _load_average() -> float | None:
-    """The host's 1-minute load average (None where the OS has none): a busy host slows every pass."""
+    """With ``--compare REV`` the script instead runs an interleaved A/B against the git revision
+``REV`` (see :mod:`bench_compare`, next to this script): the revision is exported into a
+temporary directory, and rounds of one timed pass of the old code and one of the working
+tree alternate, each in a fresh subprocess whose ``PYTHONPATH`` selects the package; the
+medians, spreads, per-component breakdowns and their ratio are reported.
+
+The host's 1-minute load average (None where the OS has none): a busy host slows every pass."""
     try:
         return float(os.getloadavg()[0])
     except (AttributeError, OSError):
@@ -203,11 +260,26 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--vector", type=int, default=0, metavar="N",
                         help="also time a gymnasium AsyncVectorEnv of N worker processes (the training set-up) "
                              "and report its total env steps/s; 0 (default) skips it")
+    parser.add_argument("--scenario", default="paper", choices=("paper", "interactive"),
+                        help="the world: paper (default, SOfAR-<Track>-v0) or interactive "
+                             "(SOfAR-<Track>-Interactive-v0)")
+    parser.add_argument("--compare", default=None, metavar="REV",
+                        help="interleaved A/B against the git revision REV instead of a plain run "
+                             "(each pass in a fresh subprocess; see eval/bench_compare.py)")
+    parser.add_argument("--rounds", type=int, default=5,
+                        help="with --compare: rounds of one pass of each revision, alternating (default 5)")
+    parser.add_argument("--no-breakdown", action="store_true",
+                        help="skip the instrumented pass (per-component breakdown)")
     parser.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = parser.parse_args(argv)
+    if args.compare is not None:
+        from bench_compare import compare_revisions
+
+        return compare_revisions(args, argv if argv is not None else sys.argv[1:])
 
     def make() -> SOfARRaceEnv:
-        env = SOfARRaceEnv(track=args.track, rho=args.rho, n_opponents=args.opponents, timing_info=True)
+        env = SOfARRaceEnv(track=args.track, rho=args.rho, n_opponents=args.opponents, timing_info=True,
+                           **_scenario_kwargs(args))
         env.reset(seed=args.seed)  # builds the controllers (and compiles them on a first run)
         for _ in range(20):  # warm-up
             env.step(np.array([args.gamma], np.float32))
@@ -225,27 +297,32 @@ def main(argv: list[str] | None = None) -> dict:
     load_after = _load_average()
     rates = [args.steps / t.sum() for t, _ in passes]
     times, stats = passes[int(np.argsort(rates)[len(rates) // 2])]  # the median pass
-    timer = ComponentTimer()
-    env2 = make()
-    undo = instrument(env2, timer)
-    try:
-        t0 = time.perf_counter()
-        run(env2, args.steps, args.gamma, args.seed)
-        wall = time.perf_counter() - t0
-    finally:
-        undo()
-    accounted = sum(timer.total.values())
-    breakdown = {k: 1e3 * v / args.steps for k, v in sorted(timer.total.items(), key=lambda kv: -kv[1])}
-    breakdown["other (env + stack glue, rewards, info)"] = 1e3 * max(wall - accounted, 0.0) / args.steps
+    breakdown, compiled, wall = {}, {}, math.nan
+    if not args.no_breakdown:
+        timer, kernels = ComponentTimer(), ComponentTimer()
+        env2 = make()
+        undo = instrument(env2, timer, kernels)
+        try:
+            t0 = time.perf_counter()
+            run(env2, args.steps, args.gamma, args.seed)
+            wall = time.perf_counter() - t0
+        finally:
+            undo()
+        accounted = sum(timer.total.values())
+        breakdown = {k: 1e3 * v / args.steps for k, v in sorted(timer.total.items(), key=lambda kv: -kv[1])}
+        breakdown["other (env + stack glue, rewards, info)"] = 1e3 * max(wall - accounted, 0.0) / args.steps
+        compiled = {k: 1e3 * kernels.total.get(k, 0.0) / args.steps for k in COMPILED}
 
     result = {
-        "track": args.track, "rho": args.rho, "opponents": args.opponents, "gamma": args.gamma,
+        "track": args.track, "scenario": args.scenario, "rho": args.rho, "opponents": args.opponents,
+        "gamma": args.gamma,
         "steps": args.steps, "repeats": args.repeats, "steps_per_s": float(np.median(rates)),
         "steps_per_s_best": float(max(rates)), "steps_per_s_passes": [float(r) for r in rates],
         "step_ms": {"median": 1e3 * float(np.median(times)), "p95": 1e3 * float(np.percentile(times, 95)),
                     "mean": 1e3 * float(times.mean())},
         **stats,
         "breakdown_ms_per_step": breakdown,
+        "compiled_ms_per_step": compiled,
         "instrumented_ms_per_step": 1e3 * wall / args.steps,
         "cpu_count": os.cpu_count(),
         "load_average_1min": {"before": load_before, "after": load_after},
@@ -253,7 +330,8 @@ def main(argv: list[str] | None = None) -> dict:
     }
     if args.vector:
         result["vector"] = run_vector(args)
-    print(f"{args.track}, {args.opponents} opponents at rho={args.rho}, gamma={args.gamma}, {args.steps} steps")
+    print(f"{args.track} ({args.scenario} world), {args.opponents} opponents at rho={args.rho}, "
+          f"gamma={args.gamma}, {args.steps} steps")
     print(f"  {result['steps_per_s']:.0f} env steps/s median of {args.repeats} passes, best "
           f"{result['steps_per_s_best']:.0f} (passes: {', '.join(f'{r:.0f}' for r in rates)})")
     if load_after is not None:
@@ -264,9 +342,14 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"  median pass: step median {result['step_ms']['median']:.2f} ms, "
           f"p95 {result['step_ms']['p95']:.2f} ms; MPC median {stats['mpc_median_ms']:.2f} ms, "
           f"MIQP median {stats['miqp_median_ms']:.2f} ms per solve")
-    print(f"  per-step breakdown (instrumented run, {result['instrumented_ms_per_step']:.2f} ms/step):")
+    if breakdown:
+        print(f"  per-step breakdown (instrumented run, {result['instrumented_ms_per_step']:.2f} ms/step):")
     for name, ms in breakdown.items():
         print(f"    {name:40s} {ms:6.3f} ms  {100 * ms / result['instrumented_ms_per_step']:5.1f} %")
+    if compiled:
+        print("  of which compiled kernels (inside the components above):")
+        for name, ms in compiled.items():
+            print(f"    {name:40s} {ms:6.3f} ms  {100 * ms / result['instrumented_ms_per_step']:5.1f} %")
     if args.vector:
         vec = result["vector"]
         print(f"  AsyncVectorEnv, {vec['workers']} workers: {vec['steps_per_s']:.0f} env steps/s in total "

@@ -7,11 +7,10 @@ evaluated in the same order as numpy's, so the results are bit-identical. numpy'
 re-derives them and checks its arguments at every call, which costs more than the
 arithmetic for short arrays (10 us against 30-37 us per call on the planner's 76 nodes).
 
-Only the passing-side planner uses it (the closing speeds of
-:mod:`sofar_env.planning.clearance`, 0.6 calls per env step): it saves about 1 % of an env
-step there (cProfile call counts over 1,000 steps of the ``eval/bench_env.py`` scenario,
-timeit per call, 1.55 ms per step), below the 2 % for which a hand-optimised copy is kept;
-the stack calls :func:`numpy.gradient`.
+Used where an env step differentiates along a fixed time grid: the closing speeds of
+:mod:`sofar_env.planning.clearance` (0.6 calls per env step) and the followed cars'
+speeds of :meth:`sofar_env.stack.follow.PassOrFollow.speed_cap` (0.45 calls per env step
+of the ``eval/bench_env.py`` scenario).
 """
 
 from __future__ import annotations

@@ -3,10 +3,9 @@
 ``interp`` is numpy's compiled kernel behind :func:`numpy.interp`, without the Python
 wrapper's argument handling (same kernel, same results, 0.6-0.8 us less per call).
 
-Only the passing-side planner uses it (:mod:`sofar_env.planning.miqp`, 1.4 calls per env
-step): it saves about 0.1 % of an env step there (cProfile call counts over 1,000 steps of
-the ``eval/bench_env.py`` scenario, timeit per call, 1.55 ms per step), below the 2 % for
-which a hand-optimised copy is kept; the track and the stack call :func:`numpy.interp`.
+Used wherever an env step interpolates arrays: the track's sampled columns at array
+arguments, the opponents' pace prediction, the MPC's track edges and the passing-side
+planner (about 20 calls per env step of the ``eval/bench_env.py`` scenario).
 """
 
 from __future__ import annotations

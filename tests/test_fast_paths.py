@@ -1,6 +1,7 @@
 """The hand-optimised copies in the hot loop give the very same numbers (bit for bit) as the plain forms:
-the plant's RK4 step, the footprint corner list, and the planner's time derivative on its node grid
-(``sofar_env._gradient.GridGradient``)."""
+the plant's RK4 step, the footprint corner list, the time derivative on a fixed grid
+(``sofar_env._gradient.GridGradient``), the compiled interpolation kernel, the track's Python-float
+paths and its scalar Frenet projection, the ego's node speeds and the MPC's finite-data check."""
 
 import math
 
@@ -58,3 +59,131 @@ def test_grid_gradient_is_numpy_gradient(t):
     assert grad(np.zeros((0, t.size))).shape == (0, t.size)
     with pytest.raises(ValueError, match="samples"):
         grad(np.zeros(t.size + 1))
+
+
+# ---------------------------------------------------------------- track, prediction, MPC checks
+
+
+@pytest.fixture(scope="module")
+def laguna():
+    from sofar_env.tracks import Track
+
+    return Track.load("LagunaSeca")
+
+
+def _arc_lengths(track, n=400, seed=3):
+    """Arc lengths inside, below, above and at the ends of [0, L), as Python floats."""
+    rng = np.random.default_rng(seed)
+    L = track.length
+    special = [0.0, L, -L, 2.0 * L, float(np.nextafter(L, 0.0)), -1e-13, float(track.s[7]), -3.5 * L]
+    return special + rng.uniform(-1.5 * L, 2.5 * L, n).tolist()
+
+
+def test_compiled_interp_is_numpy_interp():
+    from sofar_env._interp import interp
+
+    rng = np.random.default_rng(2)
+    xp = np.cumsum(rng.uniform(0.1, 2.0, 50))
+    fp = rng.normal(size=50)
+    x = rng.uniform(xp[0] - 5.0, xp[-1] + 5.0, (7, 9))
+    np.testing.assert_array_equal(interp(x, xp, fp), np.interp(x, xp, fp))
+    assert interp(float(x[0, 0]), xp, fp) == np.interp(float(x[0, 0]), xp, fp)
+
+
+def test_track_float_paths_are_the_generic_paths(laguna):
+    """speed / curvature / widths / wrap / gap at a Python float (the fast path) equal the same call at a
+    numpy scalar and at a 0-d array (the generic scalar path), bit for bit; wrap and gap also equal the
+    array path (the interpolated columns differ from numpy's interp formula in the last bit, by design:
+    see ``Track._interp_scalar``)."""
+    track = laguna
+    values = _arc_lengths(track)
+    arr = np.array(values)
+    for name in ("speed", "curvature", "width_left", "width_right", "wrap"):
+        method = getattr(track, name)
+        fast = [method(v) for v in values]
+        assert all(type(f) is float for f in fast)
+        assert fast == [method(np.float64(v)) for v in values] == [method(np.array(v)) for v in values]
+        if name == "wrap":
+            np.testing.assert_array_equal(np.array(fast), method(arr))
+        else:
+            np.testing.assert_allclose(np.array(fast), method(arr), rtol=1e-14, atol=1e-14)
+    other = np.random.default_rng(4).uniform(-track.length, 2.0 * track.length, arr.size)
+    fast = [track.gap(a, b) for a, b in zip(values, other.tolist())]
+    assert fast == [track._gap_scalar(float(a), float(b)) for a, b in zip(values, other)]
+    np.testing.assert_array_equal(np.array(fast), track.gap(arr, other))
+
+
+def _reference_newton_scalar(track, x, y, s, robust=False):
+    """The scalar Newton projection written with the curve's own scalar evaluations."""
+    from sofar_env.tracks.track import _NEWTON_MAX_ITER, _NEWTON_TOL
+
+    curve = track._curve
+    converged = False
+    for _ in range(_NEWTON_MAX_ITER):
+        px, py, dx, dy, ddx, ddy = curve.eval_scalar(s)
+        ex, ey = px - x, py - y
+        dd = dx * dx + dy * dy
+        h = dd + ex * ddx + ey * ddy
+        if h < 0.2 * dd:
+            h = dd
+        step = min(max(-(ex * dx + ey * dy) / h, -track._max_step), track._max_step)
+        s = curve.wrap_scalar(s + step)
+        if -_NEWTON_TOL < step < _NEWTON_TOL:
+            converged = True
+            break
+    if not converged and not robust:
+        return None
+    px, py, dx, dy = curve.tangent_scalar(s)
+    return s, (dx * (y - py) - dy * (x - px)) / math.hypot(dx, dy)
+
+
+def test_scalar_projection_is_the_reference_newton(laguna):
+    track = laguna
+    rng = np.random.default_rng(6)
+    s0 = rng.uniform(0.0, track.length, 300)
+    x, y = track.to_cartesian(s0, rng.uniform(-12.0, 12.0, s0.size))
+    hints = (s0 + rng.normal(0.0, 8.0, s0.size)) % track.length
+    for xi, yi, hi in zip(x.tolist(), y.tolist(), hints.tolist()):
+        for robust in (False, True):
+            assert track._newton_scalar(xi, yi, hi, robust) == _reference_newton_scalar(track, xi, yi, hi, robust)
+
+
+def test_ego_node_positions_follow_min_max_recurrence(laguna):
+    from sofar_env.stack.prediction import ego_node_positions
+    from sofar_env.vehicle import AV21
+
+    node_t = np.arange(76) * 0.1
+    for ego_s, ego_v, factor in ((10.0, 0.0, 1.0), (1500.0, 35.0, 0.9), (3000.0, 90.0, 1.0), (600.0, -1.0, 0.5)):
+        got = ego_node_positions(laguna, ego_s, ego_v, node_t, 0.1, factor, AV21)
+        v0 = max(ego_v, 0.0)  # the recurrence with Python's min and max, as written before
+        s = v0 * node_t
+        for _ in range(2):
+            v = [v0]
+            for vr in (factor * np.asarray(laguna.speed(ego_s + s), float))[:-1].tolist():
+                v.append(min(max(vr, v[-1] + AV21.a_min * 0.1), v[-1] + AV21.a_max * 0.1))
+            v = np.array(v)
+            s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * 0.1)])
+        np.testing.assert_array_equal(got, s)
+
+
+@pytest.mark.parametrize("values, finite", [
+    ([1.0, -2.0, 3e5], True), ([], True), ([1.0, np.nan], False), ([np.inf, 1.0], False),
+    ([np.inf, -np.inf], False), ([1e308, 1e308], True), ([1e308, 1e308, np.nan], False)])
+def test_mpc_finite_check_is_elementwise(values, finite):
+    from sofar_env.control.mpc.rti import _all_finite
+
+    a = np.array(values, dtype=float)
+    assert _all_finite(a) is finite is bool(np.isfinite(a).all())
+    assert _all_finite(a.reshape(-1, 1)) is finite
+
+
+def test_speed_cap_gradient_follows_the_grid():
+    """The followed cars' speeds are np.gradient along the grid given, also when the grid changes."""
+    from sofar_env.stack.follow import PassOrFollow
+
+    pof = PassOrFollow.__new__(PassOrFollow)  # only the gradient helper and its cache are exercised
+    pof._time_gradient = None
+    f = np.random.default_rng(8).normal(size=(3, 21)) * 30.0
+    for t in (np.arange(21) * 0.075, np.concatenate([np.arange(10) * 0.075, 0.675 + np.arange(1, 12) * 0.15]),
+              np.arange(21) * 0.075):
+        np.testing.assert_array_equal(pof._gradient(t, f), np.gradient(f, t, axis=1))

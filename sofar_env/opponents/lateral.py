@@ -23,6 +23,8 @@ import math
 import numpy as np
 from scipy.ndimage import minimum_filter1d
 
+from .._interp import interp
+
 __all__ = ["track_target", "keep_clear", "EdgeBand"]
 
 _APPROACH_TIME = 0.5
@@ -127,7 +129,7 @@ class EdgeBand:
     def soft(self, s) -> tuple[np.ndarray, np.ndarray]:
         """The soft band ``(lo, hi)`` at ``s`` (an array): the footprint ``inner`` inside both edges."""
         s = np.mod(np.asarray(s, float), self.track.length)
-        return np.interp(s, self._knots, self._soft[0]), np.interp(s, self._knots, self._soft[1])
+        return interp(s, self._knots, self._soft[0]), interp(s, self._knots, self._soft[1])  # np.interp
 
     def envelope(self, s: float, v: float, lateral_speed: float, lateral_accel: float) -> tuple[float, float]:
         """The soft band at ``s`` tightened so that a car at speed ``v`` [m/s] that starts moving back
@@ -140,7 +142,7 @@ class EdgeBand:
         u, a = lateral_speed, max(lateral_accel, 1e-9)
         t_ramp = u / a
         back = np.where(t < t_ramp, 0.5 * a * t * t, u * t - 0.5 * u * t_ramp)  # room gained by moving back
-        lo_e, hi_e = float(np.max(lo - back)), float(np.min(hi + back))
+        lo_e, hi_e = float(np.maximum.reduce(lo - back)), float(np.minimum.reduce(hi + back))  # np.max, np.min
         if lo_e > hi_e:
             lo_e = hi_e = 0.5 * (lo_e + hi_e)
         return lo_e, hi_e
@@ -149,7 +151,7 @@ class EdgeBand:
         """Narrowest width of the soft band over ``[s, s + distance]`` [m] (sampled every <= 5 m)."""
         k = min(int(math.ceil(max(distance, 0.0) / 5.0)) + 1, _ROOM_SAMPLES)
         lo, hi = self.soft(s + np.linspace(0.0, max(distance, 0.0), k))
-        return float(np.min(hi - lo))
+        return float(np.minimum.reduce(hi - lo))  # np.min
 
     def hard(self, s: float, heading: float) -> tuple[float, float]:
         """The hard band at ``s`` for a car at ``heading`` [rad] to the raceline: every corner inside

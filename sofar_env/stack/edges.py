@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from .._interp import interp
 from ..vehicle import VehicleParams
 
 __all__ = ["TrackEdges"]
@@ -43,8 +44,9 @@ class TrackEdges:
             return (-np.asarray(self.track.width_right(s_abs), float),
                     np.asarray(self.track.width_left(s_abs), float))
         pts = s_abs[:, None] + self._offsets[None, :]
-        wr = np.asarray(self.track.width_right(pts.ravel()), float).reshape(pts.shape).min(axis=1)
-        wl = np.asarray(self.track.width_left(pts.ravel()), float).reshape(pts.shape).min(axis=1)
+        flat = pts.ravel()
+        wr = np.minimum.reduce(np.asarray(self.track.width_right(flat), float).reshape(pts.shape), axis=1)
+        wl = np.minimum.reduce(np.asarray(self.track.width_left(flat), float).reshape(pts.shape), axis=1)
         return -wr, wl
 
     def for_mpc(self, s_abs: np.ndarray, x_prev: np.ndarray | None, t: np.ndarray,
@@ -67,7 +69,7 @@ class TrackEdges:
         """
         n_min, n_max = self(s_abs)
         if self.footprint_aware and x_prev is not None:
-            e = np.interp(t + shift, t, x_prev[:, 2])
+            e = interp(t + shift, t, x_prev[:, 2])  # np.interp
             if edge_relative:
                 h = 0.5  # [m] half-step of the edges' slope
                 lo_ahead, hi_ahead = self(s_abs + h)

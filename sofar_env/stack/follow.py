@@ -49,6 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._gradient import GridGradient
 from ..planning.clearance import ellipse_violation
 from ..planning.miqp import PassingSidePlanner, PlanResult
 from .config import StackConfig
@@ -86,6 +87,7 @@ class PassOrFollow:
         self.predict = predict
         self.edges = edges
         self._node_t = np.arange(config.miqp.nodes) * config.miqp.node_dt
+        self._time_gradient: tuple[np.ndarray, GridGradient] | None = None  # d/dt on the grid of speed_cap
         self._parked_planner = (PassingSidePlanner(dataclasses.replace(
             config.miqp, safe_lat=config.parked_clearance, safe_lon=config.parked_window,
             window_shape="ellipse"))
@@ -244,9 +246,17 @@ class PassOrFollow:
         elapsed = (step - self.target.step) * cfg.mpc.control_dt
         pred = self.predict(plan_s, rows, elapsed + t)  # relative to the ego at plan time
         gap = pred.T - float(self.track.gap(ego_s, plan_s)) - s_rel[:, None]
-        v_o = np.gradient(pred, t, axis=1).T if len(t) > 1 else rows[None, :, 2]
+        v_o = self._gradient(t, pred).T if len(t) > 1 else rows[None, :, 2]
         v_cap2 = v_o ** 2 + 2.0 * cfg.follow_decel * (gap - cfg.follow_gap)
         return np.sqrt(np.maximum(v_cap2.min(axis=1), 0.0))
+
+    def _gradient(self, t: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """``np.gradient(f, t, axis=1)`` (bit-identical), its coefficients kept for the last grid ``t``."""
+        cached = self._time_gradient
+        if cached is None or not np.array_equal(cached[0], t):
+            t = np.array(t, dtype=float)
+            cached = self._time_gradient = (t, GridGradient(t))
+        return cached[1](f)
 
     def _follow_plan(self, ego_s: float, ego_n: float, ego_v: float, s_nodes: np.ndarray, n_ref: np.ndarray,
                      opp_rel: np.ndarray, opp_s: np.ndarray, blocked: np.ndarray,

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._interp import interp
 from ..vehicle import VehicleParams
 
 __all__ = ["relative_opponents", "lateral_motion", "OpponentPredictor", "ego_node_positions",
@@ -90,8 +91,8 @@ class OpponentPredictor:
             return opp_rel[:, :1] + opp_rel[:, 2:3] * times[None, :]
         s_abs = np.asarray(self.track.wrap(ego_s + opp_rel[:, 0]), float)
         rho = np.maximum(opp_rel[:, 2], 0.0) / np.maximum(np.asarray(self.track.speed(s_abs), float), 0.1)
-        t0 = np.interp(s_abs, self._s, self._t)
-        s_pred = np.interp(t0[:, None] + rho[:, None] * times[None, :], self._t, self._s)
+        t0 = interp(s_abs, self._s, self._t)  # np.interp
+        s_pred = interp(t0[:, None] + rho[:, None] * times[None, :], self._t, self._s)
         return opp_rel[:, :1] + (s_pred - s_abs[:, None])
 
 
@@ -106,8 +107,13 @@ def ego_node_positions(track, ego_s: float, ego_v: float, node_t: np.ndarray, no
     for _ in range(2):  # two fixed-point passes: speed reference at the guessed positions
         v_ref = speed_factor * np.asarray(track.speed(ego_s + s), float)
         v = [v0]
-        for vr in v_ref[:-1].tolist():
-            v.append(min(max(vr, v[-1] + dv_min), v[-1] + dv_max))
+        last = v0
+        for vr in v_ref[:-1].tolist():  # v_k+1 = min(max(vr, v_k + dv_min), v_k + dv_max), as Python's min/max pick
+            lo, hi = last + dv_min, last + dv_max
+            last = lo if lo > vr else vr
+            if hi < last:
+                last = hi
+            v.append(last)
         v = np.array(v)
         s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
     return s

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .._interp import interp
 from .curve import PeriodicCurve
 from .format import (
     EDGE_COLUMNS,
@@ -49,6 +50,11 @@ _HINT_WINDOW = 40.0  # [m] half width of the local search window around s_hint
 
 def _as_scalar(value: Any) -> float | None:
     """Python float when ``value`` is a scalar, else None."""
+    kind = type(value)
+    if kind is float:  # the common case first: the per-step callers pass Python floats
+        return value
+    if kind is np.ndarray:
+        return float(value) if value.ndim == 0 else None
     if isinstance(value, (float, int)):
         return float(value)
     return float(value) if np.ndim(value) == 0 else None
@@ -182,6 +188,9 @@ class Track:
     # ------------------------------------------------------------- s algebra
     def wrap(self, s):
         """Arc length wrapped into [0, L)."""
+        if type(s) is float:
+            r = s % self.length
+            return 0.0 if r >= self.length else r
         sc = _as_scalar(s)
         if sc is not None:
             return self._curve.wrap_scalar(sc)
@@ -189,6 +198,10 @@ class Track:
 
     def gap(self, s_a, s_b):
         """Signed periodic difference s_a - s_b in [-L/2, L/2)."""
+        if type(s_a) is float and type(s_b) is float:
+            half = 0.5 * self.length
+            r = (s_a - s_b + half) % self.length
+            return (0.0 if r >= self.length else r) - half
         a, b = _as_scalar(s_a), _as_scalar(s_b)
         if a is not None and b is not None:
             return self._gap_scalar(a, b)
@@ -210,7 +223,7 @@ class Track:
             return self._interp_scalar(closed_list, sc)
         # No wrap of s = L to 0 is needed here (unlike wrap()): the closed table holds the
         # first sample again at s = L, and np.interp returns exactly fp[-1] there.
-        return np.interp(np.mod(np.asarray(s, dtype=float), self.length), self._knots, closed)
+        return interp(np.mod(np.asarray(s, dtype=float), self.length), self._knots, closed)  # np.interp
 
     def _interp_scalar(self, closed_list: list, s: float) -> float:
         """:meth:`_interp` at a scalar ``s``, on Python floats.
@@ -235,20 +248,30 @@ class Track:
         w = (s - k0) / (kl[i + 1] - k0)
         return closed_list[i] + w * (closed_list[i + 1] - closed_list[i])
 
+    # The four accessors below call _interp_scalar directly for a Python float (the per-step
+    # callers' case: about 30 calls per env step), without the dispatch of _interp.
     def curvature(self, s):
         """Signed curvature of the raceline [1/m] (> 0 in left turns)."""
+        if type(s) is float:
+            return self._interp_scalar(self._tables["kappa"][1], s)
         return self._interp("kappa", s)
 
     def width_left(self, s):
         """Distance from the raceline to the left edge along the normal [m]."""
+        if type(s) is float:
+            return self._interp_scalar(self._tables["wl"][1], s)
         return self._interp("wl", s)
 
     def width_right(self, s):
         """Distance from the raceline to the right edge along the normal [m]."""
+        if type(s) is float:
+            return self._interp_scalar(self._tables["wr"][1], s)
         return self._interp("wr", s)
 
     def speed(self, s):
         """Speed profile [m/s]."""
+        if type(s) is float:
+            return self._interp_scalar(self._tables["v"][1], s)
         return self._interp("v", s)
 
     # ------------------------------------------------------- spline geometry
@@ -368,16 +391,33 @@ class Track:
     def _newton_scalar(self, x: float, y: float, s: float, robust: bool = False):
         """:meth:`_newton` for one point on Python floats; None if it has not converged (unless ``robust``)."""
         curve = self._curve
+        # PeriodicCurve.eval_scalar and wrap_scalar inlined (the same operations in the same order)
+        knots, coefs, last, length = curve._knots_list, curve._coef_list, curve._last, curve.length
+        max_step = self._max_step
         converged = False
         for _ in range(_NEWTON_MAX_ITER):
-            px, py, dx, dy, ddx, ddy = curve.eval_scalar(s)
+            i = bisect.bisect_right(knots, s) - 1
+            if i > last:
+                i = last
+            elif i < 0:
+                i = 0
+            t = s - knots[i]
+            a, b, c, d, e, f, g, hh = coefs[i]
+            px = ((a * t + b) * t + c) * t + d
+            py = ((e * t + f) * t + g) * t + hh
+            dx = (3.0 * a * t + 2.0 * b) * t + c
+            dy = (3.0 * e * t + 2.0 * f) * t + g
+            ddx = 6.0 * a * t + 2.0 * b
+            ddy = 6.0 * e * t + 2.0 * f
             ex, ey = px - x, py - y
             dd = dx * dx + dy * dy
             h = dd + ex * ddx + ey * ddy
             if h < 0.2 * dd:
                 h = dd
-            step = min(max(-(ex * dx + ey * dy) / h, -self._max_step), self._max_step)
-            s = curve.wrap_scalar(s + step)
+            step = min(max(-(ex * dx + ey * dy) / h, -max_step), max_step)
+            s = (s + step) % length
+            if s >= length:
+                s = 0.0
             if -_NEWTON_TOL < step < _NEWTON_TOL:
                 converged = True
                 break

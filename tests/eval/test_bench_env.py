@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -24,6 +26,11 @@ def test_bench_env_reports_every_pass(tmp_path):
     assert ref["before"] > 0 and ref["after"] > 0
     # the component breakdown accounts for the controller's two solvers
     assert result["breakdown_ms_per_step"]["mpc"] > 0 and result["breakdown_ms_per_step"]["miqp"] > 0
+    # the compiled kernels inside them are timed too, and take part of their time
+    kernels = result["compiled_ms_per_step"]
+    assert kernels["compiled: PIQP (MPC QP)"] > 0 and kernels["compiled: linearisation (generated C)"] > 0
+    assert kernels["compiled: PIQP (MPC QP)"] < result["breakdown_ms_per_step"]["mpc"]
+    assert 0 <= kernels["compiled: DAQP (MIQP B&B)"] < result["breakdown_ms_per_step"]["miqp"]
 
 
 def test_bench_env_times_an_async_vector_env(tmp_path):
@@ -40,3 +47,36 @@ def test_bench_env_rejects_zero_repeats():
     proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--repeats", "0"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0 and "--repeats" in proc.stderr
+
+
+def test_compare_passes_on_the_benchmark_options_but_not_its_own():
+    sys.path.insert(0, str(ROOT / "eval"))
+    try:
+        from bench_compare import pass_arguments
+    finally:
+        sys.path.remove(str(ROOT / "eval"))
+    argv = ["--compare", "main", "--steps", "50", "--rounds=3", "--json", "x.json", "--scenario", "interactive",
+            "--repeats", "2", "--vector", "2", "--json=y.json"]
+    assert pass_arguments(argv) == ["--steps", "50", "--scenario", "interactive", "--vector", "2"]
+
+
+def test_compare_runs_interleaved_passes_of_both_revisions(tmp_path):
+    """An A/A run against the checked-out commit: both sides run, and the ratio is reported from them."""
+    if subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True).returncode != 0:
+        pytest.skip("not a git checkout")
+    out = tmp_path / "ab.json"
+    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--compare", "HEAD", "--rounds", "1",
+                    "--steps", "5", "--no-breakdown", "--json", str(out)],
+                   check=True, capture_output=True, text=True, timeout=300)
+    res = json.loads(out.read_text())
+    old, new = res["old"]["steps_per_s"], res["new"]["steps_per_s"]
+    assert len(old["values"]) == len(new["values"]) == 1 and old["median"] > 0 and new["median"] > 0
+    assert res["ratio_of_medians"] == pytest.approx(new["median"] / old["median"])
+    assert res["old"]["commit"] == subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True,
+                                                  text=True).stdout.strip()
+
+
+def test_bench_train_rejects_zero_rounds():
+    proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_train.py"), "--compare", "HEAD", "--rounds", "0"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0 and "--rounds" in proc.stderr

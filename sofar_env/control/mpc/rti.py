@@ -79,6 +79,12 @@ _BOX_DROP_DISTANCE = np.array([2.0, 0.15, np.inf, np.inf, np.inf, 5.0, 0.08])
 _ROWS_CHECK_TOL = 1e-6
 
 
+
+def _all_finite(a: np.ndarray) -> bool:
+    """``np.isfinite(a).all()``, without the Python wrapper of the ndarray method."""
+    return bool(np.logical_and.reduce(np.isfinite(a), axis=None))
+
+
 class MPCDCBF:
     """MPC-DCBF solved by an SQP real-time iteration (see the module docstring).
 
@@ -360,7 +366,7 @@ class MPCDCBF:
         c, b, hl, hu, xl, xu = data
         # every linearisation output enters one of these (a NaN or inf anywhere shows up)
         checked = [b, c, qs.A.data, qs.G.data, self._lin.alat] + ([self._lin.h[:, self._act]] if qs.m else [])
-        if not all(np.isfinite(a).all() for a in checked):
+        if not all(_all_finite(a) for a in checked):
             return None, 0, "non-finite QP data"
         if (xl > xu).any():
             return None, 0, "inconsistent hard bounds"
