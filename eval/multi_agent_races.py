@@ -36,6 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cars", type=int, default=4, help="controlled cars (default 4)")
     parser.add_argument("--pace-range", nargs=2, type=float, default=None, metavar=("LO", "HI"),
                         help="race.pace_range of the cars' speed factors (default: the environment's)")
+    parser.add_argument("--v2v", action="store_true",
+                        help="race.v2v: the cars predict each other from their published MPC plans")
     parser.add_argument("--races", action="store_true", help="also print one line per race")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
@@ -44,6 +46,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.duration <= 0 or args.cars < 2:
         parser.error("--duration must be > 0 and --cars >= 2")
     overrides = {"pace_range": tuple(args.pace_range)} if args.pace_range else {}
+    if args.v2v:
+        overrides["v2v"] = True
     strategy = Strategy.fixed(args.gamma)
     policy = strategy.build()
     results = []
@@ -54,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
             logger.info("%s seed %d: %d overtakes, %d colliding, %d off track, %d stalled, pace %s",
                         track, seed, r.overtakes, r.collided, r.off_track, r.stalled, r.speed_factors)
             results.append(r)
-    pace = f", pace_range {tuple(args.pace_range)}" if args.pace_range else ""
+    pace = (f", pace_range {tuple(args.pace_range)}" if args.pace_range else "") + (", V2V" if args.v2v else "")
     print(f"{args.cars} cars, {args.duration:g} s, gamma {args.gamma:g}{pace}, seeds {' '.join(map(str, args.seeds))} "
           f"({time.perf_counter() - t0:.0f} s)\n")
     print(format_per_circuit(results, [strategy.name], args.tracks))

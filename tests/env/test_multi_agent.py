@@ -154,3 +154,18 @@ def test_no_car_starts_off_the_track_or_overlapping(track):
             assert not race._collides(k), (track, seed, k)
             assert infos[f"car_{k}"]["nearest_opponent_m"] >= 4.0  # 2 x 2 m beside, or 12 m behind
     env.close()
+
+
+def make_v2v(n_agents=3):
+    """The V2V mode: the cars predict each other from their published plans."""
+    return sofar_env.parallel_env(track="LagunaSeca", n_agents=n_agents, race={"duration": 2.0, "v2v": True})
+
+
+def test_parallel_api_with_v2v():
+    env = make_v2v(3)
+    parallel_api_test(env, num_cycles=25)
+    env.close()
+
+
+def test_parallel_seed_with_v2v():
+    parallel_seed_test(lambda: make_v2v(3), num_cycles=10)
