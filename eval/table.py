@@ -5,7 +5,7 @@
     python eval/table.py --miqp-ablation         # Table II: Laguna Seca with / without the MIQP layer
     python eval/table.py --sb3 runs/ppo/model.zip --workers 2 --out results/
     python eval/table.py --backend ray [--address auto]   # episodes on Ray (local instance or a cluster)
-    python eval/table.py --multi-agent           # PettingZoo races: 4 cars, 200 s, 4 circuits x 4 seeds
+    python eval/table.py --multi-agent           # PettingZoo races: 4 cars, 200 s, 4 circuits x 4 seeded races
     python eval/table.py --multi-agent --self-play runs/selfplay/pasta_final.json --gammas 0.3 0.5 --workers 1
 
 Results (per-episode CSV, Markdown table) go to --out; rerunning the same command
@@ -42,7 +42,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--miqp-ablation", action="store_true", help="Table II instead of Table I")
     p.add_argument("--multi-agent", action="store_true",
                    help="the multi-agent table: races of the PettingZoo environment (--cars cars, every car driven "
-                        "by the same strategy; --episodes seeded races per circuit, seeds --seed, --seed + 1, ...), "
+                        "by the same strategy; --episodes races per circuit, seeded from --seed and the circuit), "
                         "written to results/multi_agent")
     p.add_argument("--cars", type=int, default=4, help="with --multi-agent: controlled cars per race (default 4)")
     p.add_argument("--self-play", default=None,
@@ -138,7 +138,7 @@ def multi_agent_main(args: argparse.Namespace) -> int:
     duration = args.duration or (QUICK_DURATION if args.quick else ev.DEFAULT_DURATION)
     out = args.out or ("results/quick" if args.quick else "results/multi_agent")
     try:
-        report = run_multi_agent_table(strategies, out, tracks=tracks, seeds=range(args.seed, args.seed + episodes),
+        report = run_multi_agent_table(strategies, out, tracks=tracks, races=episodes, base_seed=args.seed,
                                        cars=args.cars, duration=duration, stack=args.stack, scenario=args.scenario,
                                        workers=args.workers, progress=not args.no_progress)
     except KeyboardInterrupt:

@@ -3,8 +3,11 @@
 A **race** is one seeded reset of :func:`sofar_env.multi_agent.parallel_env` with its defaults
 (rolling start from the staggered grid, each car's speed factor drawn in ``race.pace_range``)
 and ``cars`` controlled cars, run until every car is terminated (collision, leaving the track,
-stalling; a terminated car leaves the race, the others race on) or the duration is reached. The
-seed fixes the grid and the pace, so every strategy meets the same fields (paired races). A
+stalling; a terminated car leaves the race, the others race on) or the duration is reached. Race
+``e`` of a circuit is reset with :func:`race_seed` ``(base_seed, track, e)``, which fixes the grid and
+the pace: every strategy meets the same fields (paired races), and each circuit gets fields of its
+own (the environment draws the pace from the reset seed alone, so plain seeds 0, 1, ... would repeat
+the same fields on every circuit). A
 strategy (:class:`~sofar_agents.evaluation.protocol.Strategy`: a fixed gamma, a PASTA checkpoint)
 chooses every car's gamma from that car's own observation.
 
@@ -30,10 +33,16 @@ from typing import Any
 
 import numpy as np
 
-from sofar_agents.evaluation.protocol import DEFAULT_DURATION, TRACKS, Strategy, _fmt_float
+from sofar_agents.evaluation.protocol import DEFAULT_DURATION, TRACKS, Strategy, _fmt_float, episode_seed
 
-__all__ = ["RACE_COLUMNS", "RaceTask", "RaceResult", "multi_agent_tasks", "run_race", "run_multi_agent_table",
+__all__ = ["RACE_COLUMNS", "race_seed", "RaceTask", "RaceResult", "multi_agent_tasks", "run_race", "run_multi_agent_table",
            "read_race_csv", "format_multi_agent_table", "format_per_circuit"]
+
+
+def race_seed(base_seed: int, track: str, race: int) -> int:
+    """The reset seed of race ``race`` on ``track``: :func:`~sofar_agents.evaluation.protocol.episode_seed` with
+    rho 0 (deterministic across processes and platforms, the same for every strategy)."""
+    return episode_seed(base_seed, track, 0.0, race)
 
 
 @dataclass(frozen=True)
@@ -43,6 +52,7 @@ class RaceTask:
     track: str
     strategy: Strategy
     seed: int
+    """Reset seed."""
     cars: int = 4
     duration: float = DEFAULT_DURATION
     """Race duration [s]."""
@@ -95,12 +105,12 @@ RACE_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(RaceResult))
 """Columns of the per-race CSV."""
 
 
-def multi_agent_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS, seeds: Sequence[int] = (0,),
-                      cars: int = 4, duration: float = DEFAULT_DURATION, stack: str = "sofar",
+def multi_agent_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS, races: int = 4,
+                      base_seed: int = 0, cars: int = 4, duration: float = DEFAULT_DURATION, stack: str = "sofar",
                       scenario: str = "paper") -> list[RaceTask]:
-    """Every (track, seed, strategy), grouped by track."""
-    return [RaceTask(track, strat, int(seed), int(cars), float(duration), stack, scenario)
-            for track in tracks for seed in seeds for strat in strategies]
+    """Every (track, race, strategy), grouped by track; race ``e`` seeded with :func:`race_seed`."""
+    return [RaceTask(track, strat, race_seed(base_seed, track, e), int(cars), float(duration), stack, scenario)
+            for track in tracks for e in range(int(races)) for strat in strategies]
 
 
 def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] | None = None) -> RaceResult:
@@ -238,7 +248,7 @@ class MultiAgentReport:
 
 
 def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "results/multi_agent", *,
-                          tracks: Sequence[str] = TRACKS, seeds: Sequence[int] = (0, 1, 2, 3), cars: int = 4,
+                          tracks: Sequence[str] = TRACKS, races: int = 4, base_seed: int = 0, cars: int = 4,
                           duration: float = DEFAULT_DURATION, stack: str = "sofar", scenario: str = "paper",
                           workers: int | None = 1, prefix: str = "multi_agent", progress: bool = True,
                           ) -> MultiAgentReport:
@@ -246,7 +256,7 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     csv_path = out / f"{prefix}_races.csv"
-    tasks = multi_agent_tasks(strategies, tracks, seeds, cars, duration, stack, scenario)
+    tasks = multi_agent_tasks(strategies, tracks, races, base_seed, cars, duration, stack, scenario)
     done = {r.key for r in read_race_csv(csv_path)}
     todo = [t for t in tasks if t.key not in done]
     t0 = time.perf_counter()
@@ -272,11 +282,12 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
     rows = [r for r in read_race_csv(csv_path) if r.key in wanted]
     names = [s.name for s in strategies]
     labels = {s.name: s.label for s in strategies}
-    settings = (f"{cars} cars, {duration:g} s races, circuits {', '.join(tracks)}, seeds {' '.join(map(str, seeds))}, "
+    settings = (f"{cars} cars, {duration:g} s races, circuits {', '.join(tracks)}, {races} races per circuit "
+                f"(base seed {base_seed}), "
                 f"controller {stack}, world {scenario}. Generated {time.strftime('%Y-%m-%d %H:%M')}.")
     parts = ["# Multi-agent races", "", settings, "",
-             "Every car of a race is driven by the same strategy from its own observation; the seed fixes the grid "
-             "and the cars' pace, so the strategies meet the same fields. Overtakes are between controlled cars "
+             "Every car of a race is driven by the same strategy from its own observation; the race's seed fixes the "
+             "grid and the cars' pace, so the strategies meet the same fields. Overtakes are between controlled cars "
              "(credited to the passer); every collision is between two controlled cars (both terminate); success "
              "per car: cars that reached the duration.", "",
              format_multi_agent_table(rows, names, labels), "", "## Per circuit", "",

@@ -11,7 +11,7 @@ STRATEGIES = [Strategy.fixed(0.3), Strategy.fixed(0.5)]
 
 
 def test_races_are_paired_resumed_and_reported(tmp_path: Path):
-    report = run_multi_agent_table(STRATEGIES, tmp_path, tracks=["Monza"], seeds=[3], cars=3, duration=2.0,
+    report = run_multi_agent_table(STRATEGIES, tmp_path, tracks=["Monza"], races=1, base_seed=3, cars=3, duration=2.0,
                                    progress=False)
     assert report.completed == 2 and len(report.rows) == 2
     a, b = report.rows
@@ -23,7 +23,7 @@ def test_races_are_paired_resumed_and_reported(tmp_path: Path):
     csv_path = report.csv_path
     csv_path.write_text(csv_path.read_text()[:-5])  # a run killed while writing the last row
     assert len(read_race_csv(csv_path)) == 1
-    again = run_multi_agent_table(STRATEGIES, tmp_path, tracks=["Monza"], seeds=[3], cars=3, duration=2.0,
+    again = run_multi_agent_table(STRATEGIES, tmp_path, tracks=["Monza"], races=1, base_seed=3, cars=3, duration=2.0,
                                   progress=False)
     assert (again.completed, again.skipped) == (1, 1)  # only the torn race is run again
     assert [r.key for r in read_race_csv(csv_path)] == [a.key, b.key]
