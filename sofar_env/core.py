@@ -364,8 +364,9 @@ class ControlledRace:
         self._sensed_ids[car] = ids
 
     def _v2v_rows(self) -> list[np.ndarray]:
-        """Each car's opponent rows for its controller under ``race.v2v`` (:mod:`sofar_env.v2v`): the speed of
-        every other controlled car whose last MPC step solved is the one that reproduces its published plan."""
+        """Each car's opponent rows for its controller under ``race.v2v`` (:mod:`sofar_env.v2v`): for every other
+        controlled car whose last MPC step solved, the more cautious of its sensed speed and the speed that
+        reproduces its published plan (the smaller for a car ahead, the larger for a car behind)."""
         from .v2v import published_advance, speed_for_advance
 
         race, dt = self.race, self.config.race.dt
@@ -390,7 +391,9 @@ class ControlledRace:
                                                       dt, horizon)
                 if new is None:
                     new = np.array(rows, dtype=float)
-                new[r, 2] = speed_for_advance(travel, float(new[r, 0]), advances[key], horizon)
+                shared = speed_for_advance(travel, float(new[r, 0]), advances[key], horizon)
+                ahead = float(self.track.gap(new[r, 0], race.frenet[car, 0])) >= 0.0
+                new[r, 2] = min(new[r, 2], shared) if ahead else max(new[r, 2], shared)
             out_rows.append(rows if new is None else new)
         return out_rows
 

@@ -9,10 +9,15 @@ control step earlier), and every other controlled car is handed, for that car's 
 reaches at the end of the receiver's MPC horizon. With constant-speed prediction that is the
 plan's mean speed over the horizon; with pace prediction it is the pace ratio that covers the
 same distance along the speed profile in the same time, ``rho = (T(s + ds) - T(s)) / t`` with
-``T`` the profile's travel time, times ``v_profile(s)``. The row's position is the sensed one;
-only its speed changes, so the MIQP and the MPC (which predict opponents from that speed) follow
-the published plan, and the observation, the rewards and collision checks are unaffected. A car
-whose last MPC step did not solve (a fallback) publishes nothing and is predicted as without V2V.
+``T`` the profile's travel time, times ``v_profile(s)``.
+
+A plan is an intention, made under that car's own predictions of the others; the sensed speed is a
+measurement. The receiver takes the more cautious of the two: for a car ahead of it the smaller
+speed (it may brake as planned, it will not be further ahead than either says), for a car behind it
+the larger (it may accelerate as planned). The row's position is the sensed one; only its speed
+changes, so the MIQP and the MPC (which predict opponents from that speed) see the plan, and the
+observation, the rewards and collision checks are unaffected. A car whose last MPC step did not
+solve (a fallback) publishes nothing and is predicted as without V2V.
 
 Pure functions of the track's speed profile and a published plan; :mod:`sofar_env.core` applies
 them.
