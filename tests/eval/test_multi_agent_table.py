@@ -38,3 +38,25 @@ def test_table_script_multi_agent_refuses_single_car_options(capsys):
     assert table.main(["--multi-agent", "--rhos", "0.5"]) == 2
     assert table.main(["--multi-agent", "--cars", "1"]) == 2
     assert "--cars must be at least 2" in capsys.readouterr().err
+
+
+def test_races_are_seeded_per_circuit_and_shared_by_the_strategies():
+    from sofar_agents.evaluation.multi_agent import multi_agent_tasks, race_seed
+
+    tasks = multi_agent_tasks(STRATEGIES, ["Monza", "Kentucky"], races=2, base_seed=0)
+    assert len(tasks) == 8
+    seeds = {(t.track, t.strategy.name): [] for t in tasks}
+    for t in tasks:
+        seeds[(t.track, t.strategy.name)].append(t.seed)
+    assert seeds[("Monza", "gamma=0.30")] == seeds[("Monza", "gamma=0.50")] == [race_seed(0, "Monza", 0),
+                                                                                race_seed(0, "Monza", 1)]
+    assert not set(seeds[("Monza", "gamma=0.30")]) & set(seeds[("Kentucky", "gamma=0.30")])
+    assert race_seed(1, "Monza", 0) != race_seed(0, "Monza", 0)
+
+
+def test_the_committed_multi_agent_run_reads_fully():
+    root = Path(__file__).resolve().parents[2] / "results" / "multi_agent"
+    rows = read_race_csv(root / "multi_agent_races.csv")
+    assert len(rows) == 64 and len({r.key for r in rows}) == 64  # 4 strategies x 4 circuits x 4 races
+    self_play = Strategy.adaptive(root / "selfplay_lagunaseca.json", name="self-play")
+    assert {r.policy_id for r in rows if r.strategy == "self-play"} == {self_play.policy_id}
