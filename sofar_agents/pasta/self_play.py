@@ -109,7 +109,8 @@ class RaceVectorEnv:
                 rewards[s] = np.asarray(r[a], np.float64).reshape(k)
                 terminated[s] = bool(term[a])
                 truncated[s] = bool(trunc[a])
-            if not (terminated[slots[0]:slots[-1] + 1].any() or truncated[slots[0]:slots[-1] + 1].any()):
+            span = slice(slots.start, slots.stop)
+            if not (terminated[span].any() or truncated[span].any()):
                 continue
             for s, a in zip(slots, agents):  # the race ends for every car: the others are truncated
                 truncated[s] = not terminated[s]
