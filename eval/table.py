@@ -5,6 +5,8 @@
     python eval/table.py --miqp-ablation         # Table II: Laguna Seca with / without the MIQP layer
     python eval/table.py --sb3 runs/ppo/model.zip --workers 2 --out results/
     python eval/table.py --backend ray [--address auto]   # episodes on Ray (local instance or a cluster)
+    python eval/table.py --multi-agent           # PettingZoo races: 4 cars, 200 s, 4 circuits x 4 seeded races
+    python eval/table.py --multi-agent --self-play runs/selfplay/pasta_final.json --gammas 0.3 0.5 --workers 1
 
 Results (per-episode CSV, Markdown table) go to --out; rerunning the same command
 skips the episodes already in the CSV. The logic lives in sofar_agents.evaluation
@@ -38,6 +40,14 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "steps) per strategy, Adaptive + gamma 0.5 (gamma 0.3 + 0.5 without a policy), written to "
                         "results/quick; explicit options override")
     p.add_argument("--miqp-ablation", action="store_true", help="Table II instead of Table I")
+    p.add_argument("--multi-agent", action="store_true",
+                   help="the multi-agent table: races of the PettingZoo environment (--cars cars, every car driven "
+                        "by the same strategy; --episodes races per circuit, seeded from --seed and the circuit), "
+                        "written to results/multi_agent")
+    p.add_argument("--cars", type=int, default=4, help="with --multi-agent: controlled cars per race (default 4)")
+    p.add_argument("--self-play", default=None,
+                   help="with --multi-agent: also evaluate this PASTA checkpoint (e.g. from train/pasta.py "
+                        "--multi-agent), as the strategy 'self-play'")
     p.add_argument("--tracks", nargs="+", default=None, help=f"circuits (default {' '.join(ev.TRACKS)})")
     p.add_argument("--rhos", nargs="+", type=float, default=None,
                    help=f"opponent pace ratios (default {' '.join(f'{r:g}' for r in ev.RHOS)})")
@@ -66,6 +76,8 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
+    if args.multi_agent:
+        return multi_agent_main(args)
     policy = None if args.no_adaptive else ev.resolve_policy_path(args.policy, stack=args.stack, scenario=args.scenario)
     if args.miqp_ablation:
         gammas = args.gammas or [0.5]
@@ -103,6 +115,38 @@ def main(argv=None) -> int:
               f"worker{'' if st.workers == 1 else 's'}.")
     print(f"Wrote {report.csv_path} and {report.markdown_path}")
     return 1 if st.failed else 0
+
+
+def multi_agent_main(args: argparse.Namespace) -> int:
+    """``--multi-agent``: the races of :mod:`sofar_agents.evaluation.multi_agent`."""
+    from sofar_agents.evaluation.multi_agent import run_multi_agent_table
+
+    if args.miqp_ablation or args.backend != "local" or args.sb3 or args.trace or args.rhos:
+        print("error: --multi-agent takes none of --miqp-ablation, --backend ray, --sb3, --trace, --rhos",
+              file=sys.stderr)
+        return 2
+    if args.cars < 2:
+        print(f"error: --cars must be at least 2, got {args.cars}", file=sys.stderr)
+        return 2
+    policy = None if args.no_adaptive else ev.resolve_policy_path(args.policy, stack=args.stack, scenario=args.scenario)
+    strategies = ev.build_strategies(args.gammas or list(ev.FIXED_GAMMAS), policy=policy,
+                                     adaptive=policy is not None)
+    if args.self_play:
+        strategies.append(ev.Strategy.adaptive(args.self_play, name="self-play"))
+    episodes = args.episodes or (1 if args.quick else 4)
+    tracks = args.tracks or (["LagunaSeca"] if args.quick else list(ev.TRACKS))
+    duration = args.duration or (QUICK_DURATION if args.quick else ev.DEFAULT_DURATION)
+    out = args.out or ("results/quick" if args.quick else "results/multi_agent")
+    try:
+        report = run_multi_agent_table(strategies, out, tracks=tracks, races=episodes, base_seed=args.seed,
+                                       cars=args.cars, duration=duration, stack=args.stack, scenario=args.scenario,
+                                       workers=args.workers, progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: finished races are in {out}; rerun the same command to resume", file=sys.stderr)
+        return 130
+    print(report.markdown)
+    print(f"Wrote {report.csv_path} and {report.markdown_path}")
+    return 0
 
 
 if __name__ == "__main__":

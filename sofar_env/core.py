@@ -191,6 +191,8 @@ class ControlledRace:
         """One :class:`~sofar_env.sensing.Sensor` per car when ``race.sensor.enabled``."""
         self.slow_steps = np.zeros(self.n_cars, dtype=int)
         """Per car, the control steps it has been slower than ``stall_speed`` without interruption."""
+        self._travel_time = None
+        """The speed profile's travel time, for V2V rows of pace-predicting controllers (``race.v2v``)."""
 
     # ------------------------------------------------------------------ building
     def build(self) -> None:
@@ -208,6 +210,10 @@ class ControlledRace:
             self.sensors = [Sensor(cfg.race.sensor, self.track.length, cfg.race.dt) for _ in range(self.n_cars)]
             self._sensed = [np.zeros((0, 3)) for _ in range(self.n_cars)]
             self._sensed_rows = [np.zeros((0, 4)) for _ in range(self.n_cars)]
+        if cfg.race.v2v and self.n_cars > 1:
+            from .v2v import TravelTime
+
+            self._travel_time = TravelTime(self.track)
 
     def _make_stacks(self, speed_factors) -> list:
         from .stack import OvertakingStack
@@ -278,10 +284,11 @@ class ControlledRace:
         for _ in range(self.config.decision_interval):
             controls[:] = 0.0
             outs = {}
+            rows = self._v2v_rows() if self._travel_time is not None else self._sensed_rows
             for i in running:
                 gamma = gammas[i]
                 assert GAMMA_MIN <= gamma <= GAMMA_MAX, "gamma is validated by parse_gamma at the API boundary"
-                outs[i] = self.stacks[i].step(race.frenet[i], self._sensed_rows[i], gamma)
+                outs[i] = self.stacks[i].step(race.frenet[i], rows[i], gamma)
                 controls[i] = outs[i].u
             profile = {i: track.speed(float(race.frenet[i, 0])) for i in running}
             events = race.step(controls)
@@ -351,6 +358,40 @@ class ControlledRace:
         if self.config.observation == "paper":
             return observe(self.race, car, self._sensed[car])
         return observe(self.race, car, self._sensed_rows[car], "extended", self.config.stack.mpc.barrier)
+
+    def _v2v_rows(self) -> list[np.ndarray]:
+        """Each car's opponent rows for its controller under ``race.v2v`` (:mod:`sofar_env.v2v`): for every other
+        controlled car whose last MPC step solved, the more cautious of its sensed speed and the speed that
+        reproduces its published plan (the smaller for a car ahead, the larger for a car behind)."""
+        from .v2v import published_advance, speed_for_advance
+
+        race, dt = self.race, self.config.race.dt
+        advances: dict[tuple[int, float], float] = {}
+        out_rows = []
+        for car in range(self.n_cars):
+            rows = self._sensed_rows[car]
+            ids = self._sensed_ids[car] if self.sensors is not None else race.opponent_ids(car)
+            cfg = self.stacks[car].config
+            horizon = float(cfg.mpc.time_grid()[-1])
+            travel = self._travel_time if cfg.pace_prediction else None
+            new = None
+            for r, rid in enumerate(np.asarray(ids).tolist()):
+                c = -1 - rid
+                plan = self.outputs[c] if rid < 0 else None
+                if plan is None or plan.mpc.status != "solved" or not race.active[c]:
+                    continue
+                key = (c, horizon)
+                if key not in advances:
+                    x = plan.mpc.x_pred
+                    advances[key] = published_advance(self.stacks[c].config.mpc.time_grid(), x[:, 0], x[-1, 3],
+                                                      dt, horizon)
+                if new is None:
+                    new = np.array(rows, dtype=float)
+                shared = speed_for_advance(travel, float(new[r, 0]), advances[key], horizon)
+                ahead = float(self.track.gap(new[r, 0], race.frenet[car, 0])) >= 0.0
+                new[r, 2] = min(new[r, 2], shared) if ahead else max(new[r, 2], shared)
+            out_rows.append(rows if new is None else new)
+        return out_rows
 
     def _reward(self, vector: np.ndarray):
         if self.config.reward_mode == "vector":

@@ -71,6 +71,9 @@ class RaceConfig:
     """Multi-car races (the PettingZoo environment): each controlled car's speed factor (its speed reference
     as a fraction of the speed profile) is drawn uniformly in this range at every reset, unless the
     environment is given ``speed_factors``; single-car races use ``stack.speed_factor`` [-]."""
+    v2v: bool = False
+    """Multi-car races: each controlled car publishes its MPC plan and the other controlled cars predict it
+    from that plan instead of from its sensed speed (:mod:`sofar_env.v2v`); off: prediction from sensing only."""
     vehicle: VehicleParams = AV21
     """Parameters of every car."""
     opponents: OpponentConfig = field(default_factory=OpponentConfig)
@@ -101,6 +104,8 @@ class RaceConfig:
         if not (_is_real(lo) and _is_real(hi) and 0.0 <= lo <= hi <= 1.5):
             raise ValueError("race.start_speed_fraction must be an ordered pair in [0, 1.5] (fractions of the "
                              f"speed profile), got {self.start_speed_fraction!r}")
+        if not isinstance(self.v2v, (bool, np.bool_)):
+            raise ValueError(f"race.v2v must be True or False, got {self.v2v!r}")
         if self.plant not in PLANTS:
             raise ValueError(f"race.plant must be one of {PLANTS}, got {self.plant!r}")
         self._check_grid()

@@ -11,6 +11,7 @@ Usage (from the repository root, with the package installed)::
         --out runs/pasta_ls --force                         # continue in place
     python train/pasta.py --backend ray --num-workers 4     # envs in Ray actors (pip install "sofar[ray]")
     python train/pasta.py --backend ray --address auto --num-workers 16 --n-envs 16   # on a Ray cluster
+    python train/pasta.py --multi-agent --cars 4            # self-play: one shared policy drives 4 cars of a race
     tensorboard --logdir runs
 
 Every PASTA hyper-parameter (``sofar_agents.PASTAConfig``) is also an option, e.g.
@@ -27,6 +28,13 @@ mean returns of the last finished episodes per objective, by name.
 ``--quick`` is a preset for a first look (1 to 2 minutes on one core): 16384 steps
 in rollouts of 512, 30 s episodes, 4 PPO epochs, output in ``runs/pasta_quick``; options
 given explicitly win over it.
+
+``--multi-agent`` trains one parameter-shared policy by self-play on the PettingZoo race
+(:func:`sofar_env.multi_agent.parallel_env` on the circuit and world of ``--env-id``, ``--cars``
+cars, ``--n-envs`` races): every car is one slot of the vector env
+(:class:`sofar_agents.pasta.self_play.RaceVectorEnv`), so steps count car decisions, and a race
+ends for all its cars when one car terminates. There is no rho (the opponents are the other
+controlled cars, each with a speed factor drawn per race). Local backend only.
 
 ``--backend ray`` runs the environments (and their solvers) in ``--num-workers`` Ray
 actors, the learner in this process; a seeded run gives the same checkpoints as the
@@ -57,6 +65,7 @@ from tqdm.contrib.logging import logging_redirect_tqdm
 from sofar_agents.cli import add_dataclass_options
 from sofar_agents.pasta import PASTA, PASTAConfig
 from sofar_agents.pasta.rollout import make_training_env
+from sofar_agents.pasta.self_play import make_self_play_race
 from sofar_agents.pasta.training_log import (check_out, code_commit, console_line, log_update, n_objectives,
                                              objective_names)
 
@@ -101,6 +110,10 @@ class Args:
     address: str | None = None
     """Ray cluster to join with ``--backend ray``: ``auto`` or ``HOST:PORT`` (default:
     start a private local Ray instance with ``--num-workers`` CPUs)."""
+    multi_agent: bool = False
+    """Self-play on the PettingZoo race of ``--env-id``'s circuit and world: one shared policy drives every car."""
+    cars: int = 4
+    """Controlled cars per race with ``--multi-agent``."""
     quick: bool = False
     """Preset for a first look (1 to 2 minutes): 16384 steps, rollouts of 512, 30 s
     episodes, 4 epochs, ``--out runs/pasta_quick``; explicit options win."""
@@ -167,6 +180,10 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
         parser.error("--num-workers and --address need --backend ray")
     if args.num_workers is not None and args.num_workers < 1:
         parser.error(f"--num-workers must be positive, got {args.num_workers}")
+    if args.multi_agent and args.backend != "local":
+        parser.error("--multi-agent runs on the local backend only")
+    if args.cars < 2:
+        parser.error(f"--cars must be at least 2, got {args.cars}")
     if args.n_envs is None:
         args.n_envs = args.num_workers if args.num_workers is not None else 1
     if args.n_envs < 1:
@@ -221,12 +238,27 @@ def env_kwargs_of(args: Args) -> dict[str, Any]:
     return env_kwargs
 
 
+def race_of(env_id: str, env_kwargs: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    """The circuit and the other keyword arguments of the PettingZoo race matching ``env_id`` plus ``env_kwargs``."""
+    kwargs = {**gym.spec(env_id).kwargs, **env_kwargs}
+    track = kwargs.pop("track", None)
+    if track is None:
+        raise SystemExit(f"--multi-agent: {env_id!r} names no circuit; pass it as --env-kwargs '{{\"track\": NAME}}'")
+    return track, kwargs
+
+
 def make_vec_env(args: Args) -> Any:
     """The training envs: a gymnasium vector env (local backend) or a :class:`RayEnvPool`."""
     env_kwargs = env_kwargs_of(args)
     if args.decision_interval is not None:
         env_kwargs["decision_interval"] = args.decision_interval
     assert args.n_envs is not None
+    if args.multi_agent:
+        from sofar_agents.pasta.self_play import RaceVectorEnv
+
+        track, race_kwargs = race_of(args.env_id, env_kwargs)
+        return RaceVectorEnv([functools.partial(make_self_play_race, track, args.cars, race_kwargs)
+                              for _ in range(args.n_envs)])
     fns = [make_env(args.env_id, env_kwargs, args) for _ in range(args.n_envs)]
     if args.backend == "ray":
         from sofar_agents.pasta.ray_rollout import RayEnvPool
@@ -300,7 +332,10 @@ def main(argv: list[str] | None = None) -> Path:
         "n_envs": args.n_envs,
         "backend": args.backend,
         "num_workers": args.num_workers,
-        "rho": args.rho_values if args.rho_values is not None else [args.rho_min, args.rho_max],
+        "rho": None if args.multi_agent else (args.rho_values if args.rho_values is not None
+                                              else [args.rho_min, args.rho_max]),
+        "multi_agent": args.multi_agent,
+        "cars": args.cars if args.multi_agent else None,
         "resumed_from": args.resume,
     }
     history = list(agent.metadata.get("history", []))

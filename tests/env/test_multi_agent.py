@@ -27,19 +27,21 @@ def test_parallel_seed():
     parallel_seed_test(lambda: make(2), num_cycles=10)
 
 
-def make_default(n_agents=4):
-    """The new defaults: grid start, pace drawn per episode."""
-    return sofar_env.parallel_env(track="LagunaSeca", n_agents=n_agents, **SHORT)
+def make_default(n_agents=4, v2v=False):
+    """The new defaults: grid start, pace drawn per episode; ``v2v``: the cars also share their plans."""
+    return sofar_env.parallel_env(track="LagunaSeca", n_agents=n_agents, race={**SHORT["race"], "v2v": v2v})
 
 
-def test_parallel_api_on_the_defaults():
-    env = make_default(4)
+@pytest.mark.parametrize("v2v", [False, True])
+def test_parallel_api_on_the_defaults(v2v):
+    env = make_default(4, v2v)
     parallel_api_test(env, num_cycles=25)
     env.close()
 
 
-def test_parallel_seed_on_the_defaults():
-    parallel_seed_test(lambda: make_default(3), num_cycles=10)
+@pytest.mark.parametrize("v2v", [False, True])
+def test_parallel_seed_on_the_defaults(v2v):
+    parallel_seed_test(lambda: make_default(3, v2v), num_cycles=10)
 
 
 def test_pace_is_drawn_per_episode_from_the_seed():
@@ -154,3 +156,4 @@ def test_no_car_starts_off_the_track_or_overlapping(track):
             assert not race._collides(k), (track, seed, k)
             assert infos[f"car_{k}"]["nearest_opponent_m"] >= 4.0  # 2 x 2 m beside, or 12 m behind
     env.close()
+

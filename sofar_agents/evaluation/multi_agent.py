@@ -1,0 +1,303 @@
+"""The multi-agent table: races of the PettingZoo environment, every car driven by the same strategy.
+
+A **race** is one seeded reset of :func:`sofar_env.multi_agent.parallel_env` with its defaults
+(rolling start from the staggered grid, each car's speed factor drawn in ``race.pace_range``)
+and ``cars`` controlled cars, run until every car is terminated (collision, leaving the track,
+stalling; a terminated car leaves the race, the others race on) or the duration is reached. Race
+``e`` of a circuit is reset with :func:`race_seed` ``(base_seed, track, e)``, which fixes the grid and
+the pace: every strategy meets the same fields (paired races), and each circuit gets fields of its
+own (the environment draws the pace from the reset seed alone, so plain seeds 0, 1, ... would repeat
+the same fields on every circuit). A
+strategy (:class:`~sofar_agents.evaluation.protocol.Strategy`: a fixed gamma, a PASTA checkpoint)
+chooses every car's gamma from that car's own observation.
+
+Per race the CSV row (:data:`RACE_COLUMNS`) holds the overtakes between controlled cars (the sum of
+every car's ``info["overtakes"]``, which credits the passer only), the cars terminated by a
+collision with another car, by leaving the track and by stalling, the cars that reached the
+duration (success), and the car-seconds driven over ``cars x duration``. :func:`run_multi_agent_table`
+runs (or resumes: the rows already in the CSV are skipped) a list of races and writes a Markdown
+report; :func:`format_multi_agent_table` summarises rows per strategy.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import time
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sofar_agents.evaluation.protocol import DEFAULT_DURATION, TRACKS, Strategy, _fmt_float, episode_seed
+
+__all__ = ["RACE_COLUMNS", "race_seed", "RaceTask", "RaceResult", "multi_agent_tasks", "run_race", "run_multi_agent_table",
+           "read_race_csv", "format_multi_agent_table", "format_per_circuit"]
+
+
+def race_seed(base_seed: int, track: str, race: int) -> int:
+    """The reset seed of race ``race`` on ``track``: :func:`~sofar_agents.evaluation.protocol.episode_seed` with
+    rho 0 (deterministic across processes and platforms, the same for every strategy)."""
+    return episode_seed(base_seed, track, 0.0, race)
+
+
+@dataclass(frozen=True)
+class RaceTask:
+    """One race to run."""
+
+    track: str
+    strategy: Strategy
+    seed: int
+    """Reset seed."""
+    cars: int = 4
+    duration: float = DEFAULT_DURATION
+    """Race duration [s]."""
+    stack: str = "sofar"
+    scenario: str = "paper"
+
+    @property
+    def key(self) -> tuple:
+        return (self.track, self.strategy.name, self.strategy.policy_id, int(self.seed), int(self.cars),
+                _fmt_float(self.duration), self.stack, self.scenario)
+
+
+@dataclass
+class RaceResult:
+    """What one race produced (one CSV row)."""
+
+    track: str
+    strategy: str
+    policy_id: str
+    seed: int
+    cars: int
+    duration: float
+    stack: str
+    scenario: str
+    overtakes: int
+    """Overtakes between controlled cars (each credited to the passer)."""
+    collided: int
+    """Cars terminated by a collision with another car."""
+    off_track: int
+    """Cars terminated by leaving the track."""
+    stalled: int
+    """Cars terminated by the stall rule."""
+    success: int
+    """Cars that reached the duration."""
+    driven: float
+    """Car-seconds driven over ``cars x duration`` [-]."""
+    mean_gamma: float
+    """Mean gamma over every car decision."""
+    speed_factors: str
+    """The cars' speed factors, space separated."""
+    wall_time: float
+
+    @property
+    def key(self) -> tuple:
+        return (self.track, self.strategy, self.policy_id, int(self.seed), int(self.cars),
+                _fmt_float(self.duration), self.stack, self.scenario)
+
+
+RACE_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(RaceResult))
+"""Columns of the per-race CSV."""
+
+
+def multi_agent_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS, races: int = 4,
+                      base_seed: int = 0, cars: int = 4, duration: float = DEFAULT_DURATION, stack: str = "sofar",
+                      scenario: str = "paper") -> list[RaceTask]:
+    """Every (track, race, strategy), grouped by track; race ``e`` seeded with :func:`race_seed`."""
+    return [RaceTask(track, strat, race_seed(base_seed, track, e), int(cars), float(duration), stack, scenario)
+            for track in tracks for e in range(int(races)) for strat in strategies]
+
+
+def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] | None = None) -> RaceResult:
+    """Run one race; ``policy`` (obs -> gamma) defaults to ``task.strategy.build()``; ``race_overrides`` go
+    into the ``race`` config (e.g. ``pace_range``)."""
+    from sofar_env.multi_agent import parallel_env
+
+    policy = task.strategy.build() if policy is None else policy
+    t0 = time.perf_counter()
+    env = parallel_env(task.track, n_agents=task.cars, race={**(race_overrides or {}), "duration": float(task.duration)},
+                       stack=task.stack,
+                       scenario=task.scenario, timing_info=False)
+    obs, _ = env.reset(seed=int(task.seed))
+    last: dict[str, dict] = {}
+    gamma_sum, decisions = 0.0, 0
+    while env.agents:
+        actions = {a: np.asarray(policy(obs[a]), np.float32).reshape(1) for a in env.agents}
+        obs, _, _, _, infos = env.step(actions)
+        last.update(infos)
+        gamma_sum += sum(float(info["gamma"]) for info in infos.values())
+        decisions += len(infos)
+    factors = env.speed_factors
+    env.close()
+    count = lambda key: sum(bool(info.get(key, False)) for info in last.values())  # noqa: E731
+    return RaceResult(
+        track=task.track, strategy=task.strategy.name, policy_id=task.strategy.policy_id, seed=int(task.seed),
+        cars=int(task.cars), duration=float(task.duration), stack=task.stack, scenario=task.scenario,
+        overtakes=sum(int(info["overtakes"]) for info in last.values()), collided=count("collision"),
+        off_track=count("off_track"), stalled=count("stalled"), success=count("is_success"),
+        driven=sum(float(info["sim_time"]) for info in last.values()) / (task.cars * task.duration),
+        mean_gamma=gamma_sum / max(decisions, 1), speed_factors=" ".join(f"{f:.4f}" for f in factors),
+        wall_time=time.perf_counter() - t0,
+    )
+
+
+def _run_in_worker(task: RaceTask) -> RaceResult:
+    from sofar_agents.evaluation.protocol import _limit_torch_threads
+
+    _limit_torch_threads()
+    return run_race(task)
+
+
+# ---------------------------------------------------------------------------- CSV
+
+
+def read_race_csv(path: str | os.PathLike) -> list[RaceResult]:
+    """The complete rows of a per-race CSV (a last line without its newline, torn by a killed run, is ignored)."""
+    p = Path(path)
+    if not p.exists():
+        return []
+    text = p.read_text()
+    if text and not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]
+    out = []
+    types = {f.name: f.type for f in fields(RaceResult)}
+    for row in csv.DictReader(io.StringIO(text)):
+        values: dict[str, Any] = {}
+        for name, kind in types.items():
+            raw = row[name]
+            values[name] = int(raw) if kind == "int" else float(raw) if kind == "float" else raw
+        out.append(RaceResult(**values))
+    return out
+
+
+def _append(path: Path, result: RaceResult) -> None:
+    new = not path.exists() or path.stat().st_size == 0
+    if not new:
+        text = path.read_text()
+        if not text.endswith("\n"):  # drop a torn last line
+            path.write_text(text[: text.rfind("\n") + 1])
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, RACE_COLUMNS, lineterminator="\n")
+    if new:
+        writer.writeheader()
+    writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in asdict(result).items()})
+    with open(path, "a") as f:
+        f.write(buf.getvalue())
+        f.flush()
+
+
+# ---------------------------------------------------------------------------- tables
+
+
+def _summary_cells(rows: Sequence[RaceResult]) -> str:
+    n = len(rows)
+    car_races = sum(r.cars for r in rows)
+    mean = lambda attr: sum(getattr(r, attr) for r in rows) / n  # noqa: E731
+    with_collision = 100.0 * sum(r.collided > 0 for r in rows) / n
+    return (f"{n} | {mean('overtakes'):.2f} | {with_collision:.0f} | {mean('collided'):.2f} | "
+            f"{mean('off_track'):.2f} | {mean('stalled'):.2f} | {100.0 * sum(r.success for r in rows) / car_races:.0f} | "
+            f"{100.0 * mean('driven'):.0f} | {mean('mean_gamma'):.2f}")
+
+
+_HEADER = ("races | overtakes / race | races with a collision [%] | colliding cars / race | off-track cars / race | "
+           "stalled cars / race | success per car [%] | driven [%] | mean γ")
+
+
+def format_multi_agent_table(rows: Sequence[RaceResult], strategies: Sequence[str], labels: dict[str, str] | None = None
+                             ) -> str:
+    """One line per strategy over all its races."""
+    labels = labels or {}
+    lines = [f"| strategy | {_HEADER} |", "|---|" + "---:|" * 9]
+    for name in strategies:
+        mine = [r for r in rows if r.strategy == name]
+        if mine:
+            lines.append(f"| {labels.get(name, name)} | {_summary_cells(mine)} |")
+    return "\n".join(lines)
+
+
+def format_per_circuit(rows: Sequence[RaceResult], strategies: Sequence[str], tracks: Sequence[str],
+                       labels: dict[str, str] | None = None) -> str:
+    """One line per (circuit, strategy)."""
+    labels = labels or {}
+    lines = [f"| circuit | strategy | {_HEADER} |", "|---|---|" + "---:|" * 9]
+    for track in tracks:
+        for name in strategies:
+            mine = [r for r in rows if r.strategy == name and r.track == track]
+            if mine:
+                lines.append(f"| {track} | {labels.get(name, name)} | {_summary_cells(mine)} |")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------- the table
+
+
+@dataclass
+class MultiAgentReport:
+    markdown: str
+    csv_path: Path
+    markdown_path: Path
+    rows: list[RaceResult]
+    completed: int
+    skipped: int
+    elapsed: float
+
+
+def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "results/multi_agent", *,
+                          tracks: Sequence[str] = TRACKS, races: int = 4, base_seed: int = 0, cars: int = 4,
+                          duration: float = DEFAULT_DURATION, stack: str = "sofar", scenario: str = "paper",
+                          workers: int | None = 1, prefix: str = "multi_agent", progress: bool = True,
+                          ) -> MultiAgentReport:
+    """Run (or resume) the races into ``out_dir/<prefix>_races.csv`` and write ``<prefix>.md``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    csv_path = out / f"{prefix}_races.csv"
+    tasks = multi_agent_tasks(strategies, tracks, races, base_seed, cars, duration, stack, scenario)
+    done = {r.key for r in read_race_csv(csv_path)}
+    todo = [t for t in tasks if t.key not in done]
+    t0 = time.perf_counter()
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(todo), unit="race", disable=not progress, dynamic_ncols=True, desc="races")
+    n_workers = max(1, int(workers or os.cpu_count() or 1))
+    if n_workers == 1:
+        policies: dict[str, Any] = {}
+        for task in todo:
+            if task.strategy.name not in policies:
+                policies[task.strategy.name] = task.strategy.build()
+            _append(csv_path, run_race(task, policies[task.strategy.name]))
+            bar.update()
+    else:
+        with ProcessPoolExecutor(n_workers) as pool:
+            for result in pool.map(_run_in_worker, todo):
+                _append(csv_path, result)
+                bar.update()
+    bar.close()
+    elapsed = time.perf_counter() - t0
+    wanted = {t.key for t in tasks}
+    rows = [r for r in read_race_csv(csv_path) if r.key in wanted]
+    names = [s.name for s in strategies]
+    labels = {s.name: s.label for s in strategies}
+    settings = (f"{cars} cars, {duration:g} s races, circuits {', '.join(tracks)}, {races} races per circuit "
+                f"(base seed {base_seed}), "
+                f"controller {stack}, world {scenario}. Generated {time.strftime('%Y-%m-%d %H:%M')}.")
+    parts = ["# Multi-agent races", "", settings, "",
+             "Every car of a race is driven by the same strategy from its own observation; the race's seed fixes the "
+             "grid and the cars' pace, so the strategies meet the same fields. Overtakes are between controlled cars "
+             "(credited to the passer); every collision is between two controlled cars (both terminate); success "
+             "per car: cars that reached the duration.", "",
+             format_multi_agent_table(rows, names, labels), "", "## Per circuit", "",
+             format_per_circuit(rows, names, tracks, labels)]
+    missing = len(tasks) - len(rows)
+    if missing:
+        parts += ["", f"**Incomplete:** {missing} of {len(tasks)} races are missing; rerun the same command."]
+    parts += ["", f"{len(todo)} races run ({len(tasks) - len(todo)} taken from the CSV) with {n_workers} "
+              f"worker{'' if n_workers == 1 else 's'} in {elapsed:.0f} s."]
+    md = "\n".join(parts) + "\n"
+    md_path = out / f"{prefix}.md"
+    md_path.write_text(md)
+    return MultiAgentReport(md, csv_path, md_path, rows, len(todo), len(tasks) - len(todo), elapsed)
