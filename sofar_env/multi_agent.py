@@ -29,8 +29,7 @@ A car that collides, leaves the track or stalls (the stall rule of
 :mod:`sofar_env.core`: slower than ``stall_speed`` for ``stall_seconds``, per car)
 terminates and leaves the race (it stops and no longer counts as an obstacle); in a
 collision between two cars both terminate. All remaining cars are truncated at the race duration.
-Each car's controller predicts the others from what it senses, along the track and, from their lateral
-rates, across it (``StackConfig.lateral_prediction``); with ``race={"v2v": True}`` the cars
+Each car's controller predicts the others from what it senses; with ``race={"v2v": True}`` the cars
 also share their MPC plans and predict each other from them (:mod:`sofar_env.v2v`).
 The ``scenario`` key of the interactive world (:mod:`sofar_env.scenarios`) applies here too, without
 its scripted opponents (the multi-agent race has none).
