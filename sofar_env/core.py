@@ -210,8 +210,6 @@ class ControlledRace:
             self.sensors = [Sensor(cfg.race.sensor, self.track.length, cfg.race.dt) for _ in range(self.n_cars)]
             self._sensed = [np.zeros((0, 3)) for _ in range(self.n_cars)]
             self._sensed_rows = [np.zeros((0, 4)) for _ in range(self.n_cars)]
-        elif self.n_cars > 1:  # perfect sensing: the controllers also get the other cars' lateral rates
-            self._sensed_rows = [np.zeros((0, 4)) for _ in range(self.n_cars)]
         if cfg.race.v2v and self.n_cars > 1:
             from .v2v import TravelTime
 
@@ -336,18 +334,12 @@ class ControlledRace:
         """Update what car ``car`` sees of its opponents: the sensor's (s, n, v) estimates of the true rows
         (and, for its controller, the estimated lateral rates).
 
-        Without a sensor the seen rows are the true rows (the same list); in a race of several controlled
-        cars their controllers also get the true lateral rates (:meth:`Race.opponent_lateral_rates`).
+        Without a sensor the seen rows are the true rows (the same list), and this does nothing.
         Collisions, track limits, overtakes and the barrier-margin reward are always judged on the
         true state. ``again``: the field changed within the same control step (a car left the race);
         the sensor is not advanced a second time, the rows of the cars that left are dropped.
         """
         if self.sensors is None:
-            if self.n_cars > 1:
-                rows = np.empty((len(self._opponents[car]), 4))
-                rows[:, :3] = self._opponents[car]
-                rows[:, 3] = self.race.opponent_lateral_rates(car)
-                self._sensed_rows[car] = rows
             return
         if again:
             keep = np.isin(self._sensed_ids[car], self.race.opponent_ids(car))

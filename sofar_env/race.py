@@ -269,16 +269,6 @@ class Race:
             return rows[0]
         return np.concatenate(rows) if rows else np.zeros((0, 3))
 
-    def opponent_lateral_rates(self, car: int = 0) -> np.ndarray:
-        """Lateral rates dn/dt [m/s] of the rows of :meth:`opponent_frenet`: the scripted opponents' own, and
-        ``v sin e`` of the other active cars (the lateral counterpart of their ``s_dot``)."""
-        rates = [np.asarray(self.opponents.n_dot, float)] if self.opponents.count else []
-        others = [j for j in range(self.n_cars) if j != car and self.active[j]]
-        if others:
-            f = self.frenet[others]
-            rates.append(f[:, 3] * np.sin(f[:, 2]))
-        return np.concatenate(rates) if rates else np.zeros(0)
-
     def opponent_ids(self, car: int = 0) -> np.ndarray:
         """Stable identities of the rows of :meth:`opponent_frenet` (scripted opponents >= 0, whose id
         changes at a respawn; controlled car j: -1 - j)."""

@@ -157,21 +157,3 @@ def test_no_car_starts_off_the_track_or_overlapping(track):
             assert infos[f"car_{k}"]["nearest_opponent_m"] >= 4.0  # 2 x 2 m beside, or 12 m behind
     env.close()
 
-
-
-def test_controllers_get_the_other_cars_lateral_rates():
-    import sofar_env
-
-    env = sofar_env.parallel_env(track="Monza", n_agents=3, race={"duration": 2.0})
-    env.reset(seed=4)
-    for _ in range(5):
-        env.step({a: np.array([0.5], np.float32) for a in env.agents})
-    core = env.core
-    for car in range(3):
-        rows = core._sensed_rows[car]
-        assert rows.shape == (2, 4)
-        np.testing.assert_array_equal(rows[:, :3], core._opponents[car])
-        others = [j for j in range(3) if j != car]
-        f = core.race.frenet[others]
-        np.testing.assert_allclose(rows[:, 3], f[:, 3] * np.sin(f[:, 2]))
-    assert np.any(np.abs(np.concatenate([r[:, 3] for r in core._sensed_rows])) > 0.0)

@@ -43,12 +43,12 @@ def test_with_v2v_the_controllers_get_the_published_speeds():
     env.reset(seed=0)
     core = env.core
     first = core._v2v_rows()
-    assert all(a is b for a, b in zip(first, core._sensed_rows))  # nothing published before the first step
+    assert all(a is b for a, b in zip(first, core._sensed))  # nothing published before the first step
     env.step({a: np.array([0.5], np.float32) for a in env.agents})
     rows = core._v2v_rows()
     changed = 0
     for car in range(3):
-        np.testing.assert_array_equal(rows[car][:, [0, 1, 3]], core._sensed_rows[car][:, [0, 1, 3]])  # as sensed
+        np.testing.assert_array_equal(rows[car][:, :2], core._sensed[car][:, :2])  # positions as sensed
         ahead = np.array([core.track.gap(s, core.race.frenet[car, 0]) >= 0 for s in rows[car][:, 0]])
         sensed = core._sensed[car][:, 2]
         assert np.all(rows[car][ahead, 2] <= sensed[ahead]) and np.all(rows[car][~ahead, 2] >= sensed[~ahead])
