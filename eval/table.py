@@ -62,6 +62,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="world: paper (default) or interactive (opponents that race back, noisy sensing)")
     p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
                    help="controller preset: sofar (default) or paper (the paper's Algorithm 1 as written)")
+    p.add_argument("--opponents", type=int, default=None,
+                   help="Table I: opponents per episode (default: the environment's 4; part of the resume key)")
     p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")
     p.add_argument("--policy", default=None, help="adaptive policy checkpoint (default: the shipped one)")
     p.add_argument("--no-adaptive", action="store_true", help="leave out the adaptive policy")
@@ -75,6 +77,9 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.opponents is not None and args.opponents < 0:
+        print(f"error: --opponents must be >= 0, got {args.opponents}", file=sys.stderr)
+        return 2
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
     if args.multi_agent:
         return multi_agent_main(args)
@@ -98,7 +103,7 @@ def main(argv=None) -> int:
             report = ev.run_miqp_ablation(strategies, out, episodes=episodes, rhos=rhos, **common)
         else:
             report = ev.run_table1(strategies, out, tracks=tracks, rhos=rhos, episodes=episodes, trace=args.trace,
-                                   **common)
+                                   n_opponents=args.opponents, **common)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished episodes are in {out}; rerun the same command to resume", file=sys.stderr)
         return 130

@@ -46,18 +46,18 @@ def run_table1(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "res
                tracks: Sequence[str] = TRACKS, rhos: Sequence[float] = RHOS, episodes: int = 5, base_seed: int = 0,
                duration: float = DEFAULT_DURATION, workers: int | None = None, trace: bool = False,
                progress: bool = True, prefix: str = "table1", stack: str = "sofar", scenario: str = "paper",
-               backend: str = "local",
-               address: str | None = None) -> TableReport:
+               backend: str = "local", address: str | None = None,
+               n_opponents: int | None = None) -> TableReport:
     """Table I: run (or resume) the sweep into ``out_dir/<prefix>_episodes.csv``, write ``<prefix>.md``.
 
-    ``workers``, ``backend`` and ``address`` go to :func:`~sofar_agents.evaluation.sweep.run_sweep`.
-    With ``trace``, the per-step trace of the non-fixed strategies goes to ``<prefix>_trace.csv``.
+    ``workers``, ``backend`` and ``address`` go to :func:`~sofar_agents.evaluation.sweep.run_sweep`;
+    ``n_opponents`` sets the field size (None: the environment's default, 4). With ``trace``, the per-step trace of the non-fixed strategies goes to ``<prefix>_trace.csv``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     tasks = table1_tasks(strategies, tracks, rhos, episodes, base_seed, duration,
                          trace=(lambda s: s.kind != "fixed") if trace else False, stack=stack,
-                         scenario=scenario)
+                         scenario=scenario, n_opponents=n_opponents)
     csv_path = out / f"{prefix}_episodes.csv"
     stats = run_sweep(tasks, csv_path, workers=workers, progress=progress,
                       trace_path=out / f"{prefix}_trace.csv" if trace else None, backend=backend, address=address)
@@ -65,6 +65,8 @@ def run_table1(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "res
     settings = {"tracks": ", ".join(tracks), "rho": ", ".join(_fmt_float(r) for r in rhos),
                 "episodes per (track, rho)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed,
                 "controller": stack, "world": scenario}
+    if n_opponents is not None:
+        settings["opponents"] = n_opponents
     parts = [_run_header("Table I: performance per circuit", settings),
              "Per circuit and metric, **bold** is the best and <u>underlined</u> the second best "
              "(success rate, simulated time, laps, overtakes: higher is better). Slack: percentage of control "

@@ -240,8 +240,9 @@ def build_strategies(gammas: Sequence[float] = FIXED_GAMMAS, policy: str | os.Pa
 def table1_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS, rhos: Sequence[float] = RHOS,
                  episodes: int = 5, base_seed: int = 0, duration: float = DEFAULT_DURATION,
                  trace: bool | Callable[[Strategy], bool] = False, stack: str = "sofar",
-                 scenario: str = "paper") -> list[EpisodeTask]:
-    """Every (track, rho, episode, strategy) of Table I, grouped by track so workers reuse environments."""
+                 scenario: str = "paper", n_opponents: int | None = None) -> list[EpisodeTask]:
+    """Every (track, rho, episode, strategy) of Table I, grouped by track so workers reuse environments
+    (``n_opponents``: the field size, None for the environment's default of 4)."""
     tasks = []
     for track in tracks:
         for rho in rhos:
@@ -249,9 +250,8 @@ def table1_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS,
                 seed = episode_seed(base_seed, track, rho, e)
                 for strat in strategies:
                     tr = trace(strat) if callable(trace) else bool(trace)
-                    tasks.append(EpisodeTask(track, strat, float(rho), e, seed, True, float(duration), stack=stack,
-                                             scenario=scenario,
-                                             trace=tr))
+                    tasks.append(EpisodeTask(track, strat, float(rho), e, seed, True, float(duration),
+                                             n_opponents=n_opponents, stack=stack, scenario=scenario, trace=tr))
     return tasks
 
 
