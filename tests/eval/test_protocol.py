@@ -82,3 +82,10 @@ def test_scenario_and_stack_enter_the_resume_key_and_the_env_key():
     assert len({base.env_key, world.env_key, paper.env_key}) == 3
     tasks = ev.table1_tasks([ev.Strategy.fixed(0.5)], ["Monza"], [0.3], 1, scenario="interactive")
     assert all(t.scenario == "interactive" for t in tasks)
+
+
+def test_table1_tasks_carry_the_field_size_into_the_resume_key():
+    default = ev.table1_tasks([ev.Strategy.fixed(0.5)], ["Monza"], [0.3], 1)
+    dense = ev.table1_tasks([ev.Strategy.fixed(0.5)], ["Monza"], [0.3], 1, n_opponents=8)
+    assert default[0].n_opponents is None and dense[0].n_opponents == 8
+    assert default[0].seed == dense[0].seed and default[0].key != dense[0].key
