@@ -69,6 +69,7 @@ def test_tables_show_the_stalled_count():
 @pytest.mark.parametrize("name,recorded_with_rule", [
     ("table1_episodes.csv", True), ("table2_episodes.csv", True), ("paper_stack/table1_episodes.csv", True),
     ("paper_stack/table2_episodes.csv", True), ("interactive/table1_episodes.csv", True),
+    ("interactive_dense/table1_episodes.csv", True),
     ("seed13/table1_episodes.csv", False), ("seed14/table1_episodes.csv", False),
 ])
 def test_committed_results_still_read_and_render(name, recorded_with_rule):
