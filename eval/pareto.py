@@ -47,6 +47,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
     p.add_argument("--scenario", default="paper", choices=("paper", "interactive"), help="world (default paper)")
     p.add_argument("--stack", default="sofar", choices=("sofar", "paper"), help="controller preset (default sofar)")
+    p.add_argument("--opponents", type=int, default=None,
+                   help="opponents per episode (default: the environment's 4; part of the resume key)")
     p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: os.cpu_count())")
     p.add_argument("--backend", default="local", choices=("local", "ray"), help="local process pool or Ray actors")
@@ -61,6 +63,9 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.opponents is not None and args.opponents < 0:
+        print(f"error: --opponents must be >= 0, got {args.opponents}", file=sys.stderr)
+        return 2
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
     policy = None if args.no_policy else ev.resolve_policy_path(
         args.policy, fallback="only the fixed gammas are evaluated", stack=args.stack, scenario=args.scenario)
@@ -80,7 +85,7 @@ def main(argv=None) -> int:
         report = ev.run_pareto(policy, preferences, gammas, out, tracks=tracks, rhos=rhos, episodes=episodes,
                                base_seed=args.seed, duration=duration, workers=args.workers,
                                progress=not args.no_progress, stack=args.stack, scenario=args.scenario,
-                               backend=args.backend, address=args.address)
+                               backend=args.backend, address=args.address, n_opponents=args.opponents)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished episodes are in {out}; rerun the same command to resume", file=sys.stderr)
         return 130

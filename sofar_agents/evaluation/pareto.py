@@ -201,9 +201,11 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
                out_dir: str | os.PathLike, *, tracks: Sequence[str] = TRACKS, rhos: Sequence[float] = RHOS,
                episodes: int = 5, base_seed: int = 0, duration: float = DEFAULT_DURATION,
                workers: int | None = None, progress: bool = True, stack: str = "sofar", scenario: str = "paper",
-               backend: str = "local", address: str | None = None, prefix: str = "pareto") -> ParetoReport:
+               backend: str = "local", address: str | None = None, prefix: str = "pareto",
+               n_opponents: int | None = None) -> ParetoReport:
     """Run (or resume) the sweep of the fixed ``gammas`` and of ``policy`` at each of ``preferences`` into
-    ``out_dir/<prefix>_episodes.csv``; write ``<prefix>.md``, ``<prefix>.json`` and ``<prefix>.png``."""
+    ``out_dir/<prefix>_episodes.csv``; write ``<prefix>.md``, ``<prefix>.json`` and ``<prefix>.png``
+    (``n_opponents``: the field size, None for the environment's default of 4)."""
     strategies = [Strategy.fixed(g) for g in gammas]
     if policy is not None:
         for pref in preferences:
@@ -213,7 +215,8 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
         raise ValueError("nothing to evaluate: give fixed gammas or a policy")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    tasks = table1_tasks(strategies, tracks, rhos, episodes, base_seed, duration, stack=stack, scenario=scenario)
+    tasks = table1_tasks(strategies, tracks, rhos, episodes, base_seed, duration, stack=stack, scenario=scenario,
+                         n_opponents=n_opponents)
     csv_path = out / f"{prefix}_episodes.csv"
     stats = run_sweep(tasks, csv_path, workers=workers, progress=progress, backend=backend, address=address)
     rows = select_rows(read_episode_csv(csv_path), tasks)
@@ -226,6 +229,8 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
     settings = {"tracks": ", ".join(tracks), "rho": ", ".join(_fmt_float(r) for r in rhos),
                 "episodes per (track, rho)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed,
                 "controller": stack, "world": scenario}
+    if n_opponents is not None:
+        settings["opponents"] = n_opponents
     md = _markdown(points, hv, settings)
     if len(rows) < len(tasks):
         md += f"\n**Incomplete:** {len(tasks) - len(rows)} of {len(tasks)} episodes are missing; rerun to finish.\n"
