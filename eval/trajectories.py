@@ -106,10 +106,10 @@ def record(args: argparse.Namespace) -> int:
 def compare(args: argparse.Namespace) -> int:
     a, b = np.load(args.a), np.load(args.b)
     keys_a, keys_b = set(a.files), set(b.files)
-    bad = 0
-    for key in sorted(keys_a ^ keys_b):
+    missing = sorted(keys_a ^ keys_b)
+    for key in missing:
         logger.error("only in %s: %s", args.a if key in keys_a else args.b, key)
-        bad += 1
+    bad = 0
     for key in sorted(keys_a & keys_b):
         x, y = a[key], b[key]
         if x.shape != y.shape:
@@ -121,9 +121,10 @@ def compare(args: argparse.Namespace) -> int:
                          float(np.nanmax(np.abs(x - y))))
             bad += 1
     n = len(keys_a & keys_b)
-    logger.info("%d of %d arrays identical to the bit", n - bad if bad <= n else 0, n)
-    print(f"{'IDENTICAL' if bad == 0 else 'DIFFERENT'}: {n} arrays compared, {bad} differ")
-    return 0 if bad == 0 else 1
+    logger.info("%d of %d common arrays identical to the bit; %d arrays in only one file", n - bad, n, len(missing))
+    print(f"{'IDENTICAL' if bad == 0 and not missing else 'DIFFERENT'}: {n} arrays compared, {bad} differ, "
+          f"{len(missing)} in only one file")
+    return 0 if bad == 0 and not missing else 1
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -143,10 +143,10 @@ def observe(race, car: int = 0, opponents: np.ndarray | None = None, layout: str
     """
     if opponents is None:
         opponents = race.opponent_frenet(car)
-    opponents = np.asarray(opponents, float)
-    obs = scale(raw_observation(race.track, race.frenet[car], opponents[:, :3] if opponents.ndim == 2 else opponents))
     if layout == "paper":
-        return obs
+        return scale(raw_observation(race.track, race.frenet[car], opponents))
+    opponents = np.asarray(opponents, float)
+    obs = scale(raw_observation(race.track, race.frenet[car], opponents[:, :3]))
     extra = extra_observation(race.track, race.frenet[car], opponents, barrier_params)
     extra = 2.0 * (np.clip(extra, _EXT_LOW, EXTENDED_HIGH[12:]) - _EXT_LOW) / _EXT_SPAN - 1.0
     return np.concatenate([obs, extra.astype(np.float32)])

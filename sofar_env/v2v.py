@@ -27,24 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .stack.prediction import TravelTime
+
 __all__ = ["TravelTime", "published_advance", "speed_for_advance"]
-
-
-class TravelTime:
-    """Travel time ``T(s)`` along a circuit's speed profile over two laps (``T(0) = 0``) [s]."""
-
-    def __init__(self, track):
-        self.track = track
-        samples = np.asarray(track.s, float)
-        length = float(track.length)
-        grid = np.concatenate([samples, samples + length, [2.0 * length]])
-        v_prof = np.maximum(np.asarray(track.speed(grid), float), 0.1)
-        self._s = grid
-        self._t = np.concatenate([[0.0], np.cumsum(2.0 * np.diff(grid) / (v_prof[1:] + v_prof[:-1]))])
-
-    def __call__(self, s: np.ndarray) -> np.ndarray:
-        """``T`` at arc lengths ``s`` in ``[0, 2 L]`` [s]."""
-        return np.interp(s, self._s, self._t)
 
 
 def published_advance(times: np.ndarray, s_pred: np.ndarray, v_last: float, elapsed: float,

@@ -22,7 +22,7 @@ import numpy as np
 from .._interp import interp
 from ..vehicle import VehicleParams
 
-__all__ = ["relative_opponents", "lateral_motion", "OpponentPredictor", "ego_node_positions",
+__all__ = ["relative_opponents", "lateral_motion", "TravelTime", "OpponentPredictor", "ego_node_positions",
            "braking_positions"]
 
 
@@ -62,6 +62,26 @@ def lateral_motion(track, ego_s: float, opp_rel: np.ndarray, horizon: float, dea
     return n_end, (n_end - n) / horizon
 
 
+class TravelTime:
+    """Travel time ``T(s)`` along a circuit's speed profile over two laps (``T(0) = 0``) [s]: the table of the
+    pace-ratio prediction (:class:`OpponentPredictor`) and of the V2V plan speeds (:mod:`sofar_env.v2v`)."""
+
+    def __init__(self, track):
+        self.track = track
+        samples = np.asarray(track.s, float)
+        L = float(track.length)
+        grid = np.concatenate([samples, samples + L, [2.0 * L]])
+        v_prof = np.maximum(np.asarray(track.speed(grid), float), 0.1)
+        self.s = grid
+        """Arc length over two laps [m]."""
+        self.t = np.concatenate([[0.0], np.cumsum(2.0 * np.diff(grid) / (v_prof[1:] + v_prof[:-1]))])
+        """Travel time at :attr:`s` [s]."""
+
+    def __call__(self, s: np.ndarray) -> np.ndarray:
+        """``T`` at arc lengths ``s`` in ``[0, 2 L]`` [s]."""
+        return interp(s, self.s, self.t)  # np.interp
+
+
 class OpponentPredictor:
     """Opponent arc lengths over a horizon: at constant speed, or at their pace ratio.
 
@@ -73,12 +93,8 @@ class OpponentPredictor:
     def __init__(self, track, pace_ratio: bool = True):
         self.track = track
         self.pace_ratio = bool(pace_ratio)
-        samples = np.asarray(track.s, float)
-        L = float(track.length)
-        grid = np.concatenate([samples, samples + L, [2.0 * L]])
-        v_prof = np.maximum(np.asarray(track.speed(grid), float), 0.1)
-        self._s = grid  # arc length over two laps [m]
-        self._t = np.concatenate([[0.0], np.cumsum(2.0 * np.diff(grid) / (v_prof[1:] + v_prof[:-1]))])  # [s]
+        table = TravelTime(track)
+        self._s, self._t = table.s, table.t  # arc length [m] and travel time [s] over two laps
 
     def __call__(self, ego_s: float, opp_rel: np.ndarray, times: np.ndarray) -> np.ndarray:
         """(M, len(times)) arc lengths [m] at ``times`` [s] of the opponents ``opp_rel`` (rows
