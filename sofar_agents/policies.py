@@ -52,13 +52,17 @@ GAMMA_HIGH = GAMMA_MAX
 class PASTAPolicy:
     """Deterministic PASTA actor evaluated in numpy (float32).
 
-    ``gamma = low + (high - low) * sigmoid(mean_net([obs, w]))``; the preference
-    part of the first layer is folded into its bias (see :meth:`set_preference`).
+    ``gamma = low + (high - low) * sigmoid(mean_net([obs, w]))`` (``squashing="sigmoid"``)
+    or ``gamma = clip(mean_net([obs, w]), low, high)`` (``squashing="clip"``); the
+    preference part of the first layer is folded into its bias (see :meth:`set_preference`).
     """
 
     def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], obs_dim: int, preference: Any,
                  action_low: Any, action_high: Any, path: str | Path | None = None,
-                 objective_names: Any = None) -> None:
+                 objective_names: Any = None, squashing: str = "sigmoid") -> None:
+        if squashing not in ("sigmoid", "clip"):
+            raise ValueError(f"squashing must be 'sigmoid' or 'clip', got {squashing!r}")
+        self.squashing = squashing
         self.obs_dim = int(obs_dim)
         self.path = Path(path) if path is not None else None
         self._where = f"{self.path}: " if self.path is not None else ""
@@ -104,7 +108,10 @@ class PASTAPolicy:
             h = np.tanh(h @ w + b)
         w, b = self._rest[-1]
         out = h @ w + b
-        gamma = self.action_low + self._scale / (1.0 + np.exp(-out))
+        if self.squashing == "clip":
+            gamma = out
+        else:
+            gamma = self.action_low + self._scale / (1.0 + np.exp(-out))
         return np.clip(gamma, self.action_low, self.action_high).astype(np.float32, copy=False)
 
     def __repr__(self) -> str:
@@ -135,7 +142,8 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
     layers = read_actor_layers(meta, pt_path)
     return PASTAPolicy(layers, meta["obs_dim"], meta["preference"] if preference is None else preference,
                        meta["action_low"], meta["action_high"], path=json_path,
-                       objective_names=meta.get("objective_names"))
+                       objective_names=meta.get("objective_names"),
+                       squashing=meta.get("action_squashing", "sigmoid"))
 
 
 SHIPPED_POLICIES: dict[tuple[str, str], str] = {

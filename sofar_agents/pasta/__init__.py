@@ -31,13 +31,16 @@ PPO with three additions:
    negative cosine above ``kappa``), and follows that target through an EMA.
    Optionally the per-objective gradients are de-conflicted with PCGrad.
 
-Action squashing: the actor is a Gaussian over a pre-activation ``u``; the action
-is ``a = low + (high - low) * sigmoid(u)``. The PPO ratio is computed on ``u``
-(the change-of-variables term cancels in the ratio); :meth:`PASTA.log_prob`
-returns the log-density of ``a`` including ``-log|da/du|``. The deterministic
-action is the squashed mean (the median of the squashed distribution). The
-entropy bonus is the entropy of the squashed distribution, estimated with one
-reparameterised sample per state.
+Action squashing: the actor is a Gaussian over a pre-activation ``u``. By default
+(``action_squashing="sigmoid"``) the action is ``a = low + (high - low) * sigmoid(u)``;
+the PPO ratio is computed on ``u`` (the change-of-variables term cancels in the
+ratio); :meth:`PASTA.log_prob` returns the log-density of ``a`` including
+``-log|da/du|``. The deterministic action is the squashed mean (the median of the
+squashed distribution). The entropy bonus is the entropy of the squashed
+distribution, estimated with one reparameterised sample per state. With
+``action_squashing="clip"`` ``u`` is in action units and ``a = clip(u, low, high)``
+(the reference's ``gamma = 0.05 + 0.95 mu``, clipped): a censored Gaussian whose
+deterministic action reaches a bound exactly; the entropy bonus is that of ``u``.
 
 Rollouts are collected from a Gymnasium vector environment created with
 ``autoreset_mode=AutoresetMode.SAME_STEP``; all randomness comes from generators

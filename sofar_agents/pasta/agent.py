@@ -25,7 +25,7 @@ from sofar_agents.pasta.attention import MuController, attention_weights, normal
 from sofar_agents.pasta.buffer import RolloutBuffer
 from sofar_agents.pasta.checkpoint import load_agent, save_agent
 from sofar_agents.pasta.config import PASTAConfig
-from sofar_agents.pasta.distribution import SigmoidSquash, gaussian_log_prob
+from sofar_agents.pasta.distribution import make_squash
 from sofar_agents.pasta.gae import compute_gae
 from sofar_agents.pasta.networks import Actor, BranchedCritic, network_inputs
 from sofar_agents.pasta.rollout import RolloutCollector
@@ -87,12 +87,17 @@ class PASTA:
         cfg = self.config
         in_dim = self.obs_dim + self.n_objectives
         self.actor = Actor(in_dim, self.act_dim, cfg.hidden_sizes, cfg.log_std_init, self.torch_gen)
-        if cfg.initial_action is not None:
-            frac = (cfg.initial_action - self.action_low) / (self.action_high - self.action_low)
+        self.squash = make_squash(cfg.action_squashing, self.action_low, self.action_high)
+        start = cfg.initial_action
+        if start is None and cfg.action_squashing == "clip":
+            start = 0.5 * (self.action_low + self.action_high)  # the sigmoid's zero bias: mid-range
+        if start is not None:
+            frac = (start - self.action_low) / (self.action_high - self.action_low)
             if not np.all((frac > 0.0) & (frac < 1.0)):
                 raise ValueError(f"initial_action {cfg.initial_action} must lie strictly inside the action bounds")
             with torch.no_grad():
-                self.actor.mean_net[-1].bias.copy_(torch.as_tensor(np.log(frac / (1.0 - frac)), dtype=torch.float32))
+                self.actor.mean_net[-1].bias.copy_(torch.as_tensor(self.squash.initial_bias(start),
+                                                                   dtype=torch.float32))
         self.critic = BranchedCritic(in_dim, self.n_objectives, cfg.hidden_sizes, cfg.critic_head_hidden,
                                      self.torch_gen)
         self.optimizer = torch.optim.Adam(
@@ -101,7 +106,6 @@ class PASTA:
             eps=cfg.adam_eps,
             fused=True,
         )
-        self.squash = SigmoidSquash(self.action_low, self.action_high)
 
         self.return_rms = RunningMeanStd(shape=(self.n_objectives,))
         self.mu_controller = MuController.from_config(cfg)
@@ -186,9 +190,7 @@ class PASTA:
         x = network_inputs(obs2, np.tile(w, (obs2.shape[0], 1)))
         a = torch.as_tensor(np.asarray(action, dtype=np.float32).reshape(-1, self.act_dim))
         with torch.inference_mode():
-            u = self.squash.inverse(a)
-            lp = gaussian_log_prob(u, self.actor(x), self.actor.log_std)
-            lp = lp - self.squash.log_abs_det_jacobian(u)
+            lp = self.squash.action_log_prob(a, self.actor(x), self.actor.log_std)
         return lp.numpy()
 
     # ----------------------------------------------------------------- rollout

@@ -4,7 +4,8 @@ A checkpoint is a pair of files with a common stem (format_version 1):
 
 - ``<stem>.json``: ``format_version``, ``algorithm``, ``weights_file``, ``obs_dim``,
   ``n_objectives``, ``objective_names``, ``act_dim``, ``action_low``, ``action_high``,
-  ``action_squashing`` (``"sigmoid"``: ``a = low + (high - low) * sigmoid(u)``),
+  ``action_squashing`` (``"sigmoid"``: ``a = low + (high - low) * sigmoid(u)``, or
+  ``"clip"``: ``a = clip(u, low, high)``; the same as ``config.action_squashing``),
   ``activation`` (``"tanh"``), the deployment ``preference``, the agent's ``seed``,
   the PASTA ``config``, the optimiser ``state`` counters and ``training`` metadata
   (command, seed, env, code version, steps, wall time).
@@ -38,7 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sofar_agents.pasta.config import PASTAConfig
+from sofar_agents.pasta.config import SQUASHINGS, PASTAConfig
 
 if TYPE_CHECKING:
     from sofar_agents.pasta.agent import PASTA
@@ -114,9 +115,14 @@ def read_checkpoint_metadata(path: str | Path) -> tuple[dict[str, Any], Path, Pa
     if np.any(low >= high):
         raise ValueError(f"{json_path}: action_low {meta['action_low']} must lie below action_high "
                          f"{meta['action_high']} in every component")
-    if meta.get("action_squashing", "sigmoid") != "sigmoid" or meta.get("activation", "tanh") != "tanh":
+    squashing = meta.get("action_squashing", "sigmoid")
+    if squashing not in SQUASHINGS or meta.get("activation", "tanh") != "tanh":
         raise ValueError(f"{json_path}: unsupported squashing/activation "
                          f"{meta.get('action_squashing')!r}/{meta.get('activation')!r}")
+    config = meta["config"]
+    if config.get("action_squashing", "sigmoid") != squashing:
+        raise ValueError(f"{json_path}: action_squashing {squashing!r} disagrees with the config's "
+                         f"{config.get('action_squashing', 'sigmoid')!r}")
     if "weights_file" in meta:
         pt_path = json_path.parent / meta["weights_file"]
     if not pt_path.is_file():
@@ -265,7 +271,7 @@ def save_agent(agent: PASTA, path: str | Path, metadata: dict[str, Any] | None =
         "act_dim": agent.act_dim,
         "action_low": [float(str(v)) for v in agent.action_low],
         "action_high": [float(str(v)) for v in agent.action_high],
-        "action_squashing": "sigmoid",
+        "action_squashing": agent.config.action_squashing,
         "activation": "tanh",
         "preference": [float(v) for v in agent.preference],
         "seed": agent.seed,

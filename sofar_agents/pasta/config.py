@@ -6,7 +6,11 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["PASTAConfig"]
+__all__ = ["SQUASHINGS", "PASTAConfig"]
+
+
+SQUASHINGS = ("sigmoid", "clip")
+"""Names of the action squashings (``PASTAConfig.action_squashing``, the checkpoint JSON)."""
 
 
 @dataclass(frozen=True)
@@ -104,7 +108,13 @@ class PASTAConfig:
     critic_head_hidden: int = 64
     """Hidden width of each per-objective value head (0 = a single linear layer)."""
     log_std_init: float = -0.5
-    """Initial log standard deviation of the pre-squash Gaussian (state independent)."""
+    """Initial log standard deviation of the pre-squash Gaussian (state independent); in
+    action units with ``action_squashing="clip"`` (e.g. -2.3 for a spread of 0.1 in gamma)."""
+    action_squashing: str = "sigmoid"
+    """How the Gaussian ``u`` becomes the box action: ``"sigmoid"``, ``a = low + (high - low)
+    * sigmoid(u)`` (the bounds only in the limit), or ``"clip"``, ``a = clip(u, low, high)``
+    with ``u`` in action units (a censored Gaussian: a deterministic policy can sit exactly
+    on a bound). See :mod:`sofar_agents.pasta.distribution`."""
     initial_action: float | None = None
     """If set, the actor's output bias is initialised so that the deterministic action of
     the untrained policy is this value (in action units, strictly inside the bounds), e.g. a
@@ -129,6 +139,8 @@ class PASTAConfig:
             raise ValueError(f"kappa must lie in [0, 1), got {self.kappa}")
         if self.scalarization not in ("stch", "linear"):
             raise ValueError(f"scalarization must be 'stch' or 'linear', got {self.scalarization!r}")
+        if self.action_squashing not in SQUASHINGS:
+            raise ValueError(f"action_squashing must be one of {SQUASHINGS}, got {self.action_squashing!r}")
         if self.preference_sampling not in ("dirichlet", "fixed"):
             raise ValueError(
                 f"preference_sampling must be 'dirichlet' or 'fixed', got {self.preference_sampling!r}"

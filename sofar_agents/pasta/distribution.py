@@ -1,9 +1,17 @@
-"""The squashed Gaussian policy distribution of PASTA (torch).
+"""The bounded-Gaussian policy distributions of PASTA (torch).
 
-The actor is a diagonal Gaussian over a pre-activation ``u``; the action is
-``a = low + (high - low) * sigmoid(u)``. The PPO ratio is computed on ``u`` (the
-change-of-variables term cancels in the ratio); the density of ``a`` subtracts
-``log|da/du|`` (:meth:`SigmoidSquash.log_abs_det_jacobian`).
+The actor is a diagonal Gaussian over a pre-activation ``u``; a *squashing* maps ``u``
+to the box action. The PPO ratio is computed on ``u`` in both cases.
+
+- ``"sigmoid"`` (:class:`SigmoidSquash`): ``a = low + (high - low) * sigmoid(u)``, a
+  bijection; the density of ``a`` subtracts ``log|da/du|``. The bounds are reached only
+  in the limit ``u -> +-inf``.
+- ``"clip"`` (:class:`ClipSquash`): ``a = clip(u, low, high)`` with ``u`` in action units
+  (the mapping of the paper's reference, ``gamma = 0.05 + 0.95 mu`` clipped, and of
+  Stable-Baselines3's Gaussian policies). The action distribution is a *censored*
+  Gaussian: a point mass at each bound and the Gaussian density inside. A deterministic
+  policy can sit exactly on a bound (e.g. the most conservative barrier decay) wherever
+  its mean lies beyond it.
 """
 
 from __future__ import annotations
@@ -14,7 +22,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-__all__ = ["gaussian_log_prob", "SigmoidSquash"]
+from sofar_agents.pasta.config import SQUASHINGS
+
+__all__ = ["SQUASHINGS", "ClipSquash", "SigmoidSquash", "gaussian_log_prob", "make_squash"]
 
 
 def gaussian_log_prob(u: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
@@ -33,6 +43,7 @@ class SigmoidSquash:
     def __init__(self, low: np.ndarray, high: np.ndarray) -> None:
         self.low = torch.as_tensor(low)
         self.scale = torch.as_tensor(high - low)
+        self._bounds = (np.asarray(low), np.asarray(high))
 
     def __call__(self, u: torch.Tensor) -> torch.Tensor:
         """The action for pre-activation ``u``."""
@@ -46,3 +57,64 @@ class SigmoidSquash:
     def log_abs_det_jacobian(self, u: torch.Tensor) -> torch.Tensor:
         """log |da/du| at ``u``, summed over the action dims."""
         return (torch.log(self.scale) - F.softplus(-u) - F.softplus(u)).sum(-1)
+
+
+    def initial_bias(self, action: np.ndarray) -> np.ndarray:
+        """The mean ``u`` whose action is ``action`` (strictly inside the bounds)."""
+        low, high = self._bounds
+        frac = (action - low) / (high - low)
+        return np.log(frac / (1.0 - frac))
+
+    def action_log_prob(self, action: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+        """log-density of ``action`` under the squashed Gaussian N(mean, exp(log_std)^2) of ``u``."""
+        u = self.inverse(action)
+        return gaussian_log_prob(u, mean, log_std) - self.log_abs_det_jacobian(u)
+
+
+class ClipSquash:
+    """``a = clip(u, low, high)``: a Gaussian in action units, censored at the bounds.
+
+    Args:
+        low, high: action bounds (float32 arrays of shape ``(act_dim,)``), in action units.
+    """
+
+    def __init__(self, low: np.ndarray, high: np.ndarray) -> None:
+        self.low = torch.as_tensor(low)
+        self.high = torch.as_tensor(high)
+
+    def __call__(self, u: torch.Tensor) -> torch.Tensor:
+        """The action for pre-clip ``u``."""
+        return torch.minimum(torch.maximum(u, self.low), self.high)
+
+    def log_abs_det_jacobian(self, u: torch.Tensor) -> torch.Tensor:
+        """Zero: inside the bounds the map is the identity (the entropy bonus is that of ``u``)."""
+        return torch.zeros(u.shape[:-1], dtype=u.dtype)
+
+    def initial_bias(self, action: np.ndarray) -> np.ndarray:
+        """The mean ``u`` whose action is ``action``: the action itself."""
+        return np.asarray(action, np.float64)
+
+    def action_log_prob(self, action: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+        """Log-likelihood of ``action`` under the censored Gaussian, summed over the action dims.
+
+        Inside the bounds it is the Gaussian log-density; on a bound it is the log of the
+        probability mass clipped onto it (``log P(u <= low)`` or ``log P(u >= high)``).
+        """
+        std = torch.exp(log_std)
+        z = (action - mean) / std
+        dens = -0.5 * z * z - log_std - 0.5 * math.log(2.0 * math.pi)
+        normal = torch.distributions.Normal(torch.zeros(()), torch.ones(()))
+        at_low = action <= self.low
+        at_high = action >= self.high
+        lo_mass = torch.log(normal.cdf((self.low - mean) / std).clamp_min(1e-30))
+        hi_mass = torch.log((1.0 - normal.cdf((self.high - mean) / std)).clamp_min(1e-30))
+        return torch.where(at_low, lo_mass, torch.where(at_high, hi_mass, dens)).sum(-1)
+
+
+def make_squash(name: str, low: np.ndarray, high: np.ndarray) -> SigmoidSquash | ClipSquash:
+    """The squashing called ``name`` (one of :data:`SQUASHINGS`) for the box ``[low, high]``."""
+    if name == "sigmoid":
+        return SigmoidSquash(low, high)
+    if name == "clip":
+        return ClipSquash(low, high)
+    raise ValueError(f"unknown action squashing {name!r}; valid: {', '.join(SQUASHINGS)}")

@@ -42,7 +42,7 @@ import torch
 
 from sofar_agents.ray_support import init_ray, require_ray
 from sofar_agents.pasta.buffer import RolloutBuffer
-from sofar_agents.pasta.distribution import SigmoidSquash, gaussian_log_prob
+from sofar_agents.pasta.distribution import gaussian_log_prob, make_squash
 from sofar_agents.pasta.networks import Actor, network_inputs
 from sofar_agents.pasta.rollout import EPISODE_INFO_KEYS, _info_item, reward_vectors
 
@@ -76,11 +76,11 @@ class _EnvSlice:
     def begin(self, state: dict[str, np.ndarray], spec: tuple, noise: np.ndarray, prefs: np.ndarray,
               n_objectives: int, max_steps: int) -> dict[str, Any]:
         """Start a rollout of ``len(noise)`` steps with the actor weights ``state``; run the first chunk."""
-        in_dim, act_dim, hidden, log_std_init, low, high = spec
+        in_dim, act_dim, hidden, log_std_init, low, high, squashing = spec
         if self.policy is None:
             self.policy = Actor(in_dim, act_dim, tuple(hidden), log_std_init, torch.Generator().manual_seed(0))
             self.low, self.high = np.array(low), np.array(high)  # writable copies of Ray's read-only arrays
-            self.squash = SigmoidSquash(self.low, self.high)
+            self.squash = make_squash(squashing, self.low, self.high)
         self.policy.load_state_dict({k: torch.tensor(v) for k, v in state.items()})
         self.std = torch.exp(self.policy.log_std.detach())
         self.noise, self.prefs, self.k = noise, prefs.copy(), int(n_objectives)
@@ -224,7 +224,7 @@ class RayEnvPool:
                           for _ in range(t_steps)])  # the local collector's per-step draws, in its order
         state = ray.put({k: v.detach().numpy() for k, v in agent.actor.state_dict().items()})
         spec = (agent.obs_dim + agent.n_objectives, agent.act_dim, agent.config.hidden_sizes,
-                agent.config.log_std_init, agent.action_low, agent.action_high)
+                agent.config.log_std_init, agent.action_low, agent.action_high, agent.config.action_squashing)
         chunks: list[list[dict]] = [[] for _ in range(n_w)]
         known = [-1] * n_w  # last step each actor has reported
         waiting: dict[int, int] = {}  # actor -> step at which one of its envs ended an episode

@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from sofar_agents.pasta.config import PASTAConfig
-from sofar_agents.pasta.distribution import SigmoidSquash, gaussian_log_prob
+from sofar_agents.pasta.distribution import ClipSquash, SigmoidSquash, gaussian_log_prob
 from sofar_agents.pasta.gradients import (
     add_flat_gradient,
     gradient_conflict_ratio,
@@ -54,7 +54,7 @@ def ppo_epochs(
     actor: nn.Module,
     critic: nn.Module,
     optimizer: torch.optim.Optimizer,
-    squash: SigmoidSquash,
+    squash: SigmoidSquash | ClipSquash,
     batch: UpdateBatch,
     config: PASTAConfig,
     rng: np.random.Generator,
