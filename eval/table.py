@@ -63,7 +63,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
                    help="controller preset: sofar (default) or paper (the paper's Algorithm 1 as written)")
     p.add_argument("--opponents", type=int, default=None,
-                   help="Table I: opponents per episode (default: the environment's 4; part of the resume key)")
+                   help="Table I: opponents per episode (default: the environment's 4); with --multi-agent: scripted "
+                        "opponents besides the controlled cars (default 0); part of the resume key")
     p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")
     p.add_argument("--policy", default=None, help="adaptive policy checkpoint (default: the shipped one)")
     p.add_argument("--no-adaptive", action="store_true", help="leave out the adaptive policy")
@@ -145,7 +146,8 @@ def multi_agent_main(args: argparse.Namespace) -> int:
     try:
         report = run_multi_agent_table(strategies, out, tracks=tracks, races=episodes, base_seed=args.seed,
                                        cars=args.cars, duration=duration, stack=args.stack, scenario=args.scenario,
-                                       workers=args.workers, progress=not args.no_progress)
+                                       workers=args.workers, progress=not args.no_progress,
+                                       opponents=args.opponents or 0)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished races are in {out}; rerun the same command to resume", file=sys.stderr)
         return 130

@@ -1,8 +1,9 @@
 """PettingZoo parallel environment: several cars, each driven by its own overtaking stack.
 
 A thin adapter over the same simulation core as the Gymnasium environment
-(:class:`~sofar_env.core.ControlledRace`), with ``n_agents`` controlled cars and no scripted opponents:
-every car's opponents are the other active cars (``race.opponent_frenet(car)``).
+(:class:`~sofar_env.core.ControlledRace`), with ``n_agents`` controlled cars and, optionally,
+``n_opponents`` scripted opponents (default none): every car's opponents are the other active cars and
+the scripted ones (``race.opponent_frenet(car)``).
 Each agent's action is its own gamma; observation, action, reward terms and info
 are those of :class:`~sofar_env.env.SOfARRaceEnv`, per car (wall-clock solve times
 only with ``timing_info=True``).
@@ -31,10 +32,16 @@ terminates and leaves the race (it stops and no longer counts as an obstacle); i
 collision between two cars both terminate. All remaining cars are truncated at the race duration.
 Each car's controller predicts the others from what it senses; with ``race={"v2v": True}`` the cars
 also share their MPC plans and predict each other from them (:mod:`sofar_env.v2v`).
-The ``scenario`` key of the interactive world (:mod:`sofar_env.scenarios`) applies here too, without
-its scripted opponents (the multi-agent race has none).
+The ``scenario`` key of the interactive world (:mod:`sofar_env.scenarios`) applies here too.
 
-``reset(options=...)`` accepts ``start_s`` and ``start_speed``; other keys are
+**Scripted opponents.** ``n_opponents=k`` (or the reset option) adds the scripted field of the
+single-car environment at pace ratio ``rho`` (the config's ``race.opponents.rho``, or the reset
+option), starting at its configured gaps ahead of the pole. It is not respawned: the controlled cars
+pass it and lap it, and each pass is credited to the passer (:mod:`sofar_env.race`). With
+``scenario="interactive"`` the scripted cars race back: each defends against the nearest controlled
+car behind it and keeps clear of every controlled car alongside.
+
+``reset(options=...)`` accepts ``start_s``, ``start_speed``, ``rho`` and ``n_opponents``; other keys are
 ignored with a logged warning (PettingZoo's API test passes arbitrary options).
 """
 
@@ -59,7 +66,7 @@ __all__ = ["SOfARParallelEnv", "parallel_env"]
 
 logger = logging.getLogger(__name__)
 
-_MA_RESET_OPTIONS = ("start_s", "start_speed")
+_MA_RESET_OPTIONS = ("start_s", "start_speed", "rho", "n_opponents")
 
 
 class SOfARParallelEnv(ParallelEnv):
@@ -73,9 +80,9 @@ class SOfARParallelEnv(ParallelEnv):
         if int(n_agents) < 1:
             raise ValueError(f"n_agents must be >= 1, got {n_agents}")
         cfg = make_env_config(config, **kwargs)
-        if cfg.n_opponents and ("n_opponents" in kwargs or (isinstance(config, Mapping) and "n_opponents" in config)):
-            raise ValueError("the multi-agent environment has no scripted opponents: the other cars are the opponents")
-        self.config = apply_overrides(cfg, {"race": {"opponents": {"n_opponents": 0}}})
+        if not ("n_opponents" in kwargs or (isinstance(config, Mapping) and "n_opponents" in config)):
+            cfg = apply_overrides(cfg, {"race": {"opponents": {"n_opponents": 0}}})  # default: controlled cars only
+        self.config = cfg
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.render_mode = render_mode

@@ -3,17 +3,18 @@
 ``Race`` is the one simulation core under the Gymnasium and PettingZoo
 adapters. It holds ``n_cars`` controlled cars (the ego is car 0; the
 PettingZoo environment uses several) integrated by :class:`~sofar_env.vehicle.Plant`,
-plus a field of scripted :class:`~sofar_env.opponents.Opponents` (single-ego
-races only). Every step it reports, per controlled car:
+plus a field of scripted :class:`~sofar_env.opponents.Opponents`. Every step it reports, per
+controlled car:
 
 * ``collision``: its footprint (an oriented ``length x width`` rectangle)
   intersects the footprint of an opponent or of another controlled car;
 * ``off_track``: a corner of its footprint lies beyond an edge, i.e. the
   corner's Frenet offset exceeds ``width_left(s)`` or ``-width_right(s)`` at the
   corner's own arc length;
-* ``overtakes``: scripted opponents counted as overtaken (and respawned), or,
-  between controlled cars, another car that was ahead and fell
-  ``overtake_threshold`` behind;
+* ``overtakes``: in a single-car race, scripted opponents counted as overtaken
+  (and respawned ahead, the paper's protocol); in a multi-car race, another
+  controlled car or a scripted opponent that was ahead of this car and fell
+  ``overtake_threshold`` behind it (see *Scripted opponents in a multi-car race*);
 * ``progress``: arc length gained along the track [m]; laps = total progress /
   track length.
 
@@ -30,6 +31,14 @@ car, or the last car of an odd field) starts on the raceline. A car whose offset
 would bring its footprint within ``START_EDGE_MARGIN`` of an edge is moved inwards;
 since the stagger is longer than a car, no two footprints overlap. Every car starts
 at the drawn fraction of the speed profile at its own arc length.
+
+**Scripted opponents in a multi-car race.** They start at their configured gaps ahead of the pole
+and are never respawned: they are slower traffic that the controlled cars pass, and lap. Each
+controlled car is credited once per pass of each scripted opponent (the unwrapped gap from the car
+to the opponent, as between controlled cars); once the opponent is more than half a lap behind the
+car it counts as ahead again, so lapping it is another pass. With the interactive behaviours on,
+each opponent defends against the nearest controlled car behind it and keeps clear of every
+controlled car alongside (:func:`~sofar_env.opponents.steering.steer`).
 """
 
 from __future__ import annotations
@@ -97,6 +106,8 @@ class Race:
         self.overtakes = np.zeros(self.n_cars, int)
         self._car_rel = np.zeros((self.n_cars, self.n_cars))
         self._car_ahead = np.zeros((self.n_cars, self.n_cars), bool)
+        self._opp_rel = np.zeros((self.n_cars, 0))  # multi-car races: unwrapped gap car -> scripted opponent
+        self._opp_ahead = np.zeros((self.n_cars, 0), bool)
         # off-track prefilter: the smallest width within +-_EDGE_WINDOW of each raceline sample
         # (the corners' own projections are only needed near an edge)
         p = self.config.vehicle
@@ -135,8 +146,7 @@ class Race:
                                  f"where it is narrowest (raceline-to-edge {wl:.2f} m left, {wr:.2f} m right, car "
                                  f"half-width {half_width:g} m): use offsets in [{half_width - wr:.2f}, "
                                  f"{wl - half_width:.2f}] m")
-        if self.n_cars == 1:
-            self.check_opponent_count(cfg.n_opponents)
+        self.check_opponent_count(cfg.n_opponents)
 
     # ------------------------------------------------------------------ reset
     def check_reset(self, *, start_s=None, start_speed=None, rho=None, n_opponents=None) -> None:
@@ -156,8 +166,6 @@ class Race:
         if n_opponents is not None:
             if not (_is_real(n_opponents) and float(n_opponents) == int(n_opponents) and n_opponents >= 0):
                 raise ValueError(f"n_opponents must be a whole number >= 0, got {n_opponents!r}")
-            if n_opponents and self.n_cars > 1:
-                raise ValueError("scripted opponents are supported in single-car races only")
             self.check_opponent_count(int(n_opponents))
 
     def check_opponent_count(self, n: int) -> None:
@@ -166,7 +174,7 @@ class Race:
             return
         cfg = self.config.opponents
         furthest = cfg.gap(n - 1)
-        room = self.track.length - self.config.opponents.respawn_clearance
+        room = self.track.length - self.config.opponents.respawn_clearance - self._grid_back(self.n_cars - 1)
         if furthest >= room:
             raise ValueError(f"n_opponents = {n} does not fit on {self.track.name}: the last opponent would spawn "
                              f"{furthest:.0f} m ahead, beyond the lap ({self.track.length:.0f} m) less "
@@ -175,7 +183,7 @@ class Race:
     def max_opponents(self) -> int:
         """The largest opponent count whose spawn gaps fit on the lap."""
         cfg = self.config.opponents
-        room = self.track.length - cfg.respawn_clearance
+        room = self.track.length - cfg.respawn_clearance - self._grid_back(self.n_cars - 1)
         n = 0
         while cfg.gap(n) < room and n < 10_000:
             n += 1
@@ -206,15 +214,22 @@ class Race:
             self.frenet[k] = (s_k, n_k, 0.0, v_k, 0.0)
             if self.dynamic:
                 self.plant_states[k] = self.plant.initial_state(float(x), float(y), psi, v_k, 0.0)
-        if n_opponents and self.n_cars > 1:
-            raise ValueError("scripted opponents are supported in single-car races only")
         if self.dynamic:  # drawn only in this world: the paper world's random stream is unchanged
             self.mu = float(rng.uniform(*self.config.dynamic.mu_range))
-        self.opponents.reset(self.frenet[0, 0], rho=rho, n_opponents=0 if self.n_cars > 1 else n_opponents,
+        self.opponents.reset(self.frenet[0, 0], rho=rho, n_opponents=n_opponents,
                              rng=rng if self.config.opponents.interactive else None)
+        if self.n_cars > 1:  # gap from each car to each opponent, unwrapped: the pole's gap plus the car's place
+            back = np.array([self._grid_back(k) for k in range(self.n_cars)])
+            self._opp_rel = np.asarray(self.opponents.rel, float)[None, :] + back[:, None]
+            self._opp_ahead = self._opp_rel > 0.0
         gaps = self.track.gap(self.frenet[None, :, 0], self.frenet[:, None, 0])  # [i, j] = s_j - s_i
         self._car_rel = np.asarray(gaps, float).reshape(self.n_cars, self.n_cars)
         self._car_ahead = self._car_rel > 0.0
+
+    def _grid_back(self, car: int) -> float:
+        """How far [m] car ``car`` starts behind the pole, along the track (0 for the pole)."""
+        row, second = divmod(int(car), 2)
+        return row * self.config.grid_row_spacing + second * self.config.grid_stagger
 
     def grid_slot(self, start_s: float, car: int) -> tuple[float, float]:
         """Start arc length and lateral offset (s, n) [m] of car ``car`` when the pole is at ``start_s``.
@@ -330,6 +345,12 @@ class Race:
         if self.config.opponents.interactive and self.n_cars == 1:
             s0, n0, e0, v0, _ = self.frenet[0].tolist()  # the ego at the start of the step
             self.opponents.advance(dt, (s0, n0, v0 * math.cos(e0) / (1.0 - float(self.track.curvature(s0)) * n0)))
+        elif self.config.opponents.interactive and self.opponents.count:
+            egos = []  # every active controlled car at the start of the step
+            for k in active:
+                s0, n0, e0, v0, _ = self.frenet[k].tolist()
+                egos.append((s0, n0, v0 * math.cos(e0) / (1.0 - float(self.track.curvature(s0)) * n0)))
+            self.opponents.advance(dt, egos)
         else:
             self.opponents.advance(dt)
         self.time += dt
@@ -353,6 +374,8 @@ class Race:
             events[0].overtakes = int(passed.size)
         else:
             self._update_car_overtakes(events)
+            if self.opponents.count:
+                self._update_opponent_overtakes(events)
         for k in range(self.n_cars):
             self.overtakes[k] += events[k].overtakes
         return events
@@ -409,3 +432,21 @@ class Race:
                 if i != j and self._car_ahead[i, j] and self._car_rel[i, j] <= -thr:
                     events[i].overtakes += 1
                     self._car_ahead[i, j] = False
+
+    def _update_opponent_overtakes(self, events: list[CarEvents]) -> None:
+        """Credit each active car with the scripted opponents it passed in this step (multi-car races)."""
+        L = self.track.length
+        gaps = np.asarray(self.track.gap(self.opponents.s[None, :], self.frenet[:, 0][:, None]), float)
+        delta = (gaps - self._opp_rel + 0.5 * L) % L - 0.5 * L
+        self._opp_rel += delta
+        lapped = self._opp_rel < -0.5 * L  # more than half a lap behind: ahead again, to be lapped
+        self._opp_rel[lapped] += L
+        lapping = self._opp_rel > 0.5 * L  # a faster opponent more than half a lap ahead: behind again
+        self._opp_rel[lapping] -= L
+        self._opp_ahead[lapping] = False
+        self._opp_ahead |= self._opp_rel > 0.0
+        thr = self.config.opponents.overtake_threshold
+        for i in np.flatnonzero(self.active):
+            passed = self._opp_ahead[i] & (self._opp_rel[i] <= -thr)
+            events[i].overtakes += int(passed.sum())
+            self._opp_ahead[i, passed] = False

@@ -58,11 +58,13 @@ class RaceTask:
     """Race duration [s]."""
     stack: str = "sofar"
     scenario: str = "paper"
+    opponents: int = 0
+    """Scripted opponents in the race besides the controlled cars (a mixed field)."""
 
     @property
     def key(self) -> tuple:
         return (self.track, self.strategy.name, self.strategy.policy_id, int(self.seed), int(self.cars),
-                _fmt_float(self.duration), self.stack, self.scenario)
+                _fmt_float(self.duration), self.stack, self.scenario, int(self.opponents))
 
 
 @dataclass
@@ -78,9 +80,9 @@ class RaceResult:
     stack: str
     scenario: str
     overtakes: int
-    """Overtakes between controlled cars (each credited to the passer)."""
+    """Overtakes by controlled cars, of each other and of scripted opponents (each credited to the passer)."""
     collided: int
-    """Cars terminated by a collision with another car."""
+    """Controlled cars terminated by a collision (with another controlled car or a scripted opponent)."""
     off_track: int
     """Cars terminated by leaving the track."""
     stalled: int
@@ -94,11 +96,13 @@ class RaceResult:
     speed_factors: str
     """The cars' speed factors, space separated."""
     wall_time: float
+    opponents: int = 0
+    """Scripted opponents in the race (0: controlled cars only; absent in CSVs written before the column)."""
 
     @property
     def key(self) -> tuple:
         return (self.track, self.strategy, self.policy_id, int(self.seed), int(self.cars),
-                _fmt_float(self.duration), self.stack, self.scenario)
+                _fmt_float(self.duration), self.stack, self.scenario, int(self.opponents))
 
 
 RACE_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(RaceResult))
@@ -107,9 +111,10 @@ RACE_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(RaceResult))
 
 def multi_agent_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS, races: int = 4,
                       base_seed: int = 0, cars: int = 4, duration: float = DEFAULT_DURATION, stack: str = "sofar",
-                      scenario: str = "paper") -> list[RaceTask]:
+                      scenario: str = "paper", opponents: int = 0) -> list[RaceTask]:
     """Every (track, race, strategy), grouped by track; race ``e`` seeded with :func:`race_seed`."""
-    return [RaceTask(track, strat, race_seed(base_seed, track, e), int(cars), float(duration), stack, scenario)
+    return [RaceTask(track, strat, race_seed(base_seed, track, e), int(cars), float(duration), stack, scenario,
+                     int(opponents))
             for track in tracks for e in range(int(races)) for strat in strategies]
 
 
@@ -120,9 +125,9 @@ def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] 
 
     policy = task.strategy.build() if policy is None else policy
     t0 = time.perf_counter()
+    mixed = {"n_opponents": int(task.opponents)} if task.opponents else {}
     env = parallel_env(task.track, n_agents=task.cars, race={**(race_overrides or {}), "duration": float(task.duration)},
-                       stack=task.stack,
-                       scenario=task.scenario, timing_info=False)
+                       stack=task.stack, scenario=task.scenario, timing_info=False, **mixed)
     obs, _ = env.reset(seed=int(task.seed))
     last: dict[str, dict] = {}
     gamma_sum, decisions = 0.0, 0
@@ -142,7 +147,7 @@ def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] 
         off_track=count("off_track"), stalled=count("stalled"), success=count("is_success"),
         driven=sum(float(info["sim_time"]) for info in last.values()) / (task.cars * task.duration),
         mean_gamma=gamma_sum / max(decisions, 1), speed_factors=" ".join(f"{f:.4f}" for f in factors),
-        wall_time=time.perf_counter() - t0,
+        wall_time=time.perf_counter() - t0, opponents=int(task.opponents),
     )
 
 
@@ -169,7 +174,9 @@ def read_race_csv(path: str | os.PathLike) -> list[RaceResult]:
     for row in csv.DictReader(io.StringIO(text)):
         values: dict[str, Any] = {}
         for name, kind in types.items():
-            raw = row[name]
+            raw = row.get(name)
+            if raw is None and name == "opponents":  # a CSV from before the column: no scripted opponents
+                raw = "0"
             values[name] = int(raw) if kind == "int" else float(raw) if kind == "float" else raw
         out.append(RaceResult(**values))
     return out
@@ -177,16 +184,20 @@ def read_race_csv(path: str | os.PathLike) -> list[RaceResult]:
 
 def _append(path: Path, result: RaceResult) -> None:
     new = not path.exists() or path.stat().st_size == 0
+    rows, mode = [result], "a"
     if not new:
         text = path.read_text()
         if not text.endswith("\n"):  # drop a torn last line
             path.write_text(text[: text.rfind("\n") + 1])
+        if text.split("\n", 1)[0].split(",") != list(RACE_COLUMNS):  # an older layout: rewrite in this one
+            rows, new, mode = read_race_csv(path) + rows, True, "w"
     buf = io.StringIO()
     writer = csv.DictWriter(buf, RACE_COLUMNS, lineterminator="\n")
     if new:
         writer.writeheader()
-    writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in asdict(result).items()})
-    with open(path, "a") as f:
+    for row in rows:
+        writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in asdict(row).items()})
+    with open(path, mode) as f:
         f.write(buf.getvalue())
         f.flush()
 
@@ -251,12 +262,12 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
                           tracks: Sequence[str] = TRACKS, races: int = 4, base_seed: int = 0, cars: int = 4,
                           duration: float = DEFAULT_DURATION, stack: str = "sofar", scenario: str = "paper",
                           workers: int | None = 1, prefix: str = "multi_agent", progress: bool = True,
-                          ) -> MultiAgentReport:
+                          opponents: int = 0) -> MultiAgentReport:
     """Run (or resume) the races into ``out_dir/<prefix>_races.csv`` and write ``<prefix>.md``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     csv_path = out / f"{prefix}_races.csv"
-    tasks = multi_agent_tasks(strategies, tracks, races, base_seed, cars, duration, stack, scenario)
+    tasks = multi_agent_tasks(strategies, tracks, races, base_seed, cars, duration, stack, scenario, opponents)
     done = {r.key for r in read_race_csv(csv_path)}
     todo = [t for t in tasks if t.key not in done]
     t0 = time.perf_counter()
@@ -282,14 +293,18 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
     rows = [r for r in read_race_csv(csv_path) if r.key in wanted]
     names = [s.name for s in strategies]
     labels = {s.name: s.label for s in strategies}
-    settings = (f"{cars} cars, {duration:g} s races, circuits {', '.join(tracks)}, {races} races per circuit "
+    field = f"{cars} cars" + (f" and {opponents} scripted opponents" if opponents else "")
+    settings = (f"{field}, {duration:g} s races, circuits {', '.join(tracks)}, {races} races per circuit "
                 f"(base seed {base_seed}), "
                 f"controller {stack}, world {scenario}. Generated {time.strftime('%Y-%m-%d %H:%M')}.")
     parts = ["# Multi-agent races", "", settings, "",
              "Every car of a race is driven by the same strategy from its own observation; the race's seed fixes the "
-             "grid and the cars' pace, so the strategies meet the same fields. Overtakes are between controlled cars "
-             "(credited to the passer); every collision is between two controlled cars (both terminate); success "
-             "per car: cars that reached the duration.", "",
+             "grid and the cars' pace, so the strategies meet the same fields. " + (
+                 "Overtakes are between controlled cars (credited to the passer); every collision is between two "
+                 "controlled cars (both terminate)" if not opponents else
+                 "Overtakes are passes by controlled cars, of each other and of the scripted opponents (credited to "
+                 "the passer; a scripted car is not respawned, so lapping it is another pass); a collision terminates "
+                 "the controlled cars involved") + "; success per car: cars that reached the duration.", "",
              format_multi_agent_table(rows, names, labels), "", "## Per circuit", "",
              format_per_circuit(rows, names, tracks, labels)]
     missing = len(tasks) - len(rows)

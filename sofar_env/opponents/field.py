@@ -158,11 +158,12 @@ class Opponents:
         return min(max(n, lo), hi)
 
     # ------------------------------------------------------------------ motion
-    def advance(self, dt: float, ego: tuple[float, float, float] | None = None) -> None:
+    def advance(self, dt: float, ego: tuple[float, float, float] | list | None = None) -> None:
         """Move every opponent ``dt`` [s].
 
         ``ego`` is ``(s, n, v)`` of the ego at the start of the step (arc length [m], lateral
-        offset [m], arc-length speed [m/s]); it is used only when a behaviour is on.
+        offset [m], arc-length speed [m/s]), or a list of such tuples, one per controlled car of a
+        multi-car race; it is used only when a behaviour is on.
         """
         if self.count == 0:
             self.time += dt

@@ -56,7 +56,9 @@ def steer(dt: float, ego, state: tuple[list, list, list, list], gap: np.ndarray,
     (their envelope and keep-clear bounds conflict: they will not fit beside the car or ego next to them).
 
     ``state``: the start-of-step ``(s, n, n_dot, v)`` lists; ``gap[i, j] = s_j - s_i``; ``s_new``,
-    ``v_new``: the new arc lengths and speeds; ``ego``: ``(s, n, v)`` or None.
+    ``v_new``: the new arc lengths and speeds; ``ego``: ``(s, n, v)``, a list of such tuples (the
+    controlled cars of a multi-car race) or None. With several, each car defends against the nearest
+    one behind it (else the nearest one), and keeps clear of every one alongside or about to be.
     """
     s, n, n_dot, v = state
     m = len(s)
@@ -71,15 +73,19 @@ def steer(dt: float, ego, state: tuple[list, list, list, list], gap: np.ndarray,
         hard_near.append([j for j in soft_near[i] if abs(gap[i, j]) < traffic.side_window])
 
     # 1. intents
-    intents, ego_soft, ego_hard = [], [False] * m, [False] * m
-    if ego is not None:
-        s_e, n_e, v_e = (float(x) for x in ego)
+    # ego_soft[i] / ego_hard[i]: offsets of the egos car i keeps clear of, at its target / position
+    intents, ego_soft, ego_hard = [], [()] * m, [()] * m
+    egos = [] if ego is None else [tuple(float(x) for x in e) for e in (ego if isinstance(ego, list) else [ego])]
     for i in range(m):
-        if ego is not None:
-            gap_e, closing = float(band.track.gap(s[i], s_e)), v_e - v[i]
+        if egos:
+            rows = [(float(band.track.gap(s[i], s_e)), v_e - v[i], n_e) for s_e, n_e, v_e in egos]
+            behind = [r for r in rows if r[0] >= 0.0]
+            gap_e, closing, n_e = (min(behind, key=lambda r: r[0]) if behind
+                                   else min(rows, key=lambda r: abs(r[0])))
             defence.update(i, gap_e, closing, n[i], n_dot[i], n_e)
-            ego_soft[i] = ego_guarded(gap_e, closing, cfg.defence, vehicle.length, BRAKE_LEAD)
-            ego_hard[i] = ego_guarded(gap_e, closing, cfg.defence, vehicle.length)
+            ego_soft[i] = tuple(r[2] for r in rows
+                                if ego_guarded(r[0], r[1], cfg.defence, vehicle.length, BRAKE_LEAD))
+            ego_hard[i] = tuple(r[2] for r in rows if ego_guarded(r[0], r[1], cfg.defence, vehicle.length))
         if defence.mode[i] != IDLE:
             target, rate = float(defence.target[i]), 0.0
             v_max, a_max = defence.limits(i)
@@ -104,9 +110,9 @@ def steer(dt: float, ego, state: tuple[list, list, list, list], gap: np.ndarray,
     for i in range(m):
         lo_k, hi_k = _clear_of(i, soft_near[i], n, sep_soft)
         lo_p, hi_p = _clear_of(i, hard_near[i], n, sep_hard)
-        if ego_soft[i]:
+        for n_e in ego_soft[i]:
             lo_k, hi_k = _tighten(lo_k, hi_k, keep_clear(n[i], n_e, sep_ego))
-        if ego_hard[i]:
+        for n_e in ego_hard[i]:
             lo_p, hi_p = _tighten(lo_p, hi_p, keep_clear(n[i], n_e, sep_ego))
         target, rate, v_max, a_max = intents[i]
         lo_e, hi_e = pushed[i] if pushed[i][0] <= pushed[i][1] else env[i]

@@ -32,6 +32,7 @@ def test_unknown_fields_are_refused() -> None:
     ({"preference_sampling": "uniform"}, "preference_sampling"),
     ({"utopia_quantile": 0.4}, "utopia_quantile"),
     ({"conflict_every": 0}, "conflict_every"),
+    ({"action_squashing": "tanh"}, "action_squashing"),
 ])
 def test_invalid_values_raise(changes: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):

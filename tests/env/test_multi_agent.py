@@ -136,24 +136,84 @@ def test_crashed_agents_terminate_and_leave():
     assert set(obs) == {"car_0"} and not terms["car_0"]
 
 
-def test_scripted_opponents_are_rejected():
-    with pytest.raises(ValueError, match="no scripted opponents"):
-        sofar_env.parallel_env(n_agents=2, n_opponents=2)
+def test_no_scripted_opponents_unless_asked():
+    env = sofar_env.parallel_env(n_agents=2)
+    env.reset(seed=0)
+    assert env.race.opponents.count == 0 and env.config.n_opponents == 0
 
 
-@pytest.mark.parametrize("track", ["LagunaSeca", "Monza", "Indianapolis", "Kentucky"])
-def test_no_car_starts_off_the_track_or_overlapping(track):
-    """Seeded resets of the environment per circuit: no car off the track or touching another
-    (the grid itself is checked on 200 seeds per circuit in tests/env/test_race.py)."""
-    from sofar_env.multi_agent import parallel_env as make_parallel
-
-    env = make_parallel(track, n_agents=4)
-    for seed in range(25):
-        _, infos = env.reset(seed=seed)
-        race = env.race
-        for k in range(race.n_cars):
-            assert not race._off_track(k), (track, seed, k)
-            assert not race._collides(k), (track, seed, k)
-            assert infos[f"car_{k}"]["nearest_opponent_m"] >= 4.0  # 2 x 2 m beside, or 12 m behind
+@pytest.mark.parametrize("scenario", ["paper", "interactive"])
+def test_mixed_field_passes_the_api_test(scenario):
+    env = sofar_env.parallel_env(track="LagunaSeca", n_agents=2, n_opponents=2, scenario=scenario, **SHORT)
+    parallel_api_test(env, num_cycles=20)
     env.close()
 
+
+def test_mixed_field_is_seeded():
+    parallel_seed_test(lambda: sofar_env.parallel_env(track="LagunaSeca", n_agents=2, n_opponents=2,
+                                                      scenario="interactive", **SHORT), num_cycles=10)
+
+
+@pytest.mark.parametrize("scenario", ["paper", "interactive"])
+def test_controlled_cars_pass_scripted_opponents_and_are_credited_once_each(scenario):
+    """Two controlled cars behind three slow scripted cars (rho 0.5): every car sees them as opponents,
+    passes each of them within 60 s and is credited once per pass; nobody crashes."""
+    env = sofar_env.parallel_env(track="LagunaSeca", n_agents=2, n_opponents=3, rho=0.5, scenario=scenario,
+                                 speed_factors=(0.95, 0.9))
+    obs, infos = env.reset(seed=3)
+    race = env.race
+    assert race.opponents.count == 3
+    assert np.all(race._opp_rel > 0)  # the field starts ahead of the grid
+    ids = race.opponent_ids(1)
+    assert sorted(ids.tolist()) == [-1, 0, 1, 2]  # car 1 sees car 0 and the three scripted cars
+    passes = np.zeros(2, int)
+    for _ in range(600):
+        obs, rewards, terms, truncs, infos = env.step({a: np.array([0.3], np.float32) for a in env.agents})
+        assert not any(terms.values()), {a: (i["collision"], i["off_track"]) for a, i in infos.items()}
+        passes = race.overtakes.copy()
+    behind = race._opp_rel < -race.config.opponents.overtake_threshold
+    assert behind.all()  # both cars are past all three scripted cars ...
+    assert np.all(passes >= 3) and np.all(passes <= 4)  # ... credited once each (plus, maybe, each other)
+    assert [infos[a]["overtakes"] for a in ("car_0", "car_1")] == passes.tolist()
+
+
+def test_a_lapped_scripted_opponent_is_passed_again():
+    """A scripted car the controlled cars passed long ago comes round again (relative to them) from
+    half a lap behind: each car is credited once more when it passes it again."""
+    from sofar_env.race import CarEvents
+
+    env = sofar_env.parallel_env(track="LagunaSeca", n_agents=2, n_opponents=1, rho=0.5)
+    env.reset(seed=0)
+    race, track = env.race, env.race.track
+    L = track.length
+    cars = race.frenet[:, 0].copy()
+    s_opp = float(cars[0]) + 0.5 * L - 3.0  # just under half a lap ahead of car 0
+    race.opponents.s[:] = track.wrap(s_opp)
+    gaps = np.asarray(track.gap(race.opponents.s[0], cars), float)
+    race._opp_rel[:, 0] = np.where(gaps > 0, gaps - L, gaps)  # both cars passed it once already
+    race._opp_ahead[:] = False
+    credited = np.zeros(2, int)
+    while s_opp > cars[1] - 10.0:  # it falls back relative to the cars, 5 m per step, to 10 m behind both
+        s_opp -= 5.0
+        race.opponents.s[:] = track.wrap(s_opp)
+        events = [CarEvents(), CarEvents()]
+        race._update_opponent_overtakes(events)
+        credited += [e.overtakes for e in events]
+    assert credited.tolist() == [1, 1]
+    assert np.all(race._opp_rel < 0) and np.all(np.abs(race._opp_rel) < 0.5 * L)
+
+
+@pytest.mark.parametrize("options, match", [
+    ({"n_opponents": -1}, "n_opponents must be a whole number"),
+    ({"n_opponents": 1.5}, "n_opponents must be a whole number"),
+    ({"n_opponents": 500}, "does not fit on LagunaSeca"),
+    ({"rho": 3.0}, "rho must be a number in"),
+])
+def test_bad_mixed_field_options_raise_and_change_nothing(options, match):
+    env = sofar_env.parallel_env(track="LagunaSeca", n_agents=2, n_opponents=1)
+    env.reset(seed=0)
+    before = env.race.frenet.copy(), env.race.opponents.s.copy()
+    with pytest.raises(ValueError, match=match):
+        env.reset(seed=1, options=options)
+    np.testing.assert_array_equal(env.race.frenet, before[0])
+    np.testing.assert_array_equal(env.race.opponents.s, before[1])

@@ -60,3 +60,25 @@ def test_the_committed_multi_agent_run_reads_fully():
     assert len(rows) == 64 and len({r.key for r in rows}) == 64  # 4 strategies x 4 circuits x 4 races
     self_play = Strategy.adaptive(root / "selfplay_lagunaseca.json", name="self-play")
     assert {r.policy_id for r in rows if r.strategy == "self-play"} == {self_play.policy_id}
+
+
+def test_a_mixed_field_enters_the_key_and_the_report(tmp_path: Path):
+    """--opponents with --multi-agent: scripted cars beside the controlled ones, their own resume key."""
+    kwargs = dict(tracks=["Monza"], races=1, base_seed=3, cars=2, duration=2.0, progress=False)
+    plain = run_multi_agent_table(STRATEGIES[:1], tmp_path, **kwargs)
+    mixed = run_multi_agent_table(STRATEGIES[:1], tmp_path, opponents=2, **kwargs)
+    assert (mixed.completed, mixed.skipped) == (1, 0)  # not taken for the race without scripted cars
+    assert [r.opponents for r in read_race_csv(plain.csv_path)] == [0, 2]
+    assert "2 cars and 2 scripted opponents" in mixed.markdown and "lapping it is another pass" in mixed.markdown
+    assert "scripted" not in plain.markdown.split("\n")[2]
+    # a CSV written before the column reads as races without scripted opponents
+    lines = plain.csv_path.read_text().splitlines()
+    old = "\n".join([lines[0].rsplit(",", 1)[0], lines[1].rsplit(",", 1)[0]]) + "\n"
+    (tmp_path / "old.csv").write_text(old)
+    assert read_race_csv(tmp_path / "old.csv")[0].opponents == 0
+    # resuming into it rewrites it in the current layout, keeping its race
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "multi_agent_races.csv").write_text(old)
+    resumed = run_multi_agent_table(STRATEGIES, tmp_path / "old", **kwargs)
+    assert (resumed.completed, resumed.skipped) == (1, 1)
+    assert [r.key for r in read_race_csv(tmp_path / "old" / "multi_agent_races.csv")] == [r.key for r in resumed.rows]
