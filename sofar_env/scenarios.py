@@ -15,7 +15,14 @@ combine freely.
       oscillates laterally (yaw-rate deviations of 0.2 - 0.3 rad/s) and leaves the track within 5 - 40 s
       in most episodes, so it is not part of this scenario until the controller handles it. With it,
       lower ``vehicle.lat_acc_max`` to what the tyres give at the episode's mu (about 10 m/s^2 at the
-      lowest mu of the range without downforce).
+      lowest mu of the range without downforce). What we measured towards that: softer lateral
+      weights (``stack={"mpc": {"q": (0, 20, 0, 2.5, 0), "r": (0.01, 50)}}`` instead of n-weight 150
+      and steering-rate weight 8) remove the limit cycle on straights, and with a speed profile for
+      75 % of the tyres' grip at the lowest mu (about 1.1-1.2 x the lap time) the car laps Laguna
+      Seca, Monza and Kentucky alone for 60-100 s without leaving the track; but with opponents it
+      still leaves the track within 3-45 s: braking hard while cornering (the rear axle saturates) and
+      lateral tracking errors of 0.3-0.5 m where the raceline runs 2 m from an edge. A kinematic MPC
+      needs the yaw dynamics (a dynamic prediction model or a yaw-rate loop) for this plant.
     * **Opponents that race back** (:mod:`sofar_env.opponents`): each car's pace drawn per episode as
       rho x U(0.9, 1.1), lifts (a Poisson rate of one per 60 s per car, to 80 % pace for 4 s); each car
       drives its own smooth line (up to 1.5 m from its offset); cars defend: a car with the ego closing
