@@ -168,20 +168,26 @@ class ClearanceWindow:
         return out
 
 
-def side_clusters(pos: np.ndarray, act_rel: np.ndarray, cluster_gap: float) -> tuple[int, np.ndarray]:
+def side_clusters(pos: np.ndarray, act_rel: np.ndarray, cluster_gap: float,
+                  apart: np.ndarray | None = None) -> tuple[int, np.ndarray]:
     """Connected components of the relation "must be passed on the same side".
 
     Two relevant opponents are linked when, at some node where the ego overlaps
     either of them (``act_rel``), they are closer than ``cluster_gap`` to each
     other along the track: the ego cannot thread between them there. (Opponents
-    that only converge after the ego has passed them stay independent.)
+    that only converge after the ego has passed them stay independent.) Pairs marked
+    in the optional (R, R) boolean ``apart`` are never linked directly: the ego is
+    already between them (two cars alongside it, one on each side).
     """
     R = pos.shape[0]
     if R == 1:
         return 1, np.zeros(1, dtype=int)
     close = np.abs(pos[:, None, :] - pos[None, :, :]) < cluster_gap
     either = act_rel[:, None, :] | act_rel[None, :, :]
-    linked = (close & either).any(axis=2).tolist()
+    linked = (close & either).any(axis=2)
+    if apart is not None:
+        linked &= ~apart
+    linked = linked.tolist()
     labels = [-1] * R
     n = 0
     for i in range(R):

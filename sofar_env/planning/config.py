@@ -67,6 +67,12 @@ class MIQPConfig:
     """Opponents closer than this to each other along the track [m], at a node where
     the ego overlaps either of them, share one side decision (no threading between
     them); linking is transitive."""
+    alongside_gap: float = 0.0
+    """Side lock for cars alongside [m]: an opponent whose arc-length gap to the ego is below
+    this now keeps the ego on the side of it where the ego is (its cluster's other side costs
+    ``ALONGSIDE_LOCK_COST``): two cars alongside cannot swap sides through each other; and two
+    such cars on either side of the ego are never linked into one cluster (the ego is already
+    between them). 0 (the default) turns the lock off."""
     solver: str = "daqp"
     """"daqp" (DAQP branch-and-bound) or "enumerate" (one QP per side pattern)."""
 
@@ -78,7 +84,8 @@ class MIQPConfig:
         if not self.w_dev > 0.0:
             raise ValueError("w_dev must be > 0 (it makes the Hessian positive definite)")
         for name in ("w_smooth", "w_prev", "w_switch", "w_slack", "safe_lat",
-                     "safe_lon", "closing_decel", "track_margin", "continuity", "cluster_gap"):
+                     "safe_lon", "closing_decel", "track_margin", "continuity", "cluster_gap",
+                     "alongside_gap"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0")
         if int(self.closing_stride) != self.closing_stride or self.closing_stride < 1:

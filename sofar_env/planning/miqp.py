@@ -25,11 +25,15 @@ Cost::
     sum_k w_dev (d_k - n_ref_k)^2 + sum_k w_smooth (d_{k+1} - d_k)^2
     + sum_k w_prev (d_k - d_prev_k)^2                   (only with a previous plan)
     + sum_i w_switch (b_c(i) - b_prev_i)^2               (only with a previous side)
+    + sum_i L (b_c(i) - b_now_i)^2                       (cars alongside, with the lock on)
     + w_slack sum_p xi_p
 
 ``d_prev`` is the previous plan re-expressed at the new nodes (shifted by
 ``progress``, constant beyond its end). ``b_prev_i`` is the side chosen in the
-previous call for the same car (see :mod:`~sofar_env.planning.hysteresis`). For
+previous call for the same car (see :mod:`~sofar_env.planning.hysteresis`). With
+``alongside_gap`` > 0, ``b_now_i`` is the side of car ``i`` the ego is on now, for every car
+within ``alongside_gap`` along the track, and ``L`` = :data:`ALONGSIDE_LOCK_COST` (the
+reported ``objective`` leaves this term out). For
 binary b, ``(b - b_prev)^2`` is linear.
 
 Constraints:
@@ -66,7 +70,11 @@ from .hysteresis import match_previous_sides, prior_sides
 from .problem import SideProblem, cost_factors, evaluate, plan_cost
 from .solvers import solve_branch_and_bound, solve_enumeration
 
-__all__ = ["MIQPConfig", "PlanResult", "PassingSidePlanner"]
+__all__ = ["ALONGSIDE_LOCK_COST", "MIQPConfig", "PlanResult", "PassingSidePlanner"]
+
+ALONGSIDE_LOCK_COST = 1e9
+"""Cost of passing a car alongside on the side the ego is not on (``MIQPConfig.alongside_gap``):
+above any plan's deviation and slack costs, so the lock yields only to the hard constraints."""
 
 logger = logging.getLogger(__name__)
 
@@ -275,7 +283,12 @@ class PassingSidePlanner:
         cfg = self.config
         opp_rel = opp[relevant]
         act_rel = active[relevant]
-        n_clusters, labels = side_clusters(opp_s[relevant], act_rel, cfg.cluster_gap)
+        along = apart = None
+        if cfg.alongside_gap > 0.0:  # cars alongside: one on each side of the ego are not one cluster
+            along = np.abs(opp_rel[:, 0]) < cfg.alongside_gap
+            left = opp_rel[:, 1] > ego_n
+            apart = along[:, None] & along[None, :] & (left[:, None] != left[None, :])
+        n_clusters, labels = side_clusters(opp_s[relevant], act_rel, cfg.cluster_gap, apart)
 
         lo = lo.copy()
         hi = hi.copy()
@@ -295,6 +308,12 @@ class PassingSidePlanner:
         known = b_prev >= 0
         # w (b - bp)^2 = w (1 - 2 bp) b + w bp for binary b and bp (constant dropped), summed per cluster.
         f_b = np.bincount(labels[known], weights=cfg.w_switch * (1.0 - 2.0 * b_prev[known]), minlength=n_clusters)
+        if along is not None:
+            # a car alongside keeps the ego on its side of it: the other side of its cluster costs a lock
+            if along.any():
+                b_now = (ego_n > opp_rel[along, 1]).astype(float)  # 1: the ego is on its left
+                f_b = f_b + np.bincount(labels[along], weights=ALONGSIDE_LOCK_COST * (1.0 - 2.0 * b_now),
+                                        minlength=n_clusters)
 
         rows, ks = act_rel.nonzero()
         return SideProblem(lo=lo, hi=hi, f_d=f_d, Rinv=Rinv, RinvT=RinvT, pair_k=ks,

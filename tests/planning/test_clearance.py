@@ -169,3 +169,13 @@ def test_side_clusters_link_opponents_the_ego_cannot_thread():
     chain = np.array([50.0 + 0 * t, 58.0 + 0 * t, 66.0 + 0 * t])
     n, labels = side_clusters(chain, np.ones((3, N), dtype=bool), cluster_gap=10.0)
     assert n == 1 and np.all(labels == 0)
+
+
+def test_side_clusters_never_link_a_pair_marked_apart():
+    t = CFG.node_dt * np.arange(N)
+    pos = np.array([50.0 + 40.0 * t, 52.0 + 40.0 * t])
+    act = np.ones((2, N), dtype=bool)
+    assert side_clusters(pos, act, cluster_gap=10.0)[0] == 1
+    apart = np.array([[False, True], [True, False]])
+    n, labels = side_clusters(pos, act, cluster_gap=10.0, apart=apart)
+    assert n == 2 and labels[0] != labels[1]

@@ -142,6 +142,29 @@ def test_side_by_side_opponents_share_one_decision():
     assert free.sides[0] == +1 and free.sides[1] == -1
 
 
+def test_alongside_lock_keeps_the_ego_between_two_cars_alongside():
+    """Two cars alongside the ego, one on each side (the ego already threaded between them): the
+    cluster rule alone makes it leave the gap through one of them; the alongside lock keeps it there."""
+    s, n_ref, n_min, n_max = straight(v=30.0)
+    opp = np.array([[1.0, -4.5, 30.0], [-1.0, 4.5, 30.0]])  # as fast as the ego: alongside for a while
+    plain = PassingSidePlanner().plan(s, n_ref, n_min, n_max, 0.0, opp)
+    assert plain.n_binaries == 1 and plain.sides[0] == plain.sides[1] and plain.max_slack > 2.0
+    locked = PassingSidePlanner(MIQPConfig(alongside_gap=6.0)).plan(s, n_ref, n_min, n_max, 0.0, opp)
+    assert locked.n_binaries == 2
+    np.testing.assert_array_equal(locked.sides, [+1, -1])  # left of the right car, right of the left car
+    assert locked.max_slack < 1e-6 and np.all(np.abs(locked.d) <= 0.75 + 1e-6)
+
+
+def test_alongside_lock_keeps_the_side_of_a_car_alongside():
+    s, n_ref, n_min, n_max = straight(v=20.0)
+    opp = np.array([[0.5, 1.0, 20.0]])  # just left of the ego and alongside
+    locked = PassingSidePlanner(MIQPConfig(alongside_gap=6.0)).plan(s, n_ref, n_min, n_max, -0.5, opp)
+    assert locked.sides[0] == -1  # the ego is on its right and stays there
+    opp_right = np.array([[0.5, -1.0, 20.0]])
+    locked = PassingSidePlanner(MIQPConfig(alongside_gap=6.0)).plan(s, n_ref, n_min, n_max, 0.5, opp_right)
+    assert locked.sides[0] == +1
+
+
 @pytest.mark.parametrize("pair, free_side", [((0.0, 2.5), -1), ((0.0, -2.5), +1)])
 def test_wide_blocking_pair_forces_the_free_side(pair, free_side):
     s, n_ref, n_min, n_max = straight()
