@@ -5,7 +5,8 @@
     python eval/figures.py --trace results/table1_trace.csv # plot a trace written by `eval/table.py --trace`
 
 PNG files go to results/figures/ (--out). Recorded episodes are kept in
-<out>/episodes.csv and <out>/trace.csv and reused on a rerun. The logic lives in
+<out>/episodes.csv and <out>/trace.csv and reused on a rerun with the same policy (a folder
+that holds another policy's episodes is refused: the trace rows carry no policy id). The logic lives in
 sofar_agents.evaluation (sweep.py records the episodes, figures.py draws).
 """
 
@@ -58,6 +59,14 @@ def main(argv=None) -> int:
             print("error: no adaptive policy to record (train one or pass --policy PATH)", file=sys.stderr)
             return 2
         strategies = [ev.Strategy.adaptive(policy)]
+        # the trace rows carry no policy id: never mix the steps of two policies in one plot
+        recorded = out / "episodes.csv"
+        others = sorted({str(r["policy_id"]) for r in (ev.read_episode_csv(recorded) if recorded.exists() else [])
+                         if r["strategy"] == "adaptive"} - {strategies[0].policy_id})
+        if others:
+            print(f"error: {out} holds the episodes of another policy ({', '.join(others)}); use another --out, "
+                  f"or delete {recorded} and {out / 'trace.csv'} to record this one", file=sys.stderr)
+            return 2
         tasks = ev.table1_tasks(strategies, [args.track], args.rhos, args.episodes, args.seed, args.duration,
                                 trace=True, stack=args.stack)
         trace_path = out / "trace.csv"

@@ -11,6 +11,10 @@ off-track and stalled cars per race, success per car, car-seconds driven. Exampl
 
     python eval/multi_agent_races.py --tracks LagunaSeca Monza Indianapolis Kentucky \\
         --seeds 0 1 2 --duration 100 --gamma 0.5 --cars 4
+
+``--alongside-gap 6`` turns on the controllers' MIQP side lock for cars alongside
+(``stack.miqp.alongside_gap``); ``--table-races 4 --duration 200`` races the fields of the multi-agent
+table (its seeds) for an A/B against its committed rows.
 """
 
 from __future__ import annotations
@@ -19,8 +23,16 @@ import argparse
 import logging
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 
-from sofar_agents.evaluation.multi_agent import RaceTask, format_multi_agent_table, format_per_circuit, run_race
+from sofar_agents.evaluation.multi_agent import (
+    RaceResult,
+    RaceTask,
+    format_multi_agent_table,
+    format_per_circuit,
+    race_seed,
+    run_race,
+)
 from sofar_agents.evaluation.protocol import Strategy
 from sofar_env.constants import CIRCUITS, GAMMA_MAX, GAMMA_MIN
 
@@ -38,6 +50,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="race.pace_range of the cars' speed factors (default: the environment's)")
     parser.add_argument("--v2v", action="store_true",
                         help="race.v2v: the cars predict each other from their published MPC plans")
+    parser.add_argument("--alongside-gap", type=float, default=0.0, metavar="M",
+                        help="the controllers' MIQP side lock for cars alongside (stack.miqp.alongside_gap "
+                             "[m]; default 0: off)")
+    parser.add_argument("--table-races", type=int, default=None, metavar="N",
+                        help="instead of --seeds, the seeds of the first N races per circuit of "
+                             "eval/table.py --multi-agent (base seed 0)")
+    parser.add_argument("--workers", type=int, default=1, help="races run in parallel processes (default 1)")
     parser.add_argument("--races", action="store_true", help="also print one line per race")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
@@ -45,21 +64,30 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--gamma must lie in [{GAMMA_MIN}, {GAMMA_MAX}], got {args.gamma}")
     if args.duration <= 0 or args.cars < 2:
         parser.error("--duration must be > 0 and --cars >= 2")
+    if args.alongside_gap < 0 or (args.table_races is not None and args.table_races < 1) or args.workers < 1:
+        parser.error("--alongside-gap must be >= 0, --table-races and --workers >= 1")
     overrides = {"pace_range": tuple(args.pace_range)} if args.pace_range else {}
     if args.v2v:
         overrides["v2v"] = True
+    stack = {"miqp": {"alongside_gap": args.alongside_gap}} if args.alongside_gap else None
     strategy = Strategy.fixed(args.gamma)
-    policy = strategy.build()
-    results = []
+    tasks = [RaceTask(track, strategy, seed, args.cars, args.duration) for track in args.tracks
+             for seed in (args.seeds if args.table_races is None
+                          else [race_seed(0, track, e) for e in range(args.table_races)])]
     t0 = time.perf_counter()
-    for track in args.tracks:
-        for seed in args.seeds:
-            r = run_race(RaceTask(track, strategy, seed, args.cars, args.duration), policy, overrides)
-            logger.info("%s seed %d: %d overtakes, %d colliding, %d off track, %d stalled, pace %s",
-                        track, seed, r.overtakes, r.collided, r.off_track, r.stalled, r.speed_factors)
-            results.append(r)
-    pace = (f", pace_range {tuple(args.pace_range)}" if args.pace_range else "") + (", V2V" if args.v2v else "")
-    print(f"{args.cars} cars, {args.duration:g} s, gamma {args.gamma:g}{pace}, seeds {' '.join(map(str, args.seeds))} "
+    if args.workers == 1:
+        results = [_run(task, overrides, stack) for task in tasks]
+    else:
+        with ProcessPoolExecutor(args.workers) as pool:
+            results = list(pool.map(_run, tasks, [overrides] * len(tasks), [stack] * len(tasks)))
+    for r in results:
+        logger.info("%s seed %d: %d overtakes, %d colliding, %d off track, %d stalled, pace %s",
+                    r.track, r.seed, r.overtakes, r.collided, r.off_track, r.stalled, r.speed_factors)
+    pace = ((f", pace_range {tuple(args.pace_range)}" if args.pace_range else "") + (", V2V" if args.v2v else "")
+            + (f", alongside lock {args.alongside_gap:g} m" if args.alongside_gap else ""))
+    seeds = (f"the first {args.table_races} races per circuit of the multi-agent table" if args.table_races
+             else f"seeds {' '.join(map(str, args.seeds))}")
+    print(f"{args.cars} cars, {args.duration:g} s, gamma {args.gamma:g}{pace}, {seeds} "
           f"({time.perf_counter() - t0:.0f} s)\n")
     print(format_per_circuit(results, [strategy.name], args.tracks))
     print()
@@ -71,6 +99,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"| {r.track} | {r.seed} | {r.speed_factors} | {r.overtakes} | {r.collided} | {r.off_track} | "
                   f"{r.stalled} |")
     return 0
+
+
+def _run(task: RaceTask, race_overrides: dict, stack_overrides: dict | None) -> RaceResult:
+    return run_race(task, None, race_overrides, stack_overrides)
 
 
 if __name__ == "__main__":

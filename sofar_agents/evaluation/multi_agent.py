@@ -118,16 +118,23 @@ def multi_agent_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TR
             for track in tracks for e in range(int(races)) for strat in strategies]
 
 
-def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] | None = None) -> RaceResult:
+def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] | None = None,
+             stack_overrides: dict[str, Any] | None = None) -> RaceResult:
     """Run one race; ``policy`` (obs -> gamma) defaults to ``task.strategy.build()``; ``race_overrides`` go
-    into the ``race`` config (e.g. ``pace_range``)."""
+    into the ``race`` config (e.g. ``pace_range``), ``stack_overrides`` into the controller preset's
+    (e.g. ``{"miqp": {"alongside_gap": 6.0}}``)."""
+    from sofar_env.config import apply_overrides, make_env_config
     from sofar_env.multi_agent import parallel_env
 
     policy = task.strategy.build() if policy is None else policy
     t0 = time.perf_counter()
     mixed = {"n_opponents": int(task.opponents)} if task.opponents else {}
-    env = parallel_env(task.track, n_agents=task.cars, race={**(race_overrides or {}), "duration": float(task.duration)},
-                       stack=task.stack, scenario=task.scenario, timing_info=False, **mixed)
+    config = make_env_config(None, stack=task.stack)
+    if stack_overrides:
+        config = apply_overrides(config, {"stack": stack_overrides})
+    env = parallel_env(task.track, n_agents=task.cars, config=config,
+                       race={**(race_overrides or {}), "duration": float(task.duration)},
+                       scenario=task.scenario, timing_info=False, **mixed)
     obs, _ = env.reset(seed=int(task.seed))
     last: dict[str, dict] = {}
     gamma_sum, decisions = 0.0, 0

@@ -69,10 +69,10 @@ class MIQPConfig:
     them); linking is transitive."""
     alongside_gap: float = 0.0
     """Side lock for cars alongside [m]: an opponent whose arc-length gap to the ego is below
-    this now keeps the ego on the side of it where the ego is (its cluster's other side costs
-    ``ALONGSIDE_LOCK_COST``): two cars alongside cannot swap sides through each other; and two
-    such cars on either side of the ego are never linked into one cluster (the ego is already
-    between them). 0 (the default) turns the lock off."""
+    this now keeps the ego on the side of it where the ego is (its cluster's binary is fixed to
+    that side): two cars alongside cannot swap sides through each other; and two such cars on
+    either side of the ego are never linked into one cluster (the ego is already between them).
+    0 (the default) turns the lock off."""
     solver: str = "daqp"
     """"daqp" (DAQP branch-and-bound) or "enumerate" (one QP per side pattern)."""
 

@@ -25,15 +25,11 @@ Cost::
     sum_k w_dev (d_k - n_ref_k)^2 + sum_k w_smooth (d_{k+1} - d_k)^2
     + sum_k w_prev (d_k - d_prev_k)^2                   (only with a previous plan)
     + sum_i w_switch (b_c(i) - b_prev_i)^2               (only with a previous side)
-    + sum_i L (b_c(i) - b_now_i)^2                       (cars alongside, with the lock on)
     + w_slack sum_p xi_p
 
 ``d_prev`` is the previous plan re-expressed at the new nodes (shifted by
 ``progress``, constant beyond its end). ``b_prev_i`` is the side chosen in the
-previous call for the same car (see :mod:`~sofar_env.planning.hysteresis`). With
-``alongside_gap`` > 0, ``b_now_i`` is the side of car ``i`` the ego is on now, for every car
-within ``alongside_gap`` along the track, and ``L`` = :data:`ALONGSIDE_LOCK_COST` (the
-reported ``objective`` leaves this term out). For
+previous call for the same car (see :mod:`~sofar_env.planning.hysteresis`). For
 binary b, ``(b - b_prev)^2`` is linear.
 
 Constraints:
@@ -42,7 +38,11 @@ Constraints:
   where the corridor is narrower than two margins it collapses to its centre;
 * continuity (hard, never infeasible): ``|d_0 - e| <= continuity`` where ``e`` is
   the ego offset clipped into the node-0 corridor;
-* side constraints (Big-M, soft through ``xi``) for every active pair ``(i, k)``.
+* side constraints (Big-M, soft through ``xi``) for every active pair ``(i, k)``;
+* with ``alongside_gap`` > 0, the side lock: the binary of a cluster holding a car within
+  ``alongside_gap`` of the ego along the track is fixed to the side of that car the ego is on now
+  (left if the ego's offset is above the car's), unless the cluster holds cars alongside on both
+  sides; two cars alongside on either side of the ego are never linked into one cluster.
 
 The opponents are predicted at constant speed and offset, or along a given
 prediction (``opponent_s``, e.g. the speed profile). An opponent with no active
@@ -70,11 +70,7 @@ from .hysteresis import match_previous_sides, prior_sides
 from .problem import SideProblem, cost_factors, evaluate, plan_cost
 from .solvers import solve_branch_and_bound, solve_enumeration
 
-__all__ = ["ALONGSIDE_LOCK_COST", "MIQPConfig", "PlanResult", "PassingSidePlanner"]
-
-ALONGSIDE_LOCK_COST = 1e9
-"""Cost of passing a car alongside on the side the ego is not on (``MIQPConfig.alongside_gap``):
-above any plan's deviation and slack costs, so the lock yields only to the hard constraints."""
+__all__ = ["MIQPConfig", "PlanResult", "PassingSidePlanner"]
 
 logger = logging.getLogger(__name__)
 
@@ -308,18 +304,22 @@ class PassingSidePlanner:
         known = b_prev >= 0
         # w (b - bp)^2 = w (1 - 2 bp) b + w bp for binary b and bp (constant dropped), summed per cluster.
         f_b = np.bincount(labels[known], weights=cfg.w_switch * (1.0 - 2.0 * b_prev[known]), minlength=n_clusters)
-        if along is not None:
-            # a car alongside keeps the ego on its side of it: the other side of its cluster costs a lock
-            if along.any():
-                b_now = (ego_n > opp_rel[along, 1]).astype(float)  # 1: the ego is on its left
-                f_b = f_b + np.bincount(labels[along], weights=ALONGSIDE_LOCK_COST * (1.0 - 2.0 * b_now),
-                                        minlength=n_clusters)
+        b_fixed = None
+        if along is not None and along.any():
+            # a car alongside keeps the ego on its side of it: its cluster's binary is fixed to that side
+            b_now = (ego_n > opp_rel[along, 1]).astype(int)  # 1: the ego is on its left
+            left = np.bincount(labels[along], weights=b_now, minlength=n_clusters)
+            count = np.bincount(labels[along], minlength=n_clusters)
+            b_fixed = np.full(n_clusters, -1, dtype=int)
+            b_fixed[(count > 0) & (left == count)] = 1
+            b_fixed[(count > 0) & (left == 0)] = 0
 
         rows, ks = act_rel.nonzero()
         return SideProblem(lo=lo, hi=hi, f_d=f_d, Rinv=Rinv, RinvT=RinvT, pair_k=ks,
                            pair_c=labels[rows], pair_n=opp_rel[rows, 1],
                            pair_w=clear[relevant[rows], ks], pair_r=rows, n_clusters=n_clusters,
-                           f_b=f_b, n_ref=n_ref, d_prev=d_prev, b_prev=b_prev, rel_cluster=labels)
+                           f_b=f_b, n_ref=n_ref, d_prev=d_prev, b_prev=b_prev, rel_cluster=labels,
+                           b_fixed=b_fixed)
 
     # ------------------------------------------------------------- solvers
     def _solve_bnb(self, prob: SideProblem) -> tuple[np.ndarray, np.ndarray] | None:

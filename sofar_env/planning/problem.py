@@ -48,6 +48,7 @@ class SideProblem:
     d_prev: np.ndarray | None
     b_prev: np.ndarray       # (R,) previous side (1 left, 0 right, -1 unknown) per relevant opponent
     rel_cluster: np.ndarray  # (R,) cluster of each relevant opponent
+    b_fixed: np.ndarray | None = None  # (C,) side a cluster is locked to (1 left, 0 right), -1 free; None: all free
 
 
 def cost_factors(config: MIQPConfig) -> dict[bool, tuple[np.ndarray, np.ndarray]]:

@@ -12,7 +12,9 @@ max(0, n_i + w_ik - lo_k)`` (each is the smallest value that makes the relaxed r
 redundant inside the corridor ``[lo_k, hi_k]``). They are at most the track width plus
 the clearance, instead of a fixed large constant such as 2000, which keeps the
 relaxations tight and the problem well conditioned. ``solve_enumeration`` solves one
-QP per side pattern (``2^C``, C <= 4 in practice) and keeps the best. Both return
+QP per side pattern (``2^C``, C <= 4 in practice) and keeps the best. A cluster whose side is locked
+(``SideProblem.b_fixed``) has its binary's bounds pinned in the first route and only its side
+enumerated in the second. Both return
 ``(d, b)`` or None when DAQP fails.
 
 Numerics. The solvers work in ``u = R d`` (``H_d = R'R``, see
@@ -109,9 +111,13 @@ def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tu
     A[rows2, np.concatenate([prob.pair_c, prob.pair_c])] = -np.concatenate([Ma, Mb])
     A[rows2, slack_col] = slack_val
     bupper = bupper.copy()
+    blower = blower.copy()
+    if prob.b_fixed is not None:  # locked sides: the binary's bounds pinned to its value
+        fixed = prob.b_fixed >= 0
+        bupper[:C] = np.where(fixed, prob.b_fixed, 1.0)
+        blower[:C] = np.where(fixed, prob.b_fixed, 0.0)
     bupper[C + P:C + P + N] = prob.hi
     bupper[C + P + N:C + 2 * P + N] = prob.pair_n - sl
-    blower = blower.copy()
     blower[C + P:C + P + N] = prob.lo
     blower[C + 2 * P + N:] = prob.pair_n + sl - Mb
     x, _, flag, _ = daqp.solve(H, f, A, bupper, blower, sense.copy(), presolve=0)
@@ -143,6 +149,8 @@ def solve_enumeration(prob: SideProblem, w_slack: float) -> tuple[np.ndarray, np
     best_cost = np.inf
     for pattern in range(1 << C):
         b = np.array([(pattern >> c) & 1 for c in range(C)], dtype=float)
+        if prob.b_fixed is not None and np.any((prob.b_fixed >= 0) & (b != prob.b_fixed)):
+            continue  # a locked side
         left = b[prob.pair_c] > 0.5
         # left: d_k + xi >= n + sl;  right: d_k - xi <= n - sl
         A[N + r, r] = np.where(left, 1.0, -1.0)

@@ -18,3 +18,23 @@ def test_gamma_figures_written(tmp_path):
     # too few points for the binned mean: still both figures
     few = {"gamma": np.array([0.5, 0.6]), "nearest_opponent_m": np.array([10.0, 20.0])}
     assert all(p.exists() for p in ev.plot_gamma_figures(few, tmp_path / "few"))
+
+
+def test_figures_script_refuses_a_folder_of_another_policy(tmp_path, capsys):
+    """The trace rows carry no policy id: recording a second policy into the same folder would mix
+    their steps in one plot, so the script refuses and names the way out."""
+    import importlib.util
+    import shutil
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    spec = importlib.util.spec_from_file_location("eval_figures", root / "eval" / "figures.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    out = tmp_path / "fig"
+    out.mkdir()
+    shutil.copy(root / "results" / "paper_stack" / "figures" / "episodes.csv", out / "episodes.csv")
+    # the folder holds the paper-stack policy's episodes; ask for the default stack's policy
+    assert script.main(["--out", str(out), "--stack", "sofar", "--episodes", "1", "--rhos", "0.3"]) == 2
+    err = capsys.readouterr().err
+    assert "holds the episodes of another policy" in err and "use another --out" in err

@@ -82,3 +82,29 @@ def test_a_mixed_field_enters_the_key_and_the_report(tmp_path: Path):
     resumed = run_multi_agent_table(STRATEGIES, tmp_path / "old", **kwargs)
     assert (resumed.completed, resumed.skipped) == (1, 1)
     assert [r.key for r in read_race_csv(tmp_path / "old" / "multi_agent_races.csv")] == [r.key for r in resumed.rows]
+
+
+def test_race_script_with_the_alongside_lock_on_the_table_seeds(capsys):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "eval_ma_races", Path(__file__).resolve().parents[2] / "eval" / "multi_agent_races.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert script.main(["--tracks", "Monza", "--table-races", "1", "--duration", "2", "--cars", "2",
+                        "--alongside-gap", "6", "--races"]) == 0
+    out = capsys.readouterr().out
+    assert "alongside lock 6 m" in out and "first 1 races per circuit" in out
+    from sofar_agents.evaluation.multi_agent import race_seed
+
+    assert f"| Monza | {race_seed(0, 'Monza', 0)} |" in out
+    with __import__("pytest").raises(SystemExit):
+        script.main(["--alongside-gap", "-1"])
+
+
+def test_run_race_applies_stack_overrides():
+    from sofar_agents.evaluation.multi_agent import RaceTask, run_race
+
+    task = RaceTask("Monza", Strategy.fixed(0.5), 3, cars=2, duration=1.0, stack="paper")
+    r = run_race(task, stack_overrides={"miqp": {"alongside_gap": 6.0}})
+    assert r.success == 2 and r.stack == "paper"

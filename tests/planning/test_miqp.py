@@ -155,6 +155,20 @@ def test_alongside_lock_keeps_the_ego_between_two_cars_alongside():
     assert locked.max_slack < 1e-6 and np.all(np.abs(locked.d) <= 0.75 + 1e-6)
 
 
+@pytest.mark.parametrize("solver", ["daqp", "enumerate"])
+def test_alongside_lock_is_hard_in_both_solver_routes(solver):
+    """A car alongside on the ego's right, with room only on its right: without the lock the plan
+    crosses to the free side; with it the ego stays left of the car (taking the slack)."""
+    s, n_ref, n_min, n_max = straight(v=30.0)
+    opp = np.array([[1.0, 2.0, 30.0]])  # alongside, 2 m left of the raceline
+    ego_n = 4.0  # the ego is on its left, in a corridor that ends at 5 - margin
+    free = PassingSidePlanner(MIQPConfig(solver=solver)).plan(s, n_ref, n_min, n_max, ego_n, opp)
+    assert free.sides[0] == -1  # the cheap plan goes back to the raceline, through the car
+    locked = PassingSidePlanner(MIQPConfig(solver=solver, alongside_gap=6.0)).plan(s, n_ref, n_min, n_max,
+                                                                                    ego_n, opp)
+    assert locked.success and locked.sides[0] == +1 and locked.max_slack > 0.0
+
+
 def test_alongside_lock_keeps_the_side_of_a_car_alongside():
     s, n_ref, n_min, n_max = straight(v=20.0)
     opp = np.array([[0.5, 1.0, 20.0]])  # just left of the ego and alongside
