@@ -219,10 +219,13 @@ class ControlledRace:
         from .stack import OvertakingStack
 
         cfg = self.config
+        stack = cfg.stack
+        if self.n_cars > 1 and cfg.race.side_lock > 0 and stack.miqp.alongside_gap == 0:
+            stack = apply_overrides(stack, {"miqp": {"alongside_gap": cfg.race.side_lock}})
         if speed_factors is None:
-            configs = [cfg.stack] * self.n_cars
+            configs = [stack] * self.n_cars
         else:
-            configs = [apply_overrides(cfg.stack, {"speed_factor": sf}) for sf in speed_factors]
+            configs = [apply_overrides(stack, {"speed_factor": sf}) for sf in speed_factors]
         return [OvertakingStack(self.track, c, vehicle=cfg.race.vehicle) for c in configs]
 
     def set_speed_factors(self, speed_factors) -> None:

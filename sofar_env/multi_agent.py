@@ -31,7 +31,10 @@ A car that collides, leaves the track or stalls (the stall rule of
 terminates and leaves the race (it stops and no longer counts as an obstacle); in a
 collision between two cars both terminate. All remaining cars are truncated at the race duration.
 Each car's controller predicts the others from what it senses; with ``race={"v2v": True}`` the cars
-also share their MPC plans and predict each other from them (:mod:`sofar_env.v2v`).
+also share their MPC plans and predict each other from them (:mod:`sofar_env.v2v`). Each car's
+passing-side planner keeps the side of every car alongside it (within ``race.side_lock`` = 6 m along the
+track; ``stack.miqp.alongside_gap``, :mod:`sofar_env.planning.miqp`): two cars alongside do not plan
+through each other.
 The ``scenario`` key of the interactive world (:mod:`sofar_env.scenarios`) applies here too.
 
 **Scripted opponents.** ``n_opponents=k`` (or the reset option) adds the scripted field of the

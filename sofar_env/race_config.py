@@ -74,6 +74,10 @@ class RaceConfig:
     v2v: bool = False
     """Multi-car races: each controlled car publishes its MPC plan and the other controlled cars predict it
     from that plan instead of from its sensed speed (:mod:`sofar_env.v2v`); off: prediction from sensing only."""
+    side_lock: float = 6.0
+    """Multi-car races: the controlled cars' passing-side planners keep the side of every car within this
+    arc-length gap, i.e. alongside (``stack.miqp.alongside_gap``, see :mod:`sofar_env.planning.miqp`), unless
+    the stack config sets its own non-zero gap; 0 turns it off. No effect in single-car races [m]."""
     vehicle: VehicleParams = AV21
     """Parameters of every car."""
     opponents: OpponentConfig = field(default_factory=OpponentConfig)
@@ -104,6 +108,8 @@ class RaceConfig:
         if not (_is_real(lo) and _is_real(hi) and 0.0 <= lo <= hi <= 1.5):
             raise ValueError("race.start_speed_fraction must be an ordered pair in [0, 1.5] (fractions of the "
                              f"speed profile), got {self.start_speed_fraction!r}")
+        if not (_is_real(self.side_lock) and math.isfinite(self.side_lock) and self.side_lock >= 0):
+            raise ValueError(f"race.side_lock must be a finite number >= 0 [m], got {self.side_lock!r}")
         if not isinstance(self.v2v, (bool, np.bool_)):
             raise ValueError(f"race.v2v must be True or False, got {self.v2v!r}")
         if self.plant not in PLANTS:

@@ -217,3 +217,24 @@ def test_bad_mixed_field_options_raise_and_change_nothing(options, match):
         env.reset(seed=1, options=options)
     np.testing.assert_array_equal(env.race.frenet, before[0])
     np.testing.assert_array_equal(env.race.opponents.s, before[1])
+
+
+def test_side_lock_is_on_in_multi_car_races_only():
+    """race.side_lock (6 m) turns on the controllers' MIQP side lock in multi-car races, unless the
+    stack sets its own gap; single-car worlds are untouched (their trajectories stay the paper's)."""
+    import gymnasium as gym
+
+    env = sofar_env.parallel_env(track="Monza", n_agents=2)
+    env.reset(seed=0)
+    assert [s.config.miqp.alongside_gap for s in env.stacks] == [6.0, 6.0]
+    off = sofar_env.parallel_env(track="Monza", n_agents=2, race={"side_lock": 0.0})
+    off.reset(seed=0)
+    assert [s.config.miqp.alongside_gap for s in off.stacks] == [0.0, 0.0]
+    own = sofar_env.parallel_env(track="Monza", n_agents=2, stack={"miqp": {"alongside_gap": 3.0}})
+    own.reset(seed=0)
+    assert [s.config.miqp.alongside_gap for s in own.stacks] == [3.0, 3.0]
+    single = gym.make("SOfAR-Monza-v0").unwrapped
+    single.reset(seed=0)
+    assert single.stack.config.miqp.alongside_gap == 0.0
+    with pytest.raises(ValueError, match="race.side_lock must be a finite number >= 0"):
+        sofar_env.parallel_env(track="Monza", n_agents=2, race={"side_lock": -1.0})
