@@ -25,6 +25,7 @@ from sofar_agents.pasta.checkpoint import (
     read_checkpoint_metadata,
     validate_actor_state,
 )
+from sofar_agents.pasta.config import SQUASHINGS
 from sofar_env.constants import GAMMA_MAX, GAMMA_MIN
 
 # FORMAT_VERSION, checkpoint_paths, read_checkpoint_metadata and validate_actor_state are
@@ -60,8 +61,8 @@ class PASTAPolicy:
     def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], obs_dim: int, preference: Any,
                  action_low: Any, action_high: Any, path: str | Path | None = None,
                  objective_names: Any = None, squashing: str = "sigmoid") -> None:
-        if squashing not in ("sigmoid", "clip"):
-            raise ValueError(f"squashing must be 'sigmoid' or 'clip', got {squashing!r}")
+        if squashing not in SQUASHINGS:
+            raise ValueError(f"squashing must be one of {SQUASHINGS}, got {squashing!r}")
         self.squashing = squashing
         self.obs_dim = int(obs_dim)
         self.path = Path(path) if path is not None else None

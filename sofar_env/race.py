@@ -342,15 +342,8 @@ class Race:
         else:
             for k in active:
                 self.states[k] = self.plant.step(self.states[k], u[k])
-        if self.config.opponents.interactive and self.n_cars == 1:
-            s0, n0, e0, v0, _ = self.frenet[0].tolist()  # the ego at the start of the step
-            self.opponents.advance(dt, (s0, n0, v0 * math.cos(e0) / (1.0 - float(self.track.curvature(s0)) * n0)))
-        elif self.config.opponents.interactive and self.opponents.count:
-            egos = []  # every active controlled car at the start of the step
-            for k in active:
-                s0, n0, e0, v0, _ = self.frenet[k].tolist()
-                egos.append((s0, n0, v0 * math.cos(e0) / (1.0 - float(self.track.curvature(s0)) * n0)))
-            self.opponents.advance(dt, egos)
+        if self.config.opponents.interactive:  # the controlled cars at the start of the step
+            self.opponents.advance(dt, self._ego_row(0) if self.n_cars == 1 else [self._ego_row(k) for k in active])
         else:
             self.opponents.advance(dt)
         self.time += dt
@@ -379,6 +372,11 @@ class Race:
         for k in range(self.n_cars):
             self.overtakes[k] += events[k].overtakes
         return events
+
+    def _ego_row(self, car: int) -> tuple[float, float, float]:
+        """(s, n, arc-length speed) of controlled car ``car``, as the opponents' behaviours see it."""
+        s0, n0, e0, v0, _ = self.frenet[car].tolist()
+        return s0, n0, v0 * math.cos(e0) / (1.0 - float(self.track.curvature(s0)) * n0)
 
     def deactivate(self, car: int) -> None:
         """Remove a car from the race (it no longer moves or counts as an obstacle)."""
@@ -423,8 +421,7 @@ class Race:
         L = self.track.length
         s = self.frenet[:, 0]
         gaps = np.asarray(self.track.gap(s[None, :], s[:, None]), float)
-        delta = (gaps - self._car_rel + 0.5 * L) % L - 0.5 * L
-        self._car_rel += delta
+        _unwrap(self._car_rel, gaps, L)
         self._car_ahead |= self._car_rel > 0.0
         thr = self.config.opponents.overtake_threshold
         for i in np.flatnonzero(self.active):
@@ -437,8 +434,7 @@ class Race:
         """Credit each active car with the scripted opponents it passed in this step (multi-car races)."""
         L = self.track.length
         gaps = np.asarray(self.track.gap(self.opponents.s[None, :], self.frenet[:, 0][:, None]), float)
-        delta = (gaps - self._opp_rel + 0.5 * L) % L - 0.5 * L
-        self._opp_rel += delta
+        _unwrap(self._opp_rel, gaps, L)
         lapped = self._opp_rel < -0.5 * L  # more than half a lap behind: ahead again, to be lapped
         self._opp_rel[lapped] += L
         lapping = self._opp_rel > 0.5 * L  # a faster opponent more than half a lap ahead: behind again
@@ -450,3 +446,9 @@ class Race:
             passed = self._opp_ahead[i] & (self._opp_rel[i] <= -thr)
             events[i].overtakes += int(passed.sum())
             self._opp_ahead[i, passed] = False
+
+
+def _unwrap(rel: np.ndarray, gaps: np.ndarray, length: float) -> None:
+    """Advance the unwrapped gaps ``rel`` in place to the periodic ``gaps`` of this step (a step moves
+    every gap by less than half a lap)."""
+    rel += (gaps - rel + 0.5 * length) % length - 0.5 * length

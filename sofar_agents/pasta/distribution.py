@@ -43,7 +43,6 @@ class SigmoidSquash:
     def __init__(self, low: np.ndarray, high: np.ndarray) -> None:
         self.low = torch.as_tensor(low)
         self.scale = torch.as_tensor(high - low)
-        self._bounds = (np.asarray(low), np.asarray(high))
 
     def __call__(self, u: torch.Tensor) -> torch.Tensor:
         """The action for pre-activation ``u``."""
@@ -61,8 +60,7 @@ class SigmoidSquash:
 
     def initial_bias(self, action: np.ndarray) -> np.ndarray:
         """The mean ``u`` whose action is ``action`` (strictly inside the bounds)."""
-        low, high = self._bounds
-        frac = (action - low) / (high - low)
+        frac = (action - self.low.numpy()) / self.scale.numpy()
         return np.log(frac / (1.0 - frac))
 
     def action_log_prob(self, action: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:

@@ -308,11 +308,11 @@ class PassingSidePlanner:
         if along is not None and along.any():
             # a car alongside keeps the ego on its side of it: its cluster's binary is fixed to that side
             b_now = (ego_n > opp_rel[along, 1]).astype(int)  # 1: the ego is on its left
-            left = np.bincount(labels[along], weights=b_now, minlength=n_clusters)
+            n_left = np.bincount(labels[along], weights=b_now, minlength=n_clusters)
             count = np.bincount(labels[along], minlength=n_clusters)
             b_fixed = np.full(n_clusters, -1, dtype=int)
-            b_fixed[(count > 0) & (left == count)] = 1
-            b_fixed[(count > 0) & (left == 0)] = 0
+            b_fixed[(count > 0) & (n_left == count)] = 1
+            b_fixed[(count > 0) & (n_left == 0)] = 0
 
         rows, ks = act_rel.nonzero()
         return SideProblem(lo=lo, hi=hi, f_d=f_d, Rinv=Rinv, RinvT=RinvT, pair_k=ks,
