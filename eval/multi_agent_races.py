@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -50,6 +51,11 @@ def main(argv: list[str] | None = None) -> int:
                         help="race.pace_range of the cars' speed factors (default: the environment's)")
     parser.add_argument("--v2v", action="store_true",
                         help="race.v2v: the cars predict each other from their published MPC plans")
+    parser.add_argument("--no-restart", action="store_true",
+                        help="race.mpc_restart_slack = inf: the controllers' MPCs never restart from a cold guess")
+    parser.add_argument("--lateral-rates", choices=("mpc", "all", "off"), default=None,
+                        help="race.lateral_rates: what the controllers do with the other cars' lateral rates "
+                             "(default: the environment's, mpc)")
     parser.add_argument("--alongside-gap", type=float, default=0.0, metavar="M",
                         help="the controllers' MIQP side lock for cars alongside (stack.miqp.alongside_gap "
                              "[m]; default 0: off)")
@@ -69,6 +75,10 @@ def main(argv: list[str] | None = None) -> int:
     overrides = {"pace_range": tuple(args.pace_range)} if args.pace_range else {}
     if args.v2v:
         overrides["v2v"] = True
+    if args.no_restart:
+        overrides["mpc_restart_slack"] = math.inf
+    if args.lateral_rates:
+        overrides["lateral_rates"] = args.lateral_rates
     stack = {"miqp": {"alongside_gap": args.alongside_gap}} if args.alongside_gap else None
     strategy = Strategy.fixed(args.gamma)
     tasks = [RaceTask(track, strategy, seed, args.cars, args.duration) for track in args.tracks
@@ -84,7 +94,9 @@ def main(argv: list[str] | None = None) -> int:
         logger.info("%s seed %d: %d overtakes, %d colliding, %d off track, %d stalled, pace %s",
                     r.track, r.seed, r.overtakes, r.collided, r.off_track, r.stalled, r.speed_factors)
     pace = ((f", pace_range {tuple(args.pace_range)}" if args.pace_range else "") + (", V2V" if args.v2v else "")
-            + (f", alongside lock {args.alongside_gap:g} m" if args.alongside_gap else ""))
+            + (f", alongside lock {args.alongside_gap:g} m" if args.alongside_gap else "")
+            + (", no MPC restart" if args.no_restart else "")
+            + (f", lateral rates {args.lateral_rates}" if args.lateral_rates else ""))
     seeds = (f"the first {args.table_races} races per circuit of the multi-agent table" if args.table_races
              else f"seeds {' '.join(map(str, args.seeds))}")
     print(f"{args.cars} cars, {args.duration:g} s, gamma {args.gamma:g}{pace}, {seeds} "

@@ -130,6 +130,7 @@ class DecisionTally:
             "mpc_failures": stack.counters["mpc_failures"],
             "miqp_failures": stack.counters["miqp_failures"],
             "parked_checks": stack.counters["parked_checks"],
+            "mpc_restarts": stack.counters["mpc_restarts"],
         }
         if timings:
             info["mpc_time_ms"] = 1e3 * self.mpc_time
@@ -210,6 +211,8 @@ class ControlledRace:
             self.sensors = [Sensor(cfg.race.sensor, self.track.length, cfg.race.dt) for _ in range(self.n_cars)]
             self._sensed = [np.zeros((0, 3)) for _ in range(self.n_cars)]
             self._sensed_rows = [np.zeros((0, 4)) for _ in range(self.n_cars)]
+        elif self.n_cars > 1 and cfg.race.lateral_rates != "off":  # the true rows plus the true lateral rates
+            self._sensed_rows = [np.zeros((0, 4)) for _ in range(self.n_cars)]
         if cfg.race.v2v and self.n_cars > 1:
             from .v2v import TravelTime
 
@@ -222,6 +225,10 @@ class ControlledRace:
         stack = cfg.stack
         if self.n_cars > 1 and cfg.race.side_lock > 0 and stack.miqp.alongside_gap == 0:
             stack = apply_overrides(stack, {"miqp": {"alongside_gap": cfg.race.side_lock}})
+        if self.n_cars > 1 and cfg.race.lateral_rates == "mpc":
+            stack = apply_overrides(stack, {"lateral_prediction_plan": False})
+        if self.n_cars > 1 and math.isfinite(cfg.race.mpc_restart_slack) and math.isinf(stack.mpc.restart_slack):
+            stack = apply_overrides(stack, {"mpc": {"restart_slack": cfg.race.mpc_restart_slack}})
         if speed_factors is None:
             configs = [stack] * self.n_cars
         else:
@@ -337,12 +344,16 @@ class ControlledRace:
         """Update what car ``car`` sees of its opponents: the sensor's (s, n, v) estimates of the true rows
         (and, for its controller, the estimated lateral rates).
 
-        Without a sensor the seen rows are the true rows (the same list), and this does nothing.
+        Without a sensor the seen rows are the true rows (the same list); in a multi-car race the
+        controller's rows also carry the true lateral rates, unless ``race.lateral_rates`` is "off".
         Collisions, track limits, overtakes and the barrier-margin reward are always judged on the
         true state. ``again``: the field changed within the same control step (a car left the race);
         the sensor is not advanced a second time, the rows of the cars that left are dropped.
         """
         if self.sensors is None:
+            if self._sensed_rows is not self._opponents:  # a multi-car race with race.lateral_rates on
+                rows = self._opponents[car]
+                self._sensed_rows[car] = np.column_stack([rows, self.race.opponent_lateral_rates(car)])
             return
         if again:
             keep = np.isin(self._sensed_ids[car], self.race.opponent_ids(car))

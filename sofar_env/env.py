@@ -146,9 +146,10 @@ class SOfARRaceEnv(gym.Env):
     ``min_barrier`` (min h over the opponents now, inf if none), ``barrier_slack``,
     ``mpc_status``, ``miqp_sides`` (per opponent the planners saw, nearest first: +1 = the plan passes it
     on the left, -1 = on the right, 0 = not constrained by the plan),
-    ``mpc_failures``, ``miqp_failures``, ``parked_checks`` (episode counters; the last: MIQP calls that
-    planned the pass of near-stationary opponents with the parked clearance, see
-    :mod:`sofar_env.stack.follow`), ``is_success`` at the end. With
+    ``mpc_failures``, ``miqp_failures``, ``parked_checks``, ``mpc_restarts`` (episode counters;
+    ``parked_checks``: MIQP calls that planned the pass of near-stationary opponents with the parked
+    clearance, see :mod:`sofar_env.stack.follow`; ``mpc_restarts``: MPC solves repeated from a cold
+    guess, ``stack.mpc.restart_slack``, 0 unless it is set, as in multi-car races), ``is_success`` at the end. With
     ``timing_info=True`` also the wall-clock solve times ``mpc_time_ms``, ``miqp_time_ms`` of
     the step: off by default, because they are the only values that differ between two runs
     with the same seed, and checks that compare infos exactly (Gymnasium's ``check_env``,

@@ -34,7 +34,12 @@ Each car's controller predicts the others from what it senses; with ``race={"v2v
 also share their MPC plans and predict each other from them (:mod:`sofar_env.v2v`). Each car's
 passing-side planner keeps the side of every car alongside it (within ``race.side_lock`` = 6 m along the
 track; ``stack.miqp.alongside_gap``, :mod:`sofar_env.planning.miqp`): two cars alongside do not plan
-through each other.
+through each other. Each car's MPC restarts from a cold guess when its warm-started solve needs more
+DCBF slack than ``race.mpc_restart_slack`` = 0.05, and keeps the solution with less slack
+(``stack.mpc.restart_slack``, :mod:`sofar_env.control.mpc.rti`): a plan that passed a car on one side no
+longer drags the next plan across that car after the side changed. Each car's MPC also gets the other
+cars' lateral rates and predicts them moving across the track; its passing-side planner sees them where
+they are (``race.lateral_rates`` = "mpc"; "all" also gives the rates to the planners, "off" to no one).
 The ``scenario`` key of the interactive world (:mod:`sofar_env.scenarios`) applies here too.
 
 **Scripted opponents.** ``n_opponents=k`` (or the reset option) adds the scripted field of the

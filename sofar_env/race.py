@@ -55,7 +55,7 @@ from .geometry import footprint_corner_list, footprint_corners, footprint_radius
 from .opponents import Opponents
 from .race_config import (GRID_MIN_GAP, MAX_SPEED_FACTOR, MAX_START_SPEED_FACTOR, PLANTS,  # noqa: F401
                           START_EDGE_MARGIN, RaceConfig, _is_real)
-from .vehicle import Plant
+from .vehicle import Plant, slip_angle
 
 __all__ = ["RaceConfig", "CarEvents", "Race"]
 
@@ -283,6 +283,17 @@ class Race:
         if len(rows) == 1:
             return rows[0]
         return np.concatenate(rows) if rows else np.zeros((0, 3))
+
+    def opponent_lateral_rates(self, car: int = 0) -> np.ndarray:
+        """Lateral rates n_dot [m/s] of the rows of :meth:`opponent_frenet`: each scripted opponent's, and
+        ``v sin(e + beta)`` of each other active car (its Frenet kinematics, beta its side-slip angle)."""
+        rates = [np.asarray(self.opponents.n_dot, float)] if self.opponents.count else []
+        others = [j for j in range(self.n_cars) if j != car and self.active[j]]
+        if others:
+            p = self.config.vehicle
+            rates.append(np.array([v * math.sin(e + slip_angle(d, p)) for _, _, e, v, d in
+                                   self.frenet[others].tolist()]))
+        return np.concatenate(rates) if rates else np.zeros(0)
 
     def opponent_ids(self, car: int = 0) -> np.ndarray:
         """Stable identities of the rows of :meth:`opponent_frenet` (scripted opponents >= 0, whose id

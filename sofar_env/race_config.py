@@ -16,12 +16,14 @@ from .opponents import OpponentConfig
 from .sensing import SensorConfig
 from .vehicle import AV21, VehicleParams
 
-__all__ = ["RaceConfig", "PLANTS", "START_EDGE_MARGIN", "MAX_START_SPEED_FACTOR", "GRID_MIN_GAP",
-           "MAX_SPEED_FACTOR"]
+__all__ = ["RaceConfig", "PLANTS", "LATERAL_RATES", "START_EDGE_MARGIN", "MAX_START_SPEED_FACTOR",
+           "GRID_MIN_GAP", "MAX_SPEED_FACTOR"]
 
 
 PLANTS = ("kinematic", "dynamic")
 """Plant models of :attr:`RaceConfig.plant`."""
+LATERAL_RATES = ("mpc", "all", "off")
+"""Values of :attr:`RaceConfig.lateral_rates`."""
 START_EDGE_MARGIN = 0.5
 """Distance kept between a controlled car's footprint and the track edge at the start [m]."""
 MAX_START_SPEED_FACTOR = 1.1
@@ -78,6 +80,18 @@ class RaceConfig:
     """Multi-car races: the controlled cars' passing-side planners keep the side of every car within this
     arc-length gap, i.e. alongside (``stack.miqp.alongside_gap``, see :mod:`sofar_env.planning.miqp`), unless
     the stack config sets its own non-zero gap; 0 turns it off. No effect in single-car races [m]."""
+    lateral_rates: str = "mpc"
+    """Multi-car races: what the controllers do with the other cars' lateral rates n_dot (the true rates, or
+    the sensor's estimates with ``race.sensor`` on). ``"mpc"``: each controller's MPC gets them (its barrier
+    rows move with the cars), its passing-side planners see the cars where they are
+    (``stack.lateral_prediction_plan`` False); ``"all"``: the planners also see each car where its move ends;
+    ``"off"``: without a sensor, rows (s, n, v) only, as in single-car races of the paper's world. No effect
+    in single-car races and with ``stack.lateral_prediction`` off (the paper preset)."""
+    mpc_restart_slack: float = 0.05
+    """Multi-car races: the controlled cars' MPCs solve once more from a cold guess when a warm-started solve
+    needs more DCBF slack than this, and keep the better solution (``stack.mpc.restart_slack``, see
+    :mod:`sofar_env.control.mpc.rti`), unless the stack config sets its own finite value; inf turns it off.
+    No effect in single-car races [-]."""
     vehicle: VehicleParams = AV21
     """Parameters of every car."""
     opponents: OpponentConfig = field(default_factory=OpponentConfig)
@@ -110,6 +124,11 @@ class RaceConfig:
                              f"speed profile), got {self.start_speed_fraction!r}")
         if not (_is_real(self.side_lock) and math.isfinite(self.side_lock) and self.side_lock >= 0):
             raise ValueError(f"race.side_lock must be a finite number >= 0 [m], got {self.side_lock!r}")
+        if self.lateral_rates not in LATERAL_RATES:
+            raise ValueError(f"race.lateral_rates must be one of {', '.join(map(repr, LATERAL_RATES))}, "
+                             f"got {self.lateral_rates!r}")
+        if not (_is_real(self.mpc_restart_slack) and self.mpc_restart_slack > 0):
+            raise ValueError(f"race.mpc_restart_slack must be a number > 0 (inf: off), got {self.mpc_restart_slack!r}")
         if not isinstance(self.v2v, (bool, np.bool_)):
             raise ValueError(f"race.v2v must be True or False, got {self.v2v!r}")
         if self.plant not in PLANTS:

@@ -114,6 +114,9 @@ class StackConfig:
     ``lateral_prediction_time`` a car keeps moving at its rate less ``lateral_rate_deadband``, inside the
     edges; the MPC's barrier rows get that motion, the MIQP and the follow logic the offset where it ends
     (:func:`~sofar_env.stack.prediction.lateral_motion`)."""
+    lateral_prediction_plan: bool = True
+    """With ``lateral_prediction``: the MIQP and the follow logic see each car at the offset where its lateral
+    move ends (True), or where it is now (False); the MPC's barrier rows get the motion either way."""
     lateral_prediction_time: float = 1.5
     """How long a sensed lateral rate is carried forward [s], > 0: the MPC's horizon. A lateral move of
     a racing car lasts about this long (a defensive move across 2 m at 1.5 m/s); carried further, a move

@@ -83,9 +83,11 @@ class OvertakingStack:
         self._step = 0
         self._last_pred: np.ndarray | None = None  # previous MPC prediction (for the heading error)
         self.counters = {"steps": 0, "mpc_failures": 0, "miqp_failures": 0, "miqp_solves": 0,
-                         "follow_steps": 0, "parked_checks": 0, "parked_passes": 0}
+                         "follow_steps": 0, "parked_checks": 0, "parked_passes": 0, "mpc_restarts": 0,
+                         "mpc_restarts_taken": 0}
         """Episode counters: control steps, MPC / MIQP failures, MIQP solves, steps in follow mode,
-        MIQP calls that tried / took a pass of near-stationary opponents (:mod:`~sofar_env.stack.follow`)."""
+        MIQP calls that tried / took a pass of near-stationary opponents (:mod:`~sofar_env.stack.follow`),
+        MPC restarts from a cold guess tried / kept (``mpc.restart_slack``)."""
 
     @property
     def following(self) -> bool:
@@ -158,7 +160,8 @@ class OvertakingStack:
                                                      cfg.lateral_rate_deadband, 0.5 * self.vehicle.width)
                 n_now = opp_rel[:, 1]
                 opp_rel = opp_rel[:, :3].copy()
-                opp_rel[:, 1] = n_end
+                if cfg.lateral_prediction_plan:
+                    opp_rel[:, 1] = n_end
             else:
                 opp_rel = opp_rel[:, :3]
         miqp_ran = False
@@ -182,6 +185,8 @@ class OvertakingStack:
         result = self.mpc.solve(np.array([0.0, n, e, v, delta]), stage, opp_mpc, gamma)
         if not result.success:
             self.counters["mpc_failures"] += 1
+        self.counters["mpc_restarts"] = self.mpc.n_restarts
+        self.counters["mpc_restarts_taken"] = self.mpc.n_restarts_taken
         self._last_pred = result.x_pred if result.status == "solved" else None
         following = self.following
         self.counters["follow_steps"] += int(following)

@@ -238,3 +238,94 @@ def test_side_lock_is_on_in_multi_car_races_only():
     assert single.stack.config.miqp.alongside_gap == 0.0
     with pytest.raises(ValueError, match="race.side_lock must be a finite number >= 0"):
         sofar_env.parallel_env(track="Monza", n_agents=2, race={"side_lock": -1.0})
+
+
+def test_mpc_restart_is_on_in_multi_car_races_only():
+    """race.mpc_restart_slack (0.05) turns on the MPC's restart from a cold guess in multi-car races, unless
+    the stack sets its own value; single-car worlds are untouched."""
+    import math
+
+    import gymnasium as gym
+
+    env = sofar_env.parallel_env(track="Monza", n_agents=2)
+    env.reset(seed=0)
+    assert [s.config.mpc.restart_slack for s in env.stacks] == [0.05, 0.05]
+    off = sofar_env.parallel_env(track="Monza", n_agents=2, race={"mpc_restart_slack": math.inf})
+    off.reset(seed=0)
+    assert all(math.isinf(s.config.mpc.restart_slack) for s in off.stacks)
+    own = sofar_env.parallel_env(track="Monza", n_agents=2, stack={"mpc": {"restart_slack": 0.2}})
+    own.reset(seed=0)
+    assert [s.config.mpc.restart_slack for s in own.stacks] == [0.2, 0.2]
+    single = gym.make("SOfAR-Monza-v0").unwrapped
+    single.reset(seed=0)
+    assert math.isinf(single.stack.config.mpc.restart_slack)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="race.mpc_restart_slack must be a number > 0"):
+            sofar_env.parallel_env(track="Monza", n_agents=2, race={"mpc_restart_slack": bad})
+
+
+def _first_collision(env, seed: int, gamma: float, duration: float):
+    env.reset(seed=seed)
+    action = np.array([gamma], np.float32)
+    while env.agents and env.race.time < duration:
+        _, _, _, _, infos = env.step({a: action for a in env.agents})
+        hit = sorted(a for a, info in infos.items() if info["collision"])
+        if hit:
+            return round(env.race.time, 1), hit
+    return None
+
+
+def test_mpc_restart_avoids_a_collision_after_a_change_of_side():
+    """Indianapolis, a race of the multi-agent table (gamma 0.5): just after the rolling start car 2,
+    ahead and to the right, keeps the plan of a pass on the left after its planner switched to
+    following; its RTI, linearised along that plan, steers it across car 3 (moving left at ~5 m/s,
+    with DCBF slack 0.4) and the two collide at 4.1 s. Restarting from a cold guess when the slack is
+    large keeps it on its side: no collision, and the restarts are counted."""
+    import math
+
+    seed = 4193085697
+    # the cars' lateral rates (which avoid this collision too) are off, to see the restart alone
+    off = sofar_env.parallel_env(track="Indianapolis", n_agents=4,
+                                 race={"mpc_restart_slack": math.inf, "lateral_rates": "off"})
+    assert _first_collision(off, seed, 0.5, 5.0) == (4.1, ["car_2", "car_3"])
+    on = sofar_env.parallel_env(track="Indianapolis", n_agents=4, race={"lateral_rates": "off"})
+    assert _first_collision(on, seed, 0.5, 5.0) is None
+    assert on.stacks[2].counters["mpc_restarts_taken"] >= 1
+    assert all(s.counters["mpc_restarts_taken"] <= s.counters["mpc_restarts"] for s in on.stacks)
+
+
+def test_lateral_rates_reach_the_controllers_of_a_multi_car_race_only():
+    """race.lateral_rates: without a sensor, each controller of a multi-car race gets the other cars' rows
+    (s, n, v) plus their true lateral rate v sin(e + beta); "mpc" (the default) keeps them out of the
+    passing-side planners; single-car races keep rows of three columns."""
+    import math
+
+    import gymnasium as gym
+
+    from sofar_env.vehicle import slip_angle
+
+    env = sofar_env.parallel_env(track="LagunaSeca", n_agents=3)
+    env.reset(seed=2)
+    for _ in range(15):
+        env.step({a: np.array([0.5], np.float32) for a in env.agents})
+    race = env.race
+    rows = env.core._sensed_rows[0]
+    assert rows.shape == (2, 4)
+    np.testing.assert_array_equal(rows[:, :3], race.opponent_frenet(0))
+    p = env.config.race.vehicle
+    expected = [v * math.sin(e + slip_angle(d, p)) for _, _, e, v, d in race.frenet[1:].tolist()]
+    np.testing.assert_allclose(rows[:, 3], expected, rtol=0, atol=1e-12)
+    assert np.any(np.abs(rows[:, 3]) > 1e-3)  # the cars are moving across somewhat
+    assert [s.config.lateral_prediction_plan for s in env.stacks] == [False] * 3
+    both = sofar_env.parallel_env(track="LagunaSeca", n_agents=3, race={"lateral_rates": "all"})
+    both.reset(seed=2)
+    assert both.core._sensed_rows[0].shape == (2, 4)
+    assert [s.config.lateral_prediction_plan for s in both.stacks] == [True] * 3
+    off = sofar_env.parallel_env(track="LagunaSeca", n_agents=3, race={"lateral_rates": "off"})
+    off.reset(seed=2)
+    assert off.core._sensed_rows[0].shape == (2, 3)
+    with pytest.raises(ValueError, match="race.lateral_rates must be one of 'mpc', 'all', 'off'"):
+        sofar_env.parallel_env(track="LagunaSeca", n_agents=3, race={"lateral_rates": True})
+    single = gym.make("SOfAR-LagunaSeca-v0").unwrapped
+    single.reset(seed=0)
+    assert single.core._sensed_rows[0].shape[1] == 3

@@ -43,7 +43,7 @@ def test_with_v2v_the_controllers_get_the_published_speeds():
     env.reset(seed=0)
     core = env.core
     first = core._v2v_rows()
-    assert all(a is b for a, b in zip(first, core._sensed))  # nothing published before the first step
+    assert all(a is b for a, b in zip(first, core._sensed_rows))  # nothing published before the first step
     env.step({a: np.array([0.5], np.float32) for a in env.agents})
     rows = core._v2v_rows()
     changed = 0

@@ -57,7 +57,7 @@ def test_races_are_seeded_per_circuit_and_shared_by_the_strategies():
 def test_the_committed_multi_agent_run_reads_fully():
     root = Path(__file__).resolve().parents[2] / "results" / "multi_agent"
     rows = read_race_csv(root / "multi_agent_races.csv")
-    assert len(rows) == 64 and len({r.key for r in rows}) == 64  # 4 strategies x 4 circuits x 4 races
+    assert len(rows) == 256 and len({r.key for r in rows}) == 256  # 4 strategies x 4 circuits x 16 races
     self_play = Strategy.adaptive(root / "selfplay_lagunaseca.json", name="self-play")
     assert {r.policy_id for r in rows if r.strategy == "self-play"} == {self_play.policy_id}
 

@@ -76,6 +76,10 @@ def test_a_car_moving_into_the_ego_line_is_avoided_earlier(tracks):
     h_with = barrier(with_rate.mpc.x_pred[:, None, :], truth, bp).min()
     h_without = barrier(without.mpc.x_pred[:, None, :], truth, bp).min()
     assert h_with > 0.3 and h_without < 0.0
+    # lateral_prediction_plan off: the planners see the car where it is, the MPC still gets its motion
+    mpc_only = first_step(dataclasses.replace(StackConfig(), lateral_prediction_plan=False), opp)
+    assert mpc_only.opponents_rel[0, 1] == pytest.approx(2.5)
+    assert barrier(mpc_only.mpc.x_pred[:, None, :], truth, bp).min() > 0.3
 
 
 def test_paper_preset_ignores_the_rate():

@@ -35,6 +35,19 @@ above ``opponent_h_keep`` along the warm start and all its DCBF rows are inactiv
 by more than ``opponent_dcbf_keep`` (:func:`~.model.relevant_slots`); this keeps the QP
 small when opponents are far.
 
+Restart
+-------
+An RTI linearises the barrier along the previous plan. When that plan passes an opponent on
+one side, the linearised barrier pushes the next plan further to that side, even after the
+lateral reference has moved to the other side (the passing-side planner changed its mind,
+or the opponent moved across): the QP then satisfies its DCBF rows only with slack, and
+the car keeps going where the old plan went. With ``restart_slack`` finite, a warm-started
+solve whose largest DCBF slack exceeds it is solved once more from the cold guess
+(constant lateral offset, never through an opponent ahead; ``cold_start_iterations``
+iterations), and the solution with the smaller slack (by at least ``_RESTART_GAIN``) is
+kept; otherwise the warm-started solution and its warm start stand. Restarts are counted
+in ``n_restarts`` and ``n_restarts_taken``.
+
 Failure handling: a solver status other than solved, or a non-finite number
 anywhere, never raises. The controller returns the first control of the shifted
 previous plan (``status = "fallback_shift"``) while that plan still covers the
@@ -48,6 +61,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -77,6 +91,8 @@ _TRK_ROWS_MARGIN = 0.5
 # linearisation point is farther from it than this distance.
 _BOX_DROP_DISTANCE = np.array([2.0, 0.15, np.inf, np.inf, np.inf, 5.0, 0.08])
 _ROWS_CHECK_TOL = 1e-6
+# A restart's solution replaces the warm-started one when its largest DCBF slack is smaller by this [-]
+_RESTART_GAIN = 1e-3
 
 
 
@@ -118,6 +134,10 @@ class MPCDCBF:
         """QPs re-solved because a left-out row or bound was violated (diagnostics)."""
         self.n_failures = 0
         """Number of failed solves since construction or the last reset()."""
+        self.n_restarts = 0
+        """Restarts from a cold guess since construction or the last reset() (``restart_slack``)."""
+        self.n_restarts_taken = 0
+        """Restarts whose solution was kept, since construction or the last reset()."""
         self.reset()
 
     # ---------------------------------------------------------------- warm start
@@ -128,6 +148,8 @@ class MPCDCBF:
         self._ug: np.ndarray | None = None  # (N, 2)
         self._plan_age = 0  # consecutive fallbacks since the last successful plan
         self.n_failures = 0
+        self.n_restarts = 0
+        self.n_restarts_taken = 0
 
     def predicted_s(self, v0: float | None = None) -> np.ndarray:
         """(N+1,) arc lengths of the warm start, relative to the ego at the next solve [m].
@@ -163,8 +185,28 @@ class MPCDCBF:
         across the track at ``n_dot``, any M >= 0; ``gamma`` in [0, 1].
         """
         t_start = time.perf_counter()
-        cfg = self.config
         x0, arrays, opp, gamma = validate_arguments(x0, stage, opponents, gamma, self._n)
+        warm = self._xg is not None
+        result = self._solve(x0, arrays, opp, gamma, t_start)
+        if warm and result.success and result.slack["barrier"] > self.config.restart_slack:
+            result = self._restart(x0, arrays, opp, gamma, t_start, result)
+        return result
+
+    def _restart(self, x0, arrays, opp, gamma, t_start, result: MPCResult) -> MPCResult:
+        """The solve once more from a cold guess (module docstring, "Restart"); the better of the two."""
+        kept = (self._xg, self._ug, self._plan_age, self.n_failures)
+        self._xg = self._ug = None
+        self.n_restarts += 1
+        fresh = self._solve(x0, arrays, opp, gamma, t_start)
+        if fresh.success and fresh.slack["barrier"] < result.slack["barrier"] - _RESTART_GAIN:
+            self.n_restarts_taken += 1
+            return fresh
+        self._xg, self._ug, self._plan_age, self.n_failures = kept
+        return replace(result, solve_time=time.perf_counter() - t_start)
+
+    def _solve(self, x0, arrays, opp, gamma, t_start) -> MPCResult:
+        """One real-time iteration on validated arguments (:meth:`solve`)."""
+        cfg = self.config
         p = self.vehicle
         dt0 = float(self._dts[0])
         if abs(x0[4]) > p.steer_max + dt0 * p.steer_rate_max or x0[3] < -dt0 * p.a_max:

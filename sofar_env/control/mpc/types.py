@@ -83,6 +83,11 @@ class MPCConfig:
     """Relative tolerance of the QP solver [-]."""
     qp_max_iter: int = 100
     """Iteration limit of the QP solver [-]."""
+    restart_slack: float = math.inf
+    """A warm-started solve whose largest DCBF slack exceeds this is solved once more from a cold guess
+    (constant lateral offset, never through an opponent ahead), and the result with the smaller DCBF
+    slack is kept (:mod:`.rti`, "Restart"). inf: never (the default; multi-car races set it through
+    ``race.mpc_restart_slack``) [-]."""
 
     def __post_init__(self) -> None:
         if int(self.horizon) != self.horizon or self.horizon < 2:
@@ -107,6 +112,8 @@ class MPCConfig:
             raise ValueError(f"qp_solver must be 'piqp' or 'osqp', got {self.qp_solver!r}")
         if self.cold_start_iterations < 1 or self.integrator_substeps < 1 or self.qp_max_iter < 1:
             raise ValueError("iteration counts must be >= 1")
+        if not (self.restart_slack > 0.0):  # also rejects NaN
+            raise ValueError(f"restart_slack must be > 0 (inf: off), got {self.restart_slack!r}")
 
     @property
     def dt0(self) -> float:

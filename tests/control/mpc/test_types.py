@@ -20,7 +20,8 @@ def test_time_grid_starts_with_the_plant_period():
 @pytest.mark.parametrize("kwargs", [dict(horizon=1), dict(ts=0.0), dict(control_dt=-0.1), dict(first_step=0.0),
                                     dict(q=(1.0, 2.0)), dict(r=(0.0, 1.0)), dict(barrier_slack=(1.0, 0.0)),
                                     dict(track_margin=-1.0), dict(max_opponents=1.5), dict(qp_solver="gurobi"),
-                                    dict(cold_start_iterations=0)])
+                                    dict(cold_start_iterations=0), dict(restart_slack=0.0),
+                                    dict(restart_slack=-1.0), dict(restart_slack=float("nan"))])
 def test_config_rejects_malformed_values(kwargs):
     with pytest.raises(ValueError):
         MPCConfig(**kwargs)
