@@ -118,6 +118,22 @@ def multi_agent_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TR
             for track in tracks for e in range(int(races)) for strat in strategies]
 
 
+def race_env(task: RaceTask, race_overrides: dict[str, Any] | None = None,
+             stack_overrides: dict[str, Any] | None = None):
+    """The PettingZoo environment of ``task`` (not reset): its circuit, cars, duration, controller preset,
+    world and scripted opponents, with ``race_overrides`` / ``stack_overrides`` as in :func:`run_race`."""
+    from sofar_env.config import apply_overrides, make_env_config
+    from sofar_env.multi_agent import parallel_env
+
+    mixed = {"n_opponents": int(task.opponents)} if task.opponents else {}
+    config = make_env_config(None, stack=task.stack)
+    if stack_overrides:
+        config = apply_overrides(config, {"stack": stack_overrides})
+    return parallel_env(task.track, n_agents=task.cars, config=config,
+                        race={**(race_overrides or {}), "duration": float(task.duration)},
+                        scenario=task.scenario, timing_info=False, **mixed)
+
+
 def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] | None = None,
              stack_overrides: dict[str, Any] | None = None) -> RaceResult:
     """Run one race; ``policy`` (obs -> gamma) defaults to ``task.strategy.build()``; ``race_overrides`` go
@@ -128,13 +144,7 @@ def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] 
 
     policy = task.strategy.build() if policy is None else policy
     t0 = time.perf_counter()
-    mixed = {"n_opponents": int(task.opponents)} if task.opponents else {}
-    config = make_env_config(None, stack=task.stack)
-    if stack_overrides:
-        config = apply_overrides(config, {"stack": stack_overrides})
-    env = parallel_env(task.track, n_agents=task.cars, config=config,
-                       race={**(race_overrides or {}), "duration": float(task.duration)},
-                       scenario=task.scenario, timing_info=False, **mixed)
+    env = race_env(task, race_overrides, stack_overrides)
     obs, _ = env.reset(seed=int(task.seed))
     last: dict[str, dict] = {}
     gamma_sum, decisions = 0.0, 0
