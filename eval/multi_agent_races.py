@@ -56,6 +56,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lateral-rates", choices=("mpc", "all", "off"), default=None,
                         help="race.lateral_rates: what the controllers do with the other cars' lateral rates "
                              "(default: the environment's, mpc)")
+    parser.add_argument("--heading-extent", type=float, default=0.0, metavar="M",
+                        help="stack.mpc.barrier.heading_extent [m]: widen the barrier's lateral semi-axis with "
+                             "the ego's heading error (default 0: off)")
     parser.add_argument("--alongside-gap", type=float, default=0.0, metavar="M",
                         help="the controllers' MIQP side lock for cars alongside (stack.miqp.alongside_gap "
                              "[m]; default 0: off)")
@@ -70,8 +73,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--gamma must lie in [{GAMMA_MIN}, {GAMMA_MAX}], got {args.gamma}")
     if args.duration <= 0 or args.cars < 2:
         parser.error("--duration must be > 0 and --cars >= 2")
-    if args.alongside_gap < 0 or (args.table_races is not None and args.table_races < 1) or args.workers < 1:
-        parser.error("--alongside-gap must be >= 0, --table-races and --workers >= 1")
+    if (args.alongside_gap < 0 or args.heading_extent < 0 or (args.table_races is not None and args.table_races < 1)
+            or args.workers < 1):
+        parser.error("--alongside-gap and --heading-extent must be >= 0, --table-races and --workers >= 1")
     overrides = {"pace_range": tuple(args.pace_range)} if args.pace_range else {}
     if args.v2v:
         overrides["v2v"] = True
@@ -79,7 +83,10 @@ def main(argv: list[str] | None = None) -> int:
         overrides["mpc_restart_slack"] = math.inf
     if args.lateral_rates:
         overrides["lateral_rates"] = args.lateral_rates
-    stack = {"miqp": {"alongside_gap": args.alongside_gap}} if args.alongside_gap else None
+    stack = {"miqp": {"alongside_gap": args.alongside_gap}} if args.alongside_gap else {}
+    if args.heading_extent:
+        stack["mpc"] = {"barrier": {"heading_extent": args.heading_extent}}
+    stack = stack or None
     strategy = Strategy.fixed(args.gamma)
     tasks = [RaceTask(track, strategy, seed, args.cars, args.duration) for track in args.tracks
              for seed in (args.seeds if args.table_races is None
@@ -96,7 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     pace = ((f", pace_range {tuple(args.pace_range)}" if args.pace_range else "") + (", V2V" if args.v2v else "")
             + (f", alongside lock {args.alongside_gap:g} m" if args.alongside_gap else "")
             + (", no MPC restart" if args.no_restart else "")
-            + (f", lateral rates {args.lateral_rates}" if args.lateral_rates else ""))
+            + (f", lateral rates {args.lateral_rates}" if args.lateral_rates else "")
+            + (f", barrier heading extent {args.heading_extent:g} m" if args.heading_extent else ""))
     seeds = (f"the first {args.table_races} races per circuit of the multi-agent table" if args.table_races
              else f"seeds {' '.join(map(str, args.seeds))}")
     print(f"{args.cars} cars, {args.duration:g} s, gamma {args.gamma:g}{pace}, {seeds} "

@@ -31,6 +31,10 @@ Choices and why
   ``v_close = (v - v_o) * tanh(ds / sigma)`` with ``sigma = 2 m``; near ``ds = 0``
   (cars side by side), where the sign is ambiguous, ``(ds / a)^2`` is about zero
   anyway, so the blend costs nothing.
+* **Heading (an option, off by default).** The containment above holds for cars aligned with the
+  track. A car turned by e reaches ``(length / 2) |sin e|`` further across it (about 0.95 m more at
+  0.4 rad), which happens in slow corners and chicanes. ``heading_extent`` widens ``b`` by that much
+  times a smooth ``|sin e|`` of the ego's own heading error.
 * **Smooth max.** ``max(0, v_close)`` is replaced by the softplus
   ``softplus_k(x) = log(1 + exp(k x)) / k`` with sharpness ``k = 4 s/m``. It is an
   upper bound of ``max(0, x)`` (so the ellipse only gets longer), differs from it by
@@ -67,22 +71,30 @@ class BarrierParams:
     """Gap scale of the ahead/behind blend tanh(ds / sigma) of the closing speed [m]."""
     sharpness: float = 4.0
     """Sharpness k of the softplus smooth max(0, v_close) [s/m]."""
+    heading_extent: float = 0.0
+    """Widening of the lateral semi-axis with the ego's heading error e to the track:
+    ``b + heading_extent (sqrt(sin^2 e + eps^2) - eps)``, eps = 0.01 (a smooth |sin e|). A car turned by e
+    reaches ``(length / 2) |sin e|`` further across the track than an aligned one, so half the car length
+    (2.45 m) covers the ego's own rotation. 0 (the default): the ellipse of aligned cars [m]."""
 
     def __post_init__(self) -> None:
         for name in ("a0", "b", "a_brake", "sigma", "sharpness"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0.0):
                 raise ValueError(f"BarrierParams.{name} must be positive and finite, got {value!r}")
+        if not (np.isfinite(self.heading_extent) and self.heading_extent >= 0.0):
+            raise ValueError(f"BarrierParams.heading_extent must be >= 0 and finite, got {self.heading_extent!r}")
 
 
-_NUMPY_OPS = SimpleNamespace(abs=np.abs, exp=np.exp, log1p=np.log1p, tanh=np.tanh)
+_NUMPY_OPS = SimpleNamespace(abs=np.abs, exp=np.exp, log1p=np.log1p, tanh=np.tanh, sin=np.sin, sqrt=np.sqrt)
+_HEADING_EPS = 0.01
 
 
 def casadi_ops() -> SimpleNamespace:
     """The ``ops`` namespace of CasADi (``abs``, ``exp``, ``log1p``, ``tanh``) for :func:`barrier_expr`."""
     import casadi as ca
 
-    return SimpleNamespace(abs=ca.fabs, exp=ca.exp, log1p=ca.log1p, tanh=ca.tanh)
+    return SimpleNamespace(abs=ca.fabs, exp=ca.exp, log1p=ca.log1p, tanh=ca.tanh, sin=ca.sin, sqrt=ca.sqrt)
 
 
 def softplus(x: Any, k: float, ops: Any = _NUMPY_OPS) -> Any:
@@ -98,15 +110,20 @@ def semi_axis_s(ds: Any, v: Any, v_o: Any, p: BarrierParams, ops: Any = _NUMPY_O
 
 
 def barrier_expr(s: Any, n: Any, v: Any, s_o: Any, n_o: Any, v_o: Any, p: BarrierParams,
-                 ops: Any = _NUMPY_OPS) -> Any:
-    """h for ego (s, n, v) against an opponent (s_o, n_o, v_o), over the ``ops`` namespace.
+                 ops: Any = _NUMPY_OPS, e: Any = 0.0) -> Any:
+    """h for ego (s, n, v) against an opponent (s_o, n_o, v_o), over the ``ops`` namespace; ``e`` is the
+    ego's heading error [rad], used only with ``p.heading_extent`` > 0.
 
     Units: s, n, s_o, n_o in m; v, v_o in m/s. h is dimensionless, >= 0 is safe.
     """
     ds = s_o - s
     dn = n_o - n
     a = semi_axis_s(ds, v, v_o, p, ops)
-    return (ds / a) ** 2 + (dn / p.b) ** 2 - 1.0
+    if p.heading_extent == 0.0:  # the aligned ellipse, the very same expression as without the option
+        return (ds / a) ** 2 + (dn / p.b) ** 2 - 1.0
+    sin_e = ops.sin(e)
+    b = p.b + p.heading_extent * (ops.sqrt(sin_e * sin_e + _HEADING_EPS ** 2) - _HEADING_EPS)
+    return (ds / a) ** 2 + (dn / b) ** 2 - 1.0
 
 
 def barrier(ego: Any, opponents: Any, p: BarrierParams = BarrierParams()) -> np.ndarray:
@@ -120,14 +137,14 @@ def barrier(ego: Any, opponents: Any, p: BarrierParams = BarrierParams()) -> np.
     ego = np.asarray(ego, dtype=float)
     opponents = np.asarray(opponents, dtype=float)
     if ego.shape[-1] == 5:
-        s, n, v = ego[..., 0], ego[..., 1], ego[..., 3]
+        s, n, v, e = ego[..., 0], ego[..., 1], ego[..., 3], ego[..., 2]
     elif ego.shape[-1] == 3:
-        s, n, v = ego[..., 0], ego[..., 1], ego[..., 2]
+        s, n, v, e = ego[..., 0], ego[..., 1], ego[..., 2], 0.0
     else:
         raise ValueError(f"ego must end in 3 (s, n, v) or 5 (s, n, e, v, delta) values, got shape {ego.shape}")
     if opponents.shape[-1] != 3:
         raise ValueError(f"opponents must end in 3 values (s, n, v), got shape {opponents.shape}")
-    return barrier_expr(s, n, v, opponents[..., 0], opponents[..., 1], opponents[..., 2], p, _NUMPY_OPS)
+    return barrier_expr(s, n, v, opponents[..., 0], opponents[..., 1], opponents[..., 2], p, _NUMPY_OPS, e)
 
 
 def casadi_barrier(p: BarrierParams = BarrierParams()):
@@ -136,11 +153,11 @@ def casadi_barrier(p: BarrierParams = BarrierParams()):
 
     x = ca.SX.sym("x", 5)
     o = ca.SX.sym("o", 3)
-    h = barrier_expr(x[0], x[1], x[3], o[0], o[1], o[2], p, casadi_ops())
+    h = barrier_expr(x[0], x[1], x[3], o[0], o[1], o[2], p, casadi_ops(), x[2])
     return ca.Function("barrier", [x, o], [h], ["x", "o"], ["h"])
 
 
-_MATH_OPS = SimpleNamespace(abs=abs, exp=math.exp, log1p=math.log1p, tanh=math.tanh)
+_MATH_OPS = SimpleNamespace(abs=abs, exp=math.exp, log1p=math.log1p, tanh=math.tanh, sin=math.sin, sqrt=math.sqrt)
 
 
 def min_barrier(track, ego_frenet: np.ndarray, opponents: np.ndarray, params: BarrierParams) -> float:
@@ -149,9 +166,9 @@ def min_barrier(track, ego_frenet: np.ndarray, opponents: np.ndarray, params: Ba
 
     :func:`barrier_expr` evaluated on Python floats (the field is small), with s taken relative to the ego.
     """
-    s, n, v = float(ego_frenet[0]), float(ego_frenet[1]), float(ego_frenet[3])
+    s, n, v, e = float(ego_frenet[0]), float(ego_frenet[1]), float(ego_frenet[3]), float(ego_frenet[2])
     h = math.inf
     for row in np.asarray(opponents, float).tolist():
         s_o, n_o, v_o = row[0], row[1], row[2]
-        h = min(h, barrier_expr(0.0, n, v, track.gap(s_o, s), n_o, v_o, params, _MATH_OPS))
+        h = min(h, barrier_expr(0.0, n, v, track.gap(s_o, s), n_o, v_o, params, _MATH_OPS, e))
     return h

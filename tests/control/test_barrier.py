@@ -92,3 +92,35 @@ def test_gradient_is_finite_at_equal_speed_and_zero_gap():
     for ds in (0.0, 5.0, -5.0):
         val = np.array(g([0.0, 0.0, 0.0, 30.0, 0.0], [ds, 0.5, 30.0])).ravel()
         assert np.all(np.isfinite(val))
+
+
+def test_heading_extent_widens_the_lateral_semi_axis_with_the_egos_heading():
+    """b + heading_extent (sqrt(sin^2 e + eps^2) - eps): zero on the widened ellipse's lateral vertex, the
+    same in numpy, CasADi and min_barrier; without the option the heading is ignored."""
+    import math
+
+    from sofar_env.control.barrier import min_barrier
+
+    wide = BarrierParams(heading_extent=2.45)
+    e = 0.4
+    b = 2.7 + 2.45 * (math.sqrt(math.sin(e) ** 2 + 1e-4) - 0.01)
+    ego = np.array([0.0, 0.0, e, 30.0, 0.0])
+    assert float(barrier(ego, np.array([0.0, b, 30.0]), wide)) == pytest.approx(0.0, abs=1e-12)
+    assert float(barrier(ego, np.array([0.0, 3.0, 30.0]), wide)) < 0.0 < _h(0.0, 3.0)  # clear only when aligned
+    aligned = ego.copy()
+    aligned[2] = 0.0
+    assert float(barrier(aligned, np.array([0.0, 2.7, 30.0]), wide)) == pytest.approx(0.0, abs=1e-12)
+    assert float(barrier(ego, np.array([0.0, 2.7, 30.0]), P)) == pytest.approx(0.0, abs=1e-12)  # option off
+    f = casadi_barrier(wide)
+    opp = np.array([3.0, 2.9, 28.0])
+    assert float(f(ego, opp)) == pytest.approx(float(barrier(ego, opp, wide)), abs=1e-12)
+
+    class _Straight:
+        @staticmethod
+        def gap(a, b):
+            return a - b
+
+    assert min_barrier(_Straight(), ego, opp[None], wide) == pytest.approx(float(barrier(ego, opp, wide)), abs=1e-12)
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="heading_extent"):
+            BarrierParams(heading_extent=bad)

@@ -96,7 +96,8 @@ def stage_function(vehicle: VehicleParams, bp: BarrierParams, slots: int, subste
     f = ca.vertcat(*rk4_step(lambda xx, uu: frenet_rhs(xx, uu, kappa, vehicle, ca), xs, [u[0], u[1]], dt, substeps))
     alat = lateral_acceleration(x[3], x[4], vehicle, ca)
     ops = casadi_ops()
-    h = ca.vertcat(*[barrier_expr(x[0], x[1], x[3], o[0, i], o[1, i], o[2, i], bp, ops) for i in range(slots)])
+    h = ca.vertcat(*[barrier_expr(x[0], x[1], x[3], o[0, i], o[1, i], o[2, i], bp, ops, x[2])
+                     for i in range(slots)])
     return ca.Function(name, [x, u, kappa, dt, o], [f, alat, h], ["x", "u", "kappa", "dt", "o"], ["f", "alat", "h"])
 
 
@@ -104,7 +105,9 @@ def linearisation_function(stage, name: str):
     """``(x, u, kappa, dt, o) -> (f, A, B, alat, dalat, h, dh)``: ``stage`` and its Jacobians.
 
     ``A = df/dx``, ``B = df/du`` (sparse), ``dalat = d alat / d(v, delta)`` (1 x 2) and
-    ``dh`` (3 x slots, dense) column i the gradient of ``h_i`` with respect to ``(s, n, v)``.
+    ``dh`` (3 x slots, dense) column i the gradient of ``h_i`` with respect to ``(s, n, v)``. With
+    ``BarrierParams.heading_extent`` h also depends on the heading error; its linearisation keeps the
+    widening of the ellipse at its value at the linearisation point (no gradient in e).
     """
     import casadi as ca
 

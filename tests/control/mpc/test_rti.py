@@ -196,3 +196,21 @@ def test_left_out_constraints_do_not_change_the_answer(cache_dir, scenario):
     assert worst < 1e-5, worst
     if scenario != "opponents":
         assert reduced.n_row_resolves > 0  # the check did find binding rows / bounds
+
+
+def test_heading_extent_reaches_the_compiled_barrier(cache_dir):
+    """BarrierParams.heading_extent: the compiled stage function evaluates the widened ellipse at the ego's
+    heading (its barrier value at x0 is the numeric one with the heading), and the MPC solves with it."""
+    from sofar_env.control.barrier import BarrierParams
+
+    x0 = np.array([0.0, 0.0, 0.3, 30.0, 0.0])
+    opp = np.array([[1.0, 3.2, 30.0]])
+    stage = make_stage(v_ref=30.0, n_ref=0.0, half_width=8.0)
+    values = {}
+    for extent in (0.0, 2.45):
+        cfg = MPCConfig(cache_dir=cache_dir, barrier=BarrierParams(heading_extent=extent))
+        res = MPCDCBF(cfg).solve(x0.copy(), stage, opp, 0.3)
+        assert res.status in ("solved", "fallback_brake")
+        values[extent] = res.barrier_min
+        assert res.barrier_min == pytest.approx(float(barrier(x0, opp[0], cfg.barrier)), abs=1e-9)
+    assert values[0.0] > 0.0 > values[2.45]  # clear for aligned cars, inside the widened ellipse
