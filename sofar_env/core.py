@@ -223,12 +223,17 @@ class ControlledRace:
 
         cfg = self.config
         stack = cfg.stack
-        if self.n_cars > 1 and cfg.race.side_lock > 0 and stack.miqp.alongside_gap == 0:
-            stack = apply_overrides(stack, {"miqp": {"alongside_gap": cfg.race.side_lock}})
-        if self.n_cars > 1 and cfg.race.lateral_rates == "mpc":
-            stack = apply_overrides(stack, {"lateral_prediction_plan": False})
-        if self.n_cars > 1 and math.isfinite(cfg.race.mpc_restart_slack) and math.isinf(stack.mpc.restart_slack):
-            stack = apply_overrides(stack, {"mpc": {"restart_slack": cfg.race.mpc_restart_slack}})
+        if self.n_cars > 1:  # the multi-car defaults of race (see sofar_env.multi_agent)
+            race = cfg.race
+            overrides: dict[str, Any] = {}
+            if race.side_lock > 0 and stack.miqp.alongside_gap == 0:
+                overrides["miqp"] = {"alongside_gap": race.side_lock}
+            if race.lateral_rates == "mpc":
+                overrides["lateral_prediction_plan"] = False
+            if math.isfinite(race.mpc_restart_slack) and math.isinf(stack.mpc.restart_slack):
+                overrides["mpc"] = {"restart_slack": race.mpc_restart_slack}
+            if overrides:
+                stack = apply_overrides(stack, overrides)
         if speed_factors is None:
             configs = [stack] * self.n_cars
         else:
