@@ -56,9 +56,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lateral-rates", choices=("mpc", "all", "off"), default=None,
                         help="race.lateral_rates: what the controllers do with the other cars' lateral rates "
                              "(default: the environment's, mpc)")
-    parser.add_argument("--heading-extent", type=float, default=0.0, metavar="M",
-                        help="stack.mpc.barrier.heading_extent [m]: widen the barrier's lateral semi-axis with "
-                             "the ego's heading error (default 0: off)")
+    parser.add_argument("--heading-extent", type=float, default=None, metavar="M",
+                        help="race.heading_extent [m]: widen each car's barrier's lateral semi-axis with its "
+                             "heading error (default: the environment's, 2.45; 0: off)")
     parser.add_argument("--alongside-gap", type=float, default=0.0, metavar="M",
                         help="the controllers' MIQP side lock for cars alongside (stack.miqp.alongside_gap "
                              "[m]; default 0: off)")
@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--gamma must lie in [{GAMMA_MIN}, {GAMMA_MAX}], got {args.gamma}")
     if args.duration <= 0 or args.cars < 2:
         parser.error("--duration must be > 0 and --cars >= 2")
-    if (args.alongside_gap < 0 or args.heading_extent < 0 or (args.table_races is not None and args.table_races < 1)
+    if (args.alongside_gap < 0 or (args.heading_extent is not None and args.heading_extent < 0) or (args.table_races is not None and args.table_races < 1)
             or args.workers < 1):
         parser.error("--alongside-gap and --heading-extent must be >= 0, --table-races and --workers >= 1")
     overrides = {"pace_range": tuple(args.pace_range)} if args.pace_range else {}
@@ -83,10 +83,9 @@ def main(argv: list[str] | None = None) -> int:
         overrides["mpc_restart_slack"] = math.inf
     if args.lateral_rates:
         overrides["lateral_rates"] = args.lateral_rates
-    stack = {"miqp": {"alongside_gap": args.alongside_gap}} if args.alongside_gap else {}
-    if args.heading_extent:
-        stack["mpc"] = {"barrier": {"heading_extent": args.heading_extent}}
-    stack = stack or None
+    if args.heading_extent is not None:
+        overrides["heading_extent"] = args.heading_extent
+    stack = {"miqp": {"alongside_gap": args.alongside_gap}} if args.alongside_gap else None
     strategy = Strategy.fixed(args.gamma)
     tasks = [RaceTask(track, strategy, seed, args.cars, args.duration) for track in args.tracks
              for seed in (args.seeds if args.table_races is None
@@ -104,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
             + (f", alongside lock {args.alongside_gap:g} m" if args.alongside_gap else "")
             + (", no MPC restart" if args.no_restart else "")
             + (f", lateral rates {args.lateral_rates}" if args.lateral_rates else "")
-            + (f", barrier heading extent {args.heading_extent:g} m" if args.heading_extent else ""))
+            + (f", barrier heading extent {args.heading_extent:g} m" if args.heading_extent is not None else ""))
     seeds = (f"the first {args.table_races} races per circuit of the multi-agent table" if args.table_races
              else f"seeds {' '.join(map(str, args.seeds))}")
     print(f"{args.cars} cars, {args.duration:g} s, gamma {args.gamma:g}{pace}, {seeds} "

@@ -231,7 +231,9 @@ class ControlledRace:
             if race.lateral_rates == "mpc":
                 overrides["lateral_prediction_plan"] = False
             if math.isfinite(race.mpc_restart_slack) and math.isinf(stack.mpc.restart_slack):
-                overrides["mpc"] = {"restart_slack": race.mpc_restart_slack}
+                overrides.setdefault("mpc", {})["restart_slack"] = race.mpc_restart_slack
+            if race.heading_extent > 0 and stack.mpc.barrier.heading_extent == 0:
+                overrides.setdefault("mpc", {})["barrier"] = {"heading_extent": race.heading_extent}
             if overrides:
                 stack = apply_overrides(stack, overrides)
         if speed_factors is None:

@@ -40,6 +40,11 @@ DCBF slack than ``race.mpc_restart_slack`` = 0.05, and keeps the solution with l
 longer drags the next plan across that car after the side changed. Each car's MPC also gets the other
 cars' lateral rates and predicts them moving across the track; its passing-side planner sees them where
 they are (``race.lateral_rates`` = "mpc"; "all" also gives the rates to the planners, "off" to no one).
+Each car's barrier widens its lateral semi-axis with the car's own heading error to the track and the
+other car's course angle, whose sine is its lateral rate over its speed (``race.heading_extent`` = 2.45 m,
+half the car length, times a smooth ``|sin|`` of each; ``stack.mpc.barrier.heading_extent``,
+:mod:`sofar_env.control.barrier`): a car turned in a chicane reaches further across the track than the
+ellipse of aligned cars covers.
 The ``scenario`` key of the interactive world (:mod:`sofar_env.scenarios`) applies here too.
 
 **Scripted opponents.** ``n_opponents=k`` (or the reset option) adds the scripted field of the

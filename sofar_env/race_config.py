@@ -92,6 +92,11 @@ class RaceConfig:
     needs more DCBF slack than this, and keep the better solution (``stack.mpc.restart_slack``, see
     :mod:`sofar_env.control.mpc.rti`), unless the stack config sets its own finite value; inf turns it off.
     No effect in single-car races [-]."""
+    heading_extent: float = 2.45
+    """Multi-car races: the controlled cars' barrier widens its lateral semi-axis with the car's own heading
+    error to the track and the other car's course angle (from its lateral rate; ``stack.mpc.barrier.
+    heading_extent``, see :mod:`sofar_env.control.barrier`; half the car length covers a car's rotation),
+    unless the stack config sets its own non-zero value; 0 turns it off. No effect in single-car races [m]."""
     vehicle: VehicleParams = AV21
     """Parameters of every car."""
     opponents: OpponentConfig = field(default_factory=OpponentConfig)
@@ -129,6 +134,8 @@ class RaceConfig:
                              f"got {self.lateral_rates!r}")
         if not (_is_real(self.mpc_restart_slack) and self.mpc_restart_slack > 0):
             raise ValueError(f"race.mpc_restart_slack must be a number > 0 (inf: off), got {self.mpc_restart_slack!r}")
+        if not (_is_real(self.heading_extent) and math.isfinite(self.heading_extent) and self.heading_extent >= 0):
+            raise ValueError(f"race.heading_extent must be a finite number >= 0 [m], got {self.heading_extent!r}")
         if not isinstance(self.v2v, (bool, np.bool_)):
             raise ValueError(f"race.v2v must be True or False, got {self.v2v!r}")
         if self.plant not in PLANTS:

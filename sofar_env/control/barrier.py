@@ -34,7 +34,9 @@ Choices and why
 * **Heading (an option, off by default).** The containment above holds for cars aligned with the
   track. A car turned by e reaches ``(length / 2) |sin e|`` further across it (about 0.95 m more at
   0.4 rad), which happens in slow corners and chicanes. ``heading_extent`` widens ``b`` by that much
-  times a smooth ``|sin e|`` of the ego's own heading error.
+  times a smooth ``|sin e|`` of the ego's own heading error, plus as much for the opponent's rotation
+  where the controller knows it: ``sin_course_o``, the sine of the opponent's course angle to the track
+  (its lateral rate over its speed, ``n_dot / v``), 0 where unknown.
 * **Smooth max.** ``max(0, v_close)`` is replaced by the softplus
   ``softplus_k(x) = log(1 + exp(k x)) / k`` with sharpness ``k = 4 s/m``. It is an
   upper bound of ``max(0, x)`` (so the ellipse only gets longer), differs from it by
@@ -72,10 +74,12 @@ class BarrierParams:
     sharpness: float = 4.0
     """Sharpness k of the softplus smooth max(0, v_close) [s/m]."""
     heading_extent: float = 0.0
-    """Widening of the lateral semi-axis with the ego's heading error e to the track:
-    ``b + heading_extent (sqrt(sin^2 e + eps^2) - eps)``, eps = 0.01 (a smooth |sin e|). A car turned by e
-    reaches ``(length / 2) |sin e|`` further across the track than an aligned one, so half the car length
-    (2.45 m) covers the ego's own rotation. 0 (the default): the ellipse of aligned cars [m]."""
+    """Widening of the lateral semi-axis with the heading error e of the ego to the track and the course
+    angle c of the opponent: ``b + heading_extent (|sin e|_eps + |sin c|_eps)``, with the smooth
+    ``|x|_eps = sqrt(x^2 + eps^2) - eps``, eps = 0.01. A car turned by e reaches ``(length / 2) |sin e|``
+    further across the track than an aligned one, so half the car length (2.45 m) covers both cars'
+    rotation (the opponent's where it is known, see :func:`barrier_expr`). 0 (the default): the ellipse
+    of aligned cars [m]."""
 
     def __post_init__(self) -> None:
         for name in ("a0", "b", "a_brake", "sigma", "sharpness"):
@@ -110,9 +114,10 @@ def semi_axis_s(ds: Any, v: Any, v_o: Any, p: BarrierParams, ops: Any = _NUMPY_O
 
 
 def barrier_expr(s: Any, n: Any, v: Any, s_o: Any, n_o: Any, v_o: Any, p: BarrierParams,
-                 ops: Any = _NUMPY_OPS, e: Any = 0.0) -> Any:
+                 ops: Any = _NUMPY_OPS, e: Any = 0.0, sin_course_o: Any = 0.0) -> Any:
     """h for ego (s, n, v) against an opponent (s_o, n_o, v_o), over the ``ops`` namespace; ``e`` is the
-    ego's heading error [rad], used only with ``p.heading_extent`` > 0.
+    ego's heading error [rad] and ``sin_course_o`` the sine of the opponent's course angle to the track
+    [-] (0: aligned or unknown), both used only with ``p.heading_extent`` > 0.
 
     Units: s, n, s_o, n_o in m; v, v_o in m/s. h is dimensionless, >= 0 is safe.
     """
@@ -122,7 +127,9 @@ def barrier_expr(s: Any, n: Any, v: Any, s_o: Any, n_o: Any, v_o: Any, p: Barrie
     if p.heading_extent == 0.0:  # the aligned ellipse, the very same expression as without the option
         return (ds / a) ** 2 + (dn / p.b) ** 2 - 1.0
     sin_e = ops.sin(e)
-    b = p.b + p.heading_extent * (ops.sqrt(sin_e * sin_e + _HEADING_EPS ** 2) - _HEADING_EPS)
+    eps2 = _HEADING_EPS ** 2
+    turned = ops.sqrt(sin_e * sin_e + eps2) + ops.sqrt(sin_course_o * sin_course_o + eps2) - 2.0 * _HEADING_EPS
+    b = p.b + p.heading_extent * turned
     return (ds / a) ** 2 + (dn / b) ** 2 - 1.0
 
 
@@ -130,7 +137,8 @@ def barrier(ego: Any, opponents: Any, p: BarrierParams = BarrierParams()) -> np.
     """Numeric h, vectorised with numpy broadcasting.
 
     ``ego`` is ``(..., 3)`` rows ``(s, n, v)`` or a full Frenet state ``(..., 5)``
-    ``(s, n, e, v, delta)``; ``opponents`` is ``(..., 3)`` rows ``(s, n, v)``. The
+    ``(s, n, e, v, delta)``; ``opponents`` is ``(..., 3)`` rows ``(s, n, v)`` or ``(..., 4)`` rows
+    ``(s, n, v, sin_course)`` (see :func:`barrier_expr`). The
     leading dimensions broadcast, e.g. ``barrier(x[None, :], opps)`` gives one value
     per opponent.
     """
@@ -142,9 +150,11 @@ def barrier(ego: Any, opponents: Any, p: BarrierParams = BarrierParams()) -> np.
         s, n, v, e = ego[..., 0], ego[..., 1], ego[..., 2], 0.0
     else:
         raise ValueError(f"ego must end in 3 (s, n, v) or 5 (s, n, e, v, delta) values, got shape {ego.shape}")
-    if opponents.shape[-1] != 3:
-        raise ValueError(f"opponents must end in 3 values (s, n, v), got shape {opponents.shape}")
-    return barrier_expr(s, n, v, opponents[..., 0], opponents[..., 1], opponents[..., 2], p, _NUMPY_OPS, e)
+    if opponents.shape[-1] not in (3, 4):
+        raise ValueError(f"opponents must end in 3 values (s, n, v) or 4 (s, n, v, sin_course), got shape "
+                         f"{opponents.shape}")
+    course = opponents[..., 3] if opponents.shape[-1] == 4 else 0.0
+    return barrier_expr(s, n, v, opponents[..., 0], opponents[..., 1], opponents[..., 2], p, _NUMPY_OPS, e, course)
 
 
 def casadi_barrier(p: BarrierParams = BarrierParams()):

@@ -124,3 +124,23 @@ def test_heading_extent_widens_the_lateral_semi_axis_with_the_egos_heading():
     for bad in (-1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="heading_extent"):
             BarrierParams(heading_extent=bad)
+
+
+def test_heading_extent_also_covers_the_opponents_course():
+    """Rows (s, n, v, sin_course): the semi-axis widens by heading_extent |sin c|_eps for the opponent's
+    course c as for the ego's heading; a course of 0 is the three-column row; without the option the course
+    is ignored."""
+    import math
+
+    wide = BarrierParams(heading_extent=2.45)
+    ego = np.array([0.0, 0.0, 0.2, 30.0, 0.0])
+    c = 0.5
+    b = 2.7 + 2.45 * (math.sqrt(math.sin(0.2) ** 2 + 1e-4) + math.sqrt(c ** 2 + 1e-4) - 0.02)
+    assert float(barrier(ego, np.array([0.0, b, 30.0, c]), wide)) == pytest.approx(0.0, abs=1e-12)
+    assert float(barrier(ego, np.array([0.0, -b, 30.0, -c]), wide)) == pytest.approx(0.0, abs=1e-12)
+    row = np.array([2.0, 3.5, 31.0])
+    assert float(barrier(ego, np.append(row, 0.0), wide)) == pytest.approx(float(barrier(ego, row, wide)), abs=1e-15)
+    assert float(barrier(ego, np.append(row, c), wide)) < float(barrier(ego, row, wide))
+    assert float(barrier(ego, np.append(row, c), P)) == float(barrier(ego, row, P))
+    with pytest.raises(ValueError, match="opponents must end in 3 values"):
+        barrier(ego, np.zeros(5), wide)

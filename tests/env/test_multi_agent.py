@@ -264,6 +264,29 @@ def test_mpc_restart_is_on_in_multi_car_races_only():
             sofar_env.parallel_env(track="Monza", n_agents=2, race={"mpc_restart_slack": bad})
 
 
+def test_heading_extent_is_on_in_multi_car_races_only():
+    """race.heading_extent (2.45 m) widens each controller's barrier with its heading error in multi-car
+    races, unless the stack sets its own value; 0 turns it off; single-car worlds are untouched."""
+    import gymnasium as gym
+
+    env = sofar_env.parallel_env(track="Monza", n_agents=2)
+    env.reset(seed=0)
+    assert [s.config.mpc.barrier.heading_extent for s in env.stacks] == [2.45, 2.45]
+    assert [s.config.mpc.restart_slack for s in env.stacks] == [0.05, 0.05]  # merged with the restart
+    off = sofar_env.parallel_env(track="Monza", n_agents=2, race={"heading_extent": 0.0})
+    off.reset(seed=0)
+    assert [s.config.mpc.barrier.heading_extent for s in off.stacks] == [0.0, 0.0]
+    own = sofar_env.parallel_env(track="Monza", n_agents=2, stack={"mpc": {"barrier": {"heading_extent": 1.0}}})
+    own.reset(seed=0)
+    assert [s.config.mpc.barrier.heading_extent for s in own.stacks] == [1.0, 1.0]
+    single = gym.make("SOfAR-Monza-v0").unwrapped
+    single.reset(seed=0)
+    assert single.stack.config.mpc.barrier.heading_extent == 0.0
+    for bad in (-1.0, float("nan"), float("inf"), "2"):
+        with pytest.raises(ValueError, match="race.heading_extent must be a finite number >= 0"):
+            sofar_env.parallel_env(track="Monza", n_agents=2, race={"heading_extent": bad})
+
+
 def _first_collision(env, seed: int, gamma: float, duration: float):
     env.reset(seed=seed)
     action = np.array([gamma], np.float32)
@@ -284,11 +307,12 @@ def test_mpc_restart_avoids_a_collision_after_a_change_of_side():
     import math
 
     seed = 4193085697
-    # the cars' lateral rates (which avoid this collision too) are off, to see the restart alone
+    # the cars' lateral rates and the heading-aware barrier (which avoid this collision too) are off, to
+    # see the restart alone
     off = sofar_env.parallel_env(track="Indianapolis", n_agents=4,
-                                 race={"mpc_restart_slack": math.inf, "lateral_rates": "off"})
+                                 race={"mpc_restart_slack": math.inf, "lateral_rates": "off", "heading_extent": 0.0})
     assert _first_collision(off, seed, 0.5, 5.0) == (4.1, ["car_2", "car_3"])
-    on = sofar_env.parallel_env(track="Indianapolis", n_agents=4, race={"lateral_rates": "off"})
+    on = sofar_env.parallel_env(track="Indianapolis", n_agents=4, race={"lateral_rates": "off", "heading_extent": 0.0})
     assert _first_collision(on, seed, 0.5, 5.0) is None
     assert on.stacks[2].counters["mpc_restarts_taken"] >= 1
     assert all(s.counters["mpc_restarts_taken"] <= s.counters["mpc_restarts"] for s in on.stacks)

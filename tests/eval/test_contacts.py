@@ -30,21 +30,25 @@ def _row(**kw) -> RaceResult:
     return RaceResult(**base)
 
 
-def test_a_contact_at_a_chicane_with_the_cars_turned_is_inside_the_ellipses_clear_set():
-    """Monza, a race of the multi-agent table (gamma 0.5): at the first chicane car 0 touches car 2, both
-    turned 0.4-0.7 rad to the track at 10-17 m/s; the barrier, whose ellipse assumes aligned cars, has
-    h > 0 there."""
+def test_a_contact_at_a_chicane_with_the_cars_turned_is_inside_the_aligned_ellipses_clear_set():
+    """Monza, a race of an earlier multi-agent table (gamma 0.5): without the heading-aware barrier, at the
+    first chicane car 0 touches car 2, both turned 0.4-0.7 rad to the track at 10-17 m/s; the barrier, whose
+    ellipse assumes aligned cars, has h > 0 there. With the multi-car default (the ellipse widened by both
+    cars' rotation) the race has no contact."""
     script = _script()
-    contact = script.first_contact(_row())
+    contact = script.first_contact(_row(), {"heading_extent": 0.0})
     assert contact is not None
     assert contact.time == pytest.approx(11.3) and contact.cars == (0, 2)
-    assert contact.h > 0.0 and min(abs(e) for e in contact.headings) > 0.3
+    assert contact.h_aligned > 0.0 and min(abs(e) for e in contact.headings) > 0.3
+    assert contact.h == contact.h_aligned  # the cars' own barrier is the aligned one here
     table = script.format_contacts([(_row(), contact), (replace(_row(), seed=1), None)])
     assert "| Monza | 2286877623 | gamma=0.50 | 11.3 | 0, 2 |" in table
-    assert "no contact with this code" in table and "at 1 of them the barrier called the cars clear" in table
+    assert "no contact with this code" in table
+    assert "clear (h >= 0) at 1 of them with the aligned ellipse and at 1 with the cars' own barrier" in table
+    assert script.first_contact(_row()) is None
 
 
 def test_the_committed_table_has_the_replayed_races():
-    rows = read_race_csv(ROOT / "results" / "multi_agent" / "multi_agent_races.csv")
+    rows = read_race_csv(ROOT / "results" / "multi_agent" / "before_heading" / "multi_agent_races.csv")
     assert any(r.track == "Monza" and r.seed == 2286877623 and r.strategy == "gamma=0.50" and r.collided
                for r in rows)

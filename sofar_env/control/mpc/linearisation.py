@@ -17,7 +17,8 @@ import numpy as np
 from ...vehicle import VehicleParams
 from ..codegen import CodegenInfo, compile_function
 from .layout import LinearisationLayout
-from .model import DUMMY_OPPONENT, definition_name, linearisation_function, predict_opponents, stage_function
+from .model import (DUMMY_OPPONENT, OPPONENT_ROWS, definition_name, linearisation_function, predict_opponents,
+                    stage_function)
 from .types import MPCConfig
 
 __all__ = ["StageLinearisation"]
@@ -54,7 +55,7 @@ class StageLinearisation:
         self.u = np.zeros((k1, 2))
         self.kappa = np.zeros(k1)
         self.dt = np.concatenate([dts, [cfg.ts]])
-        self.o = np.zeros((k1, slots, 3))
+        self.o = np.zeros((k1, slots, OPPONENT_ROWS))
         self.o[:] = DUMMY_OPPONENT
         self.f = np.zeros((k1, 5))
         self.layout = lay = LinearisationLayout(
@@ -79,7 +80,7 @@ class StageLinearisation:
         self._buf = buf  # keeps the buffer (and its pointers into the arrays above) alive
 
     def set_opponents(self, rows: np.ndarray, t: np.ndarray) -> None:
-        """Slots 0..M-1: the (M, 3) ``rows`` predicted at the times ``t``; the others: the dummy."""
+        """Slots 0..M-1: the (M, 3 or 4) ``rows`` predicted at the times ``t``; the others: the dummy."""
         m = len(rows)
         self.o[:, :m] = predict_opponents(rows, t)
         self.o[:, m:] = DUMMY_OPPONENT

@@ -17,8 +17,10 @@ Multiple shooting over the time grid ``t_0 = 0, t_1 = dt_0, t_k = dt_0 + (k - 1)
 
 with ``x_ref_k = (., n_ref_k, 0, v_ref_k, 0)`` and terminal weight Q. The DCBF holds on
 **every** transition, including ``x_0 -> x_1`` (the authors' reference code misses it).
-Opponents are predicted at constant velocity, ``o_ik = (s_i + v_i t_k, n_i, v_i)``
-(:func:`predict_opponents`).
+Opponents are predicted at constant velocity, ``o_ik = (s_i + v_i t_k, n_i, v_i, c_i)``
+(:func:`predict_opponents`); with a lateral rate ``n_dot_i`` known, ``n_i + n_dot_i t_k``, and
+``c_i = n_dot_i / max(v_i, 1 m/s)`` (clipped to [-1, 1]) the sine of its course angle to the track, which
+only a barrier with ``BarrierParams.heading_extent`` > 0 uses (0 without a rate).
 
 Time grid. The first interval ``dt_0`` defaults to the plant period ``control_dt``
 (``MPCConfig.first_step``), the others are ``ts``. The first DCBF transition is then
@@ -55,12 +57,17 @@ from ...vehicle import VehicleParams, frenet_rhs, lateral_acceleration, rk4_step
 from ..barrier import BarrierParams, barrier, barrier_expr, casadi_ops
 from .types import MPCConfig
 
-__all__ = ["DUMMY_OPPONENT", "definition_name", "stage_function", "linearisation_function", "tracking_weights",
+__all__ = ["DUMMY_OPPONENT", "OPPONENT_ROWS", "definition_name", "stage_function", "linearisation_function", "tracking_weights",
            "stage_reference", "slack_weights", "variable_box", "track_limits", "predict_opponents",
            "select_opponents", "relevant_slots"]
 
-DUMMY_OPPONENT = (50.0, 0.0, 0.0)
-"""(s, n, v) put in opponent slots without an opponent: finite, far from the ego; its outputs are unused."""
+DUMMY_OPPONENT = (50.0, 0.0, 0.0, 0.0)
+"""(s, n, v, sin_course) put in opponent slots without an opponent: finite, far from the ego; its outputs
+are unused."""
+OPPONENT_ROWS = 4
+"""Rows of an opponent column of the stage function: (s, n, v, sin_course)."""
+_COURSE_MIN_SPEED = 1.0
+"""Speed below which the course angle of an opponent is taken from its lateral rate over this speed [m/s]."""
 
 
 # --------------------------------------------------------------------------------------
@@ -72,18 +79,18 @@ def definition_name(vehicle: VehicleParams, bp: BarrierParams, slots: int, subst
     """Name of the stage functions, unique per problem definition (and CasADi version)."""
     import casadi as ca
 
-    parts = (vehicle, bp, slots, substeps, ca.__version__)
+    parts = (vehicle, bp, slots, substeps, OPPONENT_ROWS, ca.__version__)
     return "sofar_mpc_stage_" + hashlib.sha1(repr(parts).encode()).hexdigest()[:12]
 
 
 def stage_function(vehicle: VehicleParams, bp: BarrierParams, slots: int, substeps: int,
                    name: str = "sofar_mpc_stage"):
-    """CasADi function ``(x[5], u[2], kappa, dt, o[3 x slots]) -> (f[5], alat, h[slots])`` of one stage.
+    """CasADi function ``(x[5], u[2], kappa, dt, o[4 x slots]) -> (f[5], alat, h[slots])`` of one stage.
 
     ``f``: the state after ``dt`` [s] (RK4 of :func:`~sofar_env.vehicle.frenet_rhs` in
     ``substeps`` steps, curvature ``kappa`` [1/m], input ``u`` held); ``alat``: the lateral
     acceleration at ``x`` [m/s^2]; ``h``: the barrier of ``x`` against each opponent
-    column ``(s, n, v)`` of ``o`` [-]. ``slots`` must be >= 1.
+    column ``(s, n, v, sin_course)`` of ``o`` [-]. ``slots`` must be >= 1.
     """
     import casadi as ca
 
@@ -91,12 +98,12 @@ def stage_function(vehicle: VehicleParams, bp: BarrierParams, slots: int, subste
     u = ca.SX.sym("u", 2)
     kappa = ca.SX.sym("kappa")
     dt = ca.SX.sym("dt")
-    o = ca.SX.sym("o", 3, slots)
+    o = ca.SX.sym("o", OPPONENT_ROWS, slots)
     xs = [x[i] for i in range(5)]
     f = ca.vertcat(*rk4_step(lambda xx, uu: frenet_rhs(xx, uu, kappa, vehicle, ca), xs, [u[0], u[1]], dt, substeps))
     alat = lateral_acceleration(x[3], x[4], vehicle, ca)
     ops = casadi_ops()
-    h = ca.vertcat(*[barrier_expr(x[0], x[1], x[3], o[0, i], o[1, i], o[2, i], bp, ops, x[2])
+    h = ca.vertcat(*[barrier_expr(x[0], x[1], x[3], o[0, i], o[1, i], o[2, i], bp, ops, x[2], o[3, i])
                      for i in range(slots)])
     return ca.Function(name, [x, u, kappa, dt, o], [f, alat, h], ["x", "u", "kappa", "dt", "o"], ["f", "alat", "h"])
 
@@ -107,7 +114,8 @@ def linearisation_function(stage, name: str):
     ``A = df/dx``, ``B = df/du`` (sparse), ``dalat = d alat / d(v, delta)`` (1 x 2) and
     ``dh`` (3 x slots, dense) column i the gradient of ``h_i`` with respect to ``(s, n, v)``. With
     ``BarrierParams.heading_extent`` h also depends on the heading error; its linearisation keeps the
-    widening of the ellipse at its value at the linearisation point (no gradient in e).
+    widening of the ellipse at its value at the linearisation point (no gradient in e; the opponent's
+    course is a parameter).
     """
     import casadi as ca
 
@@ -175,14 +183,17 @@ def track_limits(cfg: MPCConfig, arrays: np.ndarray) -> tuple[np.ndarray, np.nda
 
 
 def predict_opponents(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(len(t), M, 3) constant-velocity prediction ``(s + v t, n, v)`` of the (M, 3) ``rows`` at times ``t``;
-    rows (M, 4) ``(s, n, v, n_dot)`` also move across the track, ``n + n_dot t``."""
-    out = np.empty((len(t), len(rows), 3))
+    """(len(t), M, 4) constant-velocity prediction ``(s + v t, n, v, 0)`` of the (M, 3) ``rows`` at times ``t``;
+    rows (M, 4) ``(s, n, v, n_dot)`` also move across the track, ``n + n_dot t``, and give the sine of
+    their course angle ``clip(n_dot / max(v, 1 m/s), -1, 1)`` as the fourth value."""
+    out = np.empty((len(t), len(rows), OPPONENT_ROWS))
     out[:, :, 0] = rows[:, 0] + rows[:, 2] * t[:, None]
     if rows.shape[1] == 4:
         out[:, :, 1] = rows[:, 1] + rows[:, 3] * t[:, None]
+        out[:, :, 3] = np.clip(rows[:, 3] / np.maximum(rows[:, 2], _COURSE_MIN_SPEED), -1.0, 1.0)
     else:
         out[:, :, 1] = rows[:, 1]
+        out[:, :, 3] = 0.0
     out[:, :, 2] = rows[:, 2]
     return out
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from ...vehicle import VehicleParams
 from .layout import N_FIXED
-from .model import (DUMMY_OPPONENT, predict_opponents, slack_weights, stage_reference, track_limits,
+from .model import (DUMMY_OPPONENT, OPPONENT_ROWS, predict_opponents, slack_weights, stage_reference, track_limits,
                     tracking_weights, variable_box)
 from .types import MPCConfig
 
@@ -76,7 +76,7 @@ class IpoptReference:
         ref = ca.SX.sym("ref", n_h * N_FIXED)
         n_lo = ca.SX.sym("n_lo", n_h)
         n_hi = ca.SX.sym("n_hi", n_h)
-        opp = ca.SX.sym("opp", 3 * ms * (n_h + 1))
+        opp = ca.SX.sym("opp", OPPONENT_ROWS * ms * (n_h + 1))
         gamma = ca.SX.sym("gamma")
         par = ca.vertcat(x0, kappa, ref, n_lo, n_hi, opp, gamma)
         weights = tracking_weights(cfg)
@@ -87,7 +87,8 @@ class IpoptReference:
         us = [b[0:2] for b in blocks] + [ca.SX.zeros(2)]
         # the stage function at every stage k = 0..N: f_k, alat_k, h_k (as in the RTI's linearisation)
         out = [self.stage(xs[k], us[k], kappa[k], float(self._dt[k]),
-                          ca.reshape(opp[3 * ms * k:3 * ms * (k + 1)], 3, ms)) for k in range(n_h + 1)]
+                          ca.reshape(opp[OPPONENT_ROWS * ms * k:OPPONENT_ROWS * ms * (k + 1)], OPPONENT_ROWS, ms))
+               for k in range(n_h + 1)]
         cost = 0
         g, lbg, ubg = [], [], []
         for k in range(n_h):
@@ -122,7 +123,7 @@ class IpoptReference:
             self._nlp[m] = self._build(m)
         solver, lbg, ubg = self._nlp[m]
         nb = N_FIXED + 2 + m
-        o = np.empty((n_h + 1, self.slots, 3))
+        o = np.empty((n_h + 1, self.slots, OPPONENT_ROWS))
         o[:] = DUMMY_OPPONENT
         o[:, :m] = predict_opponents(sel, self._t)
         n_lo, n_hi = track_limits(self.config, arrays)

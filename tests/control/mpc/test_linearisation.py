@@ -52,6 +52,26 @@ def test_evaluation_fills_the_arrays_with_the_stage_function(cache_dir):
         assert lin.alat[k] == pytest.approx(alat[0], rel=1e-14, abs=1e-14)
         np.testing.assert_allclose(lin.h[k], h, rtol=1e-14)
     np.testing.assert_allclose(lin.o[:, 0, 0], 30.0 + 35.0 * t)
-    assert np.all(lin.o[:, 1] == (50.0, 0.0, 0.0))  # the unused slot holds the dummy
+    assert np.all(lin.o[:, 1] == (50.0, 0.0, 0.0, 0.0))  # the unused slot holds the dummy
     lin.set_opponents(rows[:0], t)
-    assert np.all(lin.o[:, 0] == (50.0, 0.0, 0.0))
+    assert np.all(lin.o[:, 0] == (50.0, 0.0, 0.0, 0.0))
+
+
+def test_the_compiled_barrier_sees_the_opponents_course(cache_dir):
+    """With BarrierParams.heading_extent, opponent rows with a lateral rate (s, n, v, n_dot) reach the
+    compiled barrier with the sine of their course angle n_dot / v: its h is the numeric barrier of the
+    predicted rows (s, n, v, sin_course) and lies below that of an opponent without a rate."""
+    from sofar_env.control.barrier import BarrierParams, barrier
+
+    cfg = MPCConfig(cache_dir=cache_dir, max_opponents=2, barrier=BarrierParams(heading_extent=2.45))
+    t = cfg.time_grid()
+    lin = StageLinearisation(cfg, AV21, np.diff(t))
+    xbar = np.column_stack([30.0 * t, np.zeros_like(t), np.full_like(t, 0.1), np.full_like(t, 30.0), np.zeros_like(t)])
+    ubar = np.zeros((cfg.horizon, 2))
+    rows = np.array([[12.0, 3.0, 28.0, -5.6], [12.0, 3.0, 28.0, 0.0]])
+    lin.set_opponents(rows, t)
+    np.testing.assert_allclose(lin.o[:, 0, 3], -0.2)
+    lin.evaluate(xbar, ubar, np.zeros_like(t))
+    for k in (0, 5):
+        np.testing.assert_allclose(lin.h[k], barrier(xbar[k][None, :], lin.o[k], cfg.barrier), rtol=1e-12)
+    assert lin.h[0, 0] < lin.h[0, 1]

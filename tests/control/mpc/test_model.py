@@ -22,7 +22,8 @@ def stage():
 def _point(rng):
     x = np.array([0.0, rng.uniform(-3, 3), rng.uniform(-0.05, 0.05), rng.uniform(10, 70), rng.uniform(-0.2, 0.2)])
     u = np.array([rng.uniform(-10, 3), rng.uniform(-0.35, 0.35)])
-    o = np.array([[rng.uniform(-30, 60), rng.uniform(-4, 4), rng.uniform(20, 60)] for _ in range(2)]).T
+    o = np.array([[rng.uniform(-30, 60), rng.uniform(-4, 4), rng.uniform(20, 60), rng.uniform(-0.5, 0.5)]
+                  for _ in range(2)]).T
     return x, u, rng.uniform(-1 / 80, 1 / 80), rng.uniform(0.05, 0.1), o
 
 
@@ -89,9 +90,14 @@ def test_opponents_are_predicted_at_constant_velocity():
     rows = np.array([[10.0, 1.0, 30.0], [-5.0, -2.0, 45.0]])
     t = MPCConfig().time_grid()
     o = predict_opponents(rows, t)
-    assert o.shape == (len(t), 2, 3)
+    assert o.shape == (len(t), 2, 4)
     np.testing.assert_allclose(o[:, 1, 0], -5.0 + 45.0 * t)
     assert np.all(o[:, 0, 1] == 1.0) and np.all(o[:, 1, 2] == 45.0)
+    assert np.all(o[:, :, 3] == 0.0)  # no lateral rate: course unknown
+    # rows with a lateral rate: the sine of the course angle n_dot / v, below 1 m/s over 1 m/s, clipped
+    o4 = predict_opponents(np.array([[10.0, 1.0, 30.0, 3.0], [0.0, 0.0, 0.5, -0.4], [0.0, 0.0, 0.2, 2.0]]), t)
+    np.testing.assert_allclose(o4[0, :, 3], [0.1, -0.4, 1.0])
+    np.testing.assert_allclose(o4[:, 0, 1], 1.0 + 3.0 * t)
 
 
 def test_selection_keeps_the_window_and_the_most_relevant_opponents():

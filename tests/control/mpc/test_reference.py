@@ -51,10 +51,10 @@ def test_reference_solution_satisfies_the_stage_function(cache_dir):
     assert mpc._reference.stage is mpc._lin.stage  # one stage definition for both solvers
     t = cfg.time_grid()
     dt = np.concatenate([np.diff(t), [cfg.ts]])
-    o = np.zeros((len(t), mpc._lin.slots, 3))
-    o[:] = (50.0, 0.0, 0.0)
+    o = np.zeros((len(t), mpc._lin.slots, 4))
+    o[:] = (50.0, 0.0, 0.0, 0.0)
     o[:, :2, 0] = opp[:, 0] + opp[:, 2] * t[:, None]
-    o[:, :2, 1:] = opp[:, 1:]
+    o[:, :2, 1:3] = opp[:, 1:]
     u = np.vstack([res.u_pred, [0.0, 0.0]])
     outs = [[np.asarray(v).ravel() for v in mpc._lin.stage(res.x_pred[k], u[k], stage.kappa[k], dt[k], o[k].T)]
             for k in range(len(t))]
