@@ -3,6 +3,7 @@
     python eval/figures.py                                  # 3 adaptive episodes on Laguna Seca, then plot
     python eval/figures.py --episodes 5 --rhos 0.3 0.5 --policy runs/pasta/pasta_final.json
     python eval/figures.py --trace results/table1_trace.csv # plot a trace written by `eval/table.py --trace`
+    python eval/figures.py --scenario interactive --opponents 8 --out results/interactive_dense/figures
 
 PNG files go to results/figures/ (--out). Recorded episodes are kept in
 <out>/episodes.csv and <out>/trace.csv and reused on a rerun with the same policy (a folder
@@ -32,6 +33,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--track", default="LagunaSeca")
     p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
                    help="controller preset (and which shipped policy is the default)")
+    p.add_argument("--scenario", default="paper", choices=("paper", "interactive"),
+                   help="world (the shipped policy of --stack and --scenario is the default)")
+    p.add_argument("--opponents", type=int, default=None,
+                   help="opponents per episode (default: the environment's 4)")
     p.add_argument("--episodes", type=int, default=3, help="episodes per rho")
     p.add_argument("--rhos", nargs="+", type=float, default=[0.3])
     p.add_argument("--duration", type=float, default=ev.DEFAULT_DURATION, help="episode horizon [s]")
@@ -51,10 +56,13 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
     out = Path(args.out)
+    if args.opponents is not None and args.opponents < 0:
+        print(f"error: --opponents must be >= 0, got {args.opponents}", file=sys.stderr)
+        return 2
     if args.trace:
         trace_path = Path(args.trace)
     else:
-        policy = ev.resolve_policy_path(args.policy, stack=args.stack)
+        policy = ev.resolve_policy_path(args.policy, stack=args.stack, scenario=args.scenario)
         if policy is None:
             print("error: no adaptive policy to record (train one or pass --policy PATH)", file=sys.stderr)
             return 2
@@ -68,7 +76,7 @@ def main(argv=None) -> int:
                   f"or delete {recorded} and {out / 'trace.csv'} to record this one", file=sys.stderr)
             return 2
         tasks = ev.table1_tasks(strategies, [args.track], args.rhos, args.episodes, args.seed, args.duration,
-                                trace=True, stack=args.stack)
+                                trace=True, stack=args.stack, scenario=args.scenario, n_opponents=args.opponents)
         trace_path = out / "trace.csv"
         try:
             stats = ev.run_sweep(tasks, out / "episodes.csv", workers=args.workers, trace_path=trace_path,

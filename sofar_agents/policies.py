@@ -150,8 +150,11 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
 SHIPPED_POLICIES: dict[tuple[str, str], str] = {
     ("sofar", "paper"): "pasta_lagunaseca.json",
     ("paper", "paper"): "pasta_lagunaseca_paper.json",
+    ("sofar", "interactive"): "pasta_lagunaseca_interactive.json",
 }
-"""The shipped PASTA policies, by (controller preset, world scenario): all trained on Laguna Seca only."""
+"""The shipped PASTA policies, by (controller preset, world scenario): all trained on Laguna Seca only. The
+interactive one was trained with a field of 8 opponents (``n_opponents=8``), the dense field of the
+interactive world, and observes the interactive world's 16 values."""
 
 
 def default_policy_path(stack: str = "sofar", scenario: str = "paper") -> Path:

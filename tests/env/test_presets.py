@@ -36,13 +36,21 @@ def test_paper_preset_never_follows_where_the_default_stack_does():
     assert counters["paper"]["follow_steps"] == 0
 
 
-@pytest.mark.parametrize("stack", ["sofar", "paper"])
-def test_shipped_policies_load_by_name(stack):
-    path = default_policy_path(stack=stack)
-    assert path.name == ("pasta_lagunaseca.json" if stack == "sofar" else "pasta_lagunaseca_paper.json")
+@pytest.mark.parametrize("stack, scenario, name", [("sofar", "paper", "pasta_lagunaseca.json"),
+                                                   ("paper", "paper", "pasta_lagunaseca_paper.json"),
+                                                   ("sofar", "interactive", "pasta_lagunaseca_interactive.json")])
+def test_shipped_policies_load_by_name(stack, scenario, name):
+    import gymnasium as gym
+
+    path = default_policy_path(stack=stack, scenario=scenario)
+    assert path.name == name
     policy = load_policy(path)
-    gamma = policy(np.zeros(12, np.float32))
-    assert 0.05 <= float(np.asarray(gamma).reshape(-1)[0]) <= 1.0
+    suffix = "-Interactive-v0" if scenario == "interactive" else "-v0"
+    env = gym.make(f"SOfAR-LagunaSeca{suffix}", stack=stack)
+    obs, _ = env.reset(seed=0)
+    gamma = float(np.asarray(policy(obs)).reshape(-1)[0])
+    assert 0.05 <= gamma <= 1.0
+    env.close()
 
 
 def test_no_shipped_policy_for_an_unknown_combination():

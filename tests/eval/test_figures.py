@@ -38,3 +38,22 @@ def test_figures_script_refuses_a_folder_of_another_policy(tmp_path, capsys):
     assert script.main(["--out", str(out), "--stack", "sofar", "--episodes", "1", "--rhos", "0.3"]) == 2
     err = capsys.readouterr().err
     assert "holds the episodes of another policy" in err and "use another --out" in err
+
+
+def test_figures_script_records_the_interactive_policy_in_its_world(tmp_path):
+    """--scenario interactive: the shipped interactive policy drives episodes of the interactive world (its
+    16-value observation), with the field size of --opponents, and both figures are drawn."""
+    import importlib.util
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    spec = importlib.util.spec_from_file_location("eval_figures", root / "eval" / "figures.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    out = tmp_path / "fig"
+    assert script.main(["--out", str(out), "--scenario", "interactive", "--opponents", "2", "--episodes", "1",
+                        "--duration", "2", "--workers", "1"]) == 0
+    rows = ev.read_episode_csv(out / "episodes.csv")
+    assert [(r["scenario"], int(r["n_opponents"]), r["strategy"]) for r in rows] == [("interactive", 2, "adaptive")]
+    assert (out / "gamma_hist.png").exists() and (out / "distance_vs_gamma.png").exists()
+    assert script.main(["--out", str(tmp_path / "x"), "--opponents", "-1"]) == 2
