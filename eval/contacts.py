@@ -25,14 +25,14 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from sofar_agents.evaluation.multi_agent import RaceResult, RaceTask, race_env, read_race_csv
 from sofar_agents.evaluation.protocol import Strategy
-from sofar_env.control.barrier import BarrierParams, barrier
+from sofar_env.control.barrier import barrier
 
 DEFAULT_CSV = Path(__file__).resolve().parents[1] / "results" / "multi_agent" / "multi_agent_races.csv"
 
@@ -82,7 +82,7 @@ def first_contact(row: RaceResult, race_overrides: dict | None = None) -> Contac
                 # the second car as the first one's barrier sees it: its speed along the track, its rotation
                 other = np.array([gap, fj[1], fj[3] * math.cos(fj[2]) / (1.0 - kappa * fj[1]), math.sin(fj[2])])
                 own = env.stacks[i].config.mpc.barrier
-                h_aligned = barrier(ego, other[:3], BarrierParams(**{**vars(own), "heading_extent": 0.0}))
+                h_aligned = barrier(ego, other[:3], replace(own, heading_extent=0.0))
                 return Contact(float(race.time), (i, j), float(fi[0]), gap, float(fj[1] - fi[1]),
                                (float(fi[2]), float(fj[2])), (float(fi[3]), float(fj[3])), float(h_aligned),
                                float(barrier(ego, other, own)))
