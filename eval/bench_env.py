@@ -50,6 +50,7 @@ import numpy as np
 import sofar_env  # noqa: F401  (registers the ids)
 from sofar_env.env import SOfARRaceEnv
 from sofar_env.observation import observe
+from sofar_env.scenarios import SCENARIOS
 
 TRACK_METHODS = ("to_frenet", "to_cartesian", "pose", "heading", "curvature", "width_left", "width_right", "speed",
                  "wrap", "gap", "normal")
@@ -260,7 +261,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--vector", type=int, default=0, metavar="N",
                         help="also time a gymnasium AsyncVectorEnv of N worker processes (the training set-up) "
                              "and report its total env steps/s; 0 (default) skips it")
-    parser.add_argument("--scenario", default="paper", choices=("paper", "interactive"),
+    parser.add_argument("--scenario", default="paper", choices=SCENARIOS,
                         help="the world: paper (default, SOfAR-<Track>-v0) or interactive "
                              "(SOfAR-<Track>-Interactive-v0)")
     parser.add_argument("--compare", default=None, metavar="REV",

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from sofar_agents import evaluation as ev
+from sofar_env.scenarios import SCENARIOS
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -33,7 +34,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--track", default="LagunaSeca")
     p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
                    help="controller preset (and which shipped policy is the default)")
-    p.add_argument("--scenario", default="paper", choices=("paper", "interactive"),
+    p.add_argument("--scenario", default="paper", choices=SCENARIOS,
                    help="world (the shipped policy of --stack and --scenario is the default)")
     p.add_argument("--opponents", type=int, default=None,
                    help="opponents per episode (default: the environment's 4)")

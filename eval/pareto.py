@@ -17,6 +17,7 @@ import logging
 import sys
 
 from sofar_agents import evaluation as ev
+from sofar_env.scenarios import SCENARIOS
 
 QUICK_DURATION = 30.0
 """Episode horizon of --quick [s]."""
@@ -45,7 +46,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--episodes", type=int, default=None, help="episodes per (track, rho) (default 5)")
     p.add_argument("--duration", type=float, default=None,
                    help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
-    p.add_argument("--scenario", default="paper", choices=("paper", "interactive"), help="world (default paper)")
+    p.add_argument("--scenario", default="paper", choices=SCENARIOS, help="world (default paper)")
     p.add_argument("--stack", default="sofar", choices=("sofar", "paper"), help="controller preset (default sofar)")
     p.add_argument("--opponents", type=int, default=None,
                    help="opponents per episode (default: the environment's 4; part of the resume key)")

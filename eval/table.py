@@ -20,6 +20,7 @@ import logging
 import sys
 
 from sofar_agents import evaluation as ev
+from sofar_env.scenarios import SCENARIOS
 
 QUICK_DURATION = 30.0
 """Episode horizon of --quick [s]: long enough for a few overtakes (3-4 per episode at rho 0.5)."""
@@ -58,7 +59,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help=f"fixed gammas (default {' '.join(f'{g:.2f}' for g in ev.FIXED_GAMMAS)}; Table II: 0.5)")
     p.add_argument("--duration", type=float, default=None,
                    help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
-    p.add_argument("--scenario", default="paper", choices=("paper", "interactive"),
+    p.add_argument("--scenario", default="paper", choices=SCENARIOS,
                    help="world: paper (default) or interactive (opponents that race back, noisy sensing)")
     p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
                    help="controller preset: sofar (default) or paper (the paper's Algorithm 1 as written)")

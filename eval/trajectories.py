@@ -88,12 +88,13 @@ def record_multi(episodes: int, steps: int) -> dict[str, np.ndarray]:
 
 
 def record(args: argparse.Namespace) -> int:
-    from sofar_env.registration import ENV_IDS, INTERACTIVE_IDS
+    from sofar_env.registration import DYNAMIC_IDS, ENV_IDS, INTERACTIVE_IDS
 
     t0 = time.perf_counter()
     data: dict[str, np.ndarray] = {}
     variants = [{}] + [dict(v.split("=", 1) for v in args.variant)] if args.variant else [{}]
-    ids = (ENV_IDS if "paper" in args.worlds else ()) + (INTERACTIVE_IDS if "interactive" in args.worlds else ())
+    ids = ((ENV_IDS if "paper" in args.worlds else ()) + (INTERACTIVE_IDS if "interactive" in args.worlds else ())
+           + (DYNAMIC_IDS if "dynamic" in args.worlds else ()))
     for env_id in ids:
         for extra in variants:
             data.update(record_single(env_id, args.episodes, args.steps, extra))
@@ -134,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     rec.add_argument("--out", required=True, help="output .npz file")
     rec.add_argument("--episodes", type=int, default=3, help="episodes per id (default 3)")
     rec.add_argument("--steps", type=int, default=300, help="control steps per episode (default 300)")
-    rec.add_argument("--worlds", nargs="+", default=["paper"], choices=("paper", "interactive"),
+    rec.add_argument("--worlds", nargs="+", default=["paper"], choices=("paper", "interactive", "dynamic"),
                      help="record the ids of these worlds (default: paper; the PettingZoo race is always recorded)")
     rec.add_argument("--variant", nargs="*", default=[], metavar="KEY=VALUE",
                      help="also record every id with these gym.make keyword arguments (strings)")

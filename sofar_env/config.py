@@ -9,8 +9,9 @@ mapping into one, validating as it goes:
 * top-level keys are the fields of :class:`EnvConfig` plus the shortcuts
   ``n_opponents``, ``offsets``, ``rho`` (into ``race.opponents``) and
   ``speed_factor``, ``use_miqp`` (into ``stack``);
-* ``scenario`` names the world, ``"paper"`` (default) or ``"interactive"`` (see
-  :mod:`sofar_env.scenarios`); its overrides apply first, the other keys on top;
+* ``scenario`` names the world, ``"paper"`` (default), ``"interactive"`` or ``"dynamic"``
+  (see :mod:`sofar_env.scenarios`); its overrides apply first, the other keys on top
+  (a named ``stack`` preset gets the world's stack settings, if any, before the user's);
 * ``stack`` may also name a controller preset, ``"sofar"`` (the default) or
   ``"paper"`` (the paper's Algorithm 1 as written; see
   :func:`~sofar_env.stack.stack_preset`); the other keys apply on top of it;
@@ -104,7 +105,7 @@ class EnvConfig:
     """Everything a SOfAR environment is built from."""
 
     scenario: str = "paper"
-    """The world (:mod:`sofar_env.scenarios`): ``"paper"`` or ``"interactive"``. Set through the ``scenario``
+    """The world (:mod:`sofar_env.scenarios`): ``"paper"``, ``"interactive"`` or ``"dynamic"``. Set through the ``scenario``
     key, which applies the scenario's overrides before the other keys."""
     track: Any = "LagunaSeca"
     """Circuit name (``LagunaSeca``, ``Monza``, ``Indianapolis``, ``Kentucky``, or an alias), a circuit folder path,
@@ -240,6 +241,7 @@ def make_env_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwarg
     else:
         raise ConfigError(f"config must be an EnvConfig or a mapping, got {type(config).__name__}")
     items.update(kwargs)
+    scenario_stack = None
     if "scenario" in items:
         from .scenarios import scenario_overrides
 
@@ -248,14 +250,17 @@ def make_env_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwarg
             overrides = scenario_overrides(name)
         except ValueError as exc:
             raise ConfigError(f"scenario: {exc}") from None
+        scenario_stack = overrides.get("stack")
         base = apply_overrides(base, {**overrides, "scenario": name.strip().lower()})
     if isinstance(items.get("stack"), str):
         from .stack import stack_preset
 
         try:
-            items["stack"] = stack_preset(items["stack"])
+            preset = stack_preset(items["stack"])
         except ValueError as exc:
             raise ConfigError(f"stack: {exc}") from None
+        # a world's stack settings (the dynamic plant's limits and weights) apply to any preset
+        items["stack"] = apply_overrides(preset, scenario_stack, "stack") if scenario_stack else preset
     # route the shortcut keys into their sub-config, after any explicit sub-config value
     nested: dict[str, Any] = {}
     for key in list(items):

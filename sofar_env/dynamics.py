@@ -155,6 +155,16 @@ class DynamicParams:
     """Floor on vx in the slip angles [m/s] (only matters where the kinematic model rules)."""
     tau_kinematic: float = 0.1
     """Relaxation time of the low-speed model onto the kinematic manifold [s]."""
+    yaw_rate_gain: float = 0.0
+    """Loop gain K [-] of the car's low-level yaw-rate controller; 0 (the default) switches it off.
+    With K > 0 the steering servo is not aimed at the commanded angle ``delta_cmd`` itself but at
+    ``delta_cmd + K L / max(vx, v_blend_high) (r_ref - r)``, clipped to +-steer_max, where
+    ``r_ref = v cos(beta) tan(delta_cmd) / L`` (``beta = atan(lr/L tan delta_cmd)``, ``v = |(vx, vy)|``)
+    is the yaw rate the kinematic bicycle has at the commanded angle. ``K L / vx`` makes K the
+    dimensionless loop gain at the kinematic yaw gain ``vx / L``. The loop is what makes a car that
+    slides behave like the kinematic bicycle a kinematic MPC plans with: it adds yaw damping and
+    takes out most of the under- or oversteer, as the low-level lateral controllers of the
+    Indy Autonomous Challenge stacks do below their trajectory planners."""
     mu_range: tuple[float, float] = (0.8, 1.0)
     """Range [-] from which a world should draw the per-episode friction factor mu (uniform).
     The nominal tyre set (mu = 1) already carries TUM's fitted scaling lambda_muy = 0.84 of a
@@ -166,7 +176,7 @@ class DynamicParams:
                      "B_r", "C_r", "D_r", "D_x", "tau_steer", "tau_accel", "v_floor", "tau_kinematic"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)!r}")
-        for name in ("cg_height", "drag_area", "lift_area"):
+        for name in ("cg_height", "drag_area", "lift_area", "yaw_rate_gain"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be non-negative, got {getattr(self, name)!r}")
         for name in ("aero_front", "brake_bias_front"):
@@ -268,7 +278,15 @@ def dynamic_rhs(x: Sequence[Any], u: Sequence[Any], mu: Any, p: DynamicParams = 
     fmin, fmax = _minmax(ops)
     _, _, psi, vx, vy, r, delta, delta_cmd, a = x
     a_cmd, delta_dot_cmd = u
-    delta_dot = (delta_cmd - delta) / p.tau_steer
+    target = delta_cmd
+    if p.yaw_rate_gain > 0.0:
+        L = veh.wheelbase
+        tan_c = ops.tan(delta_cmd)
+        tan_b = veh.lr / L * tan_c
+        r_ref = ops.sqrt(vx * vx + vy * vy) * tan_c / (L * ops.sqrt(1.0 + tan_b * tan_b))  # v cos(beta) tan/L
+        gain = p.yaw_rate_gain * L / fmax(vx, p.v_blend_high)
+        target = fmin(fmax(delta_cmd + gain * (r_ref - r), -veh.steer_max), veh.steer_max)
+    delta_dot = (target - delta) / p.tau_steer
     t = fmin(fmax((vx - p.v_blend_low) / (p.v_blend_high - p.v_blend_low), 0.0), 1.0)
     if isinstance(t, float) and t >= 1.0:
         vx_dot, vy_dot, r_dot = _dynamic_rates(vx, vy, r, delta, a, mu, p, veh, ops)

@@ -2,7 +2,7 @@
 
 ``import sofar_env`` registers one id per shipped circuit, e.g.
 ``gymnasium.make("SOfAR-LagunaSeca-v0")``, its interactive-world twin
-``SOfAR-LagunaSeca-Interactive-v0``, and :data:`CUSTOM_ID` for a circuit of your own::
+``SOfAR-LagunaSeca-Interactive-v0``, the same world on the tyre model ``SOfAR-LagunaSeca-Dynamic-v0``, and :data:`CUSTOM_ID` for a circuit of your own::
 
     gymnasium.make("SOfAR-Custom-v0", track="path/to/MyCircuit")   # a folder of `python -m sofar_env.tracks build`
     gymnasium.make("SOfAR-Custom-v0", track=Track.load("path/to/MyCircuit"), scenario="interactive")
@@ -20,7 +20,7 @@ import gymnasium as gym
 
 from .constants import CIRCUITS
 
-__all__ = ["TRACKS", "ENV_IDS", "INTERACTIVE_IDS", "CUSTOM_ID", "MAX_EPISODE_STEPS", "register_envs"]
+__all__ = ["TRACKS", "ENV_IDS", "INTERACTIVE_IDS", "DYNAMIC_IDS", "CUSTOM_ID", "MAX_EPISODE_STEPS", "register_envs"]
 
 TRACKS = CIRCUITS
 """Circuits with a registered environment."""
@@ -28,6 +28,8 @@ ENV_IDS = tuple(f"SOfAR-{name}-v0" for name in TRACKS)
 """The paper-world ids, in the order of :data:`TRACKS`."""
 INTERACTIVE_IDS = tuple(f"SOfAR-{name}-Interactive-v0" for name in TRACKS)
 """The interactive-world ids (``scenario="interactive"``, :mod:`sofar_env.scenarios`)."""
+DYNAMIC_IDS = tuple(f"SOfAR-{name}-Dynamic-v0" for name in TRACKS)
+"""The interactive world on the dynamic tyre plant (``scenario="dynamic"``)."""
 CUSTOM_ID = "SOfAR-Custom-v0"
 """A circuit of your own: ``track=`` a circuit folder or a :class:`~sofar_env.tracks.Track` (required; any world
 through ``scenario=``)."""
@@ -44,8 +46,10 @@ def _register(env_id: str, entry_point: str, kwargs: dict) -> None:
 
 
 def register_envs() -> None:
-    """Register every id of :data:`ENV_IDS`, :data:`INTERACTIVE_IDS` and :data:`CUSTOM_ID` (idempotent)."""
-    for ids, extra in ((ENV_IDS, {}), (INTERACTIVE_IDS, {"scenario": "interactive"})):
+    """Register every id of :data:`ENV_IDS`, :data:`INTERACTIVE_IDS`, :data:`DYNAMIC_IDS` and :data:`CUSTOM_ID`
+    (idempotent)."""
+    for ids, extra in ((ENV_IDS, {}), (INTERACTIVE_IDS, {"scenario": "interactive"}),
+                       (DYNAMIC_IDS, {"scenario": "dynamic"})):
         for name, env_id in zip(TRACKS, ids):
             _register(env_id, ENTRY_POINT, {"track": name, **extra})
     _register(CUSTOM_ID, CUSTOM_ENTRY_POINT, {})

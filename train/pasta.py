@@ -94,7 +94,7 @@ class Args:
     stack: str | None = None
     """Controller preset, ``sofar`` or ``paper`` (the paper's Algorithm 1); passed as the ``stack`` key."""
     scenario: str | None = None
-    """World, ``paper`` or ``interactive``; passed as the ``scenario`` key."""
+    """World, ``paper``, ``interactive`` or ``dynamic``; passed as the ``scenario`` key."""
     decision_interval: int | None = None
     """If set, passed to the environment as ``decision_interval`` (simulator steps per action)."""
     total_steps: int = 1_000_000

@@ -158,7 +158,7 @@ class EpisodeTask:
     stack: str = "sofar"
     """Controller preset (``"sofar"`` or ``"paper"``, see :func:`sofar_env.stack.stack_preset`)."""
     scenario: str = "paper"
-    """World (``"paper"`` or ``"interactive"``, see :mod:`sofar_env.scenarios`)."""
+    """World (``"paper"``, ``"interactive"`` or ``"dynamic"``, see :mod:`sofar_env.scenarios`)."""
     trace: bool = False
     """Record a per-step trace (gamma, nearest opponent, smallest barrier value)."""
 

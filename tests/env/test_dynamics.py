@@ -44,7 +44,7 @@ def test_parameters_validate_and_share_the_kinematic_geometry():
     with pytest.raises(Exception):
         P.mass = 700.0  # frozen
     for bad in ({"mass": 0.0}, {"aero_front": 1.5}, {"v_blend_low": 6.0, "v_blend_high": 3.0},
-                {"mu_range": (1.0, 0.5)}, {"lift_area": -1.0}):
+                {"mu_range": (1.0, 0.5)}, {"lift_area": -1.0}, {"yaw_rate_gain": -1.0}):
         with pytest.raises(ValueError):
             DynamicParams(**bad)
 
@@ -68,6 +68,12 @@ def test_casadi_evaluation_equals_the_math_evaluation():
             mu = rng.uniform(0.5, 1.0)
             np.testing.assert_allclose(np.array(f(x, u, mu)).ravel(), dynamic_rhs(x, u, mu),
                                        rtol=1e-12, atol=1e-9)
+    # with the yaw-rate loop on, too
+    p_loop = DynamicParams(yaw_rate_gain=2.0)
+    f_loop = casadi_dynamics(p_loop)
+    x = [5.0, -3.0, 0.2, 40.0, 0.3, 0.1, 0.01, 0.02, -1.0]
+    np.testing.assert_allclose(np.array(f_loop(x, [0.5, 0.1], 0.9)).ravel(), dynamic_rhs(x, [0.5, 0.1], 0.9, p_loop),
+                               rtol=1e-12, atol=1e-9)
     # the RK4 discretisation equals the plant where no clipping acts
     plant = DynamicPlant()
     F = casadi_dynamics(dt=plant.dt, substeps=plant.substeps)
@@ -123,6 +129,36 @@ def test_lateral_acceleration_saturates_at_the_front_axle_grip(mu):
     _, lift = _aero(at[3])
     assert best < mu * P.D_f * (G + lift / M)  # below the whole-car bound with downforce
     assert best > 1.15 * mu * P.D_f * G  # and well above the bound without it
+
+
+def _steady_yaw_rate(plant, v0, delta):
+    x = plant.initial_state(0.0, 0.0, 0.0, v0, delta)
+    for x in _hold_speed(plant, x, v0, 0.0, 1.0, 150):
+        pass
+    assert abs(dynamic_rhs(x, (x[8], 0.0), 1.0, plant.params)[5]) < 1e-5  # steady
+    return x
+
+
+@pytest.mark.parametrize("v0", [25.0, 60.0])
+def test_yaw_rate_loop_brings_the_yaw_rate_to_the_kinematic_bicycle(v0):
+    """Steady cornering at delta_cmd: the loop with gain K cuts the understeer's yaw-rate error.
+
+    Linear analysis: with the car's steady yaw gain g (v/L) (g < 1 understeer) and the servo aimed at
+    delta_cmd + K (L/v) (r_ref - r), the steady r / r_ref is g (1 + K) / (1 + K g), so the relative error
+    1 - r / r_ref falls from 1 - g to (1 - g) / (1 + K g).
+    """
+    delta = 0.004
+    plain = _steady_yaw_rate(DynamicPlant(), v0, delta)
+    looped = _steady_yaw_rate(DynamicPlant(DynamicParams(yaw_rate_gain=2.0)), v0, delta)
+    r_ref = math.hypot(plain[3], plain[4]) * math.tan(delta) / (L * math.sqrt(1 + (LR / L * math.tan(delta)) ** 2))
+    g = plain[5] / r_ref
+    assert 0.5 < g < 0.98  # the plain car understeers (test can fail)
+    predicted = g * 3.0 / (1.0 + 2.0 * g)
+    r_ref_loop = math.hypot(looped[3], looped[4]) * math.tan(delta) / (L * math.sqrt(1 + (LR / L * math.tan(delta)) ** 2))
+    assert looped[5] / r_ref_loop == pytest.approx(predicted, abs=0.01)
+    assert abs(1 - looped[5] / r_ref_loop) < 0.5 * abs(1 - g)
+    assert looped[6] > delta  # the servo steers more than commanded to get there
+    assert looped[7] == pytest.approx(delta)  # the commanded angle itself is the MPC's
 
 
 def test_low_speed_reproduces_the_kinematic_bicycle():

@@ -8,16 +8,17 @@ from pettingzoo.test import parallel_api_test
 
 import sofar_env  # noqa: F401
 from sofar_env.multi_agent import parallel_env
-from sofar_env.registration import INTERACTIVE_IDS
+from sofar_env.registration import DYNAMIC_IDS, INTERACTIVE_IDS
 from sofar_env.scenarios import SCENARIOS, scenario_overrides
 
 SHORT = {"race": {"duration": 3.0}}
 
 
-def test_interactive_ids_are_registered_with_the_scenario():
-    assert len(INTERACTIVE_IDS) == 4
-    for env_id in INTERACTIVE_IDS:
-        assert gym.spec(env_id).kwargs["scenario"] == "interactive"
+@pytest.mark.parametrize("ids, scenario", [(INTERACTIVE_IDS, "interactive"), (DYNAMIC_IDS, "dynamic")])
+def test_world_ids_are_registered_with_their_scenario(ids, scenario):
+    assert len(ids) == 4
+    for env_id in ids:
+        assert gym.spec(env_id).kwargs["scenario"] == scenario
 
 
 def test_scenario_sets_the_world_and_user_keys_win():
@@ -29,9 +30,9 @@ def test_scenario_sets_the_world_and_user_keys_win():
     # the user's keys apply on top of the scenario
     cfg2 = gym.make("SOfAR-Monza-Interactive-v0", config={"race": {"sensor": {"latency_steps": 0}}}).unwrapped.config
     assert cfg2.race.sensor.enabled and cfg2.race.sensor.latency_steps == 0
-    with pytest.raises(ValueError, match="valid scenarios: paper, interactive"):
+    with pytest.raises(ValueError, match="valid scenarios: paper, interactive, dynamic"):
         gym.make("SOfAR-Monza-v0", scenario="mars")
-    assert SCENARIOS == ("paper", "interactive") and scenario_overrides("paper") == {}
+    assert SCENARIOS == ("paper", "interactive", "dynamic") and scenario_overrides("paper") == {}
 
 
 @pytest.mark.parametrize("env_id", INTERACTIVE_IDS)
@@ -58,11 +59,12 @@ def test_controller_sees_sensed_rows_while_safety_is_judged_on_the_truth():
     env.close()
 
 
-def test_interactive_episodes_are_seeded():
+@pytest.mark.parametrize("env_id", ["SOfAR-Kentucky-Interactive-v0", "SOfAR-Kentucky-Dynamic-v0"])
+def test_interactive_episodes_are_seeded(env_id):
     def run():
-        env = gym.make("SOfAR-Kentucky-Interactive-v0", rho=0.3, reward_mode="vector")
+        env = gym.make(env_id, rho=0.3, reward_mode="vector")
         obs, _ = env.reset(seed=11)
-        out = [obs]
+        out = [obs, [env.unwrapped.race.mu]]  # the dynamic plant's friction draw, too
         for t in range(40):
             obs, r, term, trunc, _ = env.step(np.array([0.2 + 0.02 * t], np.float32))
             out.append(np.concatenate([obs, r]))
