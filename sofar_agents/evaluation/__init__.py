@@ -18,6 +18,8 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
   ``run_miqp_ablation``);
 * :mod:`~sofar_agents.evaluation.pareto`: success against overtaking of fixed gammas and of a
   preference-conditioned policy, fronts and their hypervolumes (``run_pareto``; ``eval/pareto.py``);
+* :mod:`~sofar_agents.evaluation.headroom`: what an adaptive gamma could gain over the best fixed one,
+  by oracles over the fixed-gamma rows of Table I (``headroom``; ``eval/headroom.py``);
 * :mod:`~sofar_agents.evaluation.latency`: Table III (``measure_latency``);
 * :mod:`~sofar_agents.evaluation.figures`: Fig. 5 (``plot_gamma_figures``);
 * :mod:`~sofar_agents.evaluation.training_curves`: learning curves from TensorBoard logs
@@ -30,6 +32,8 @@ then ``ev.run_table1(...)``.
 from sofar_agents.evaluation.episode import make_env, run_episode, slack_active
 from sofar_agents.evaluation.experiments import TableReport, run_miqp_ablation, run_table1
 from sofar_agents.evaluation.figures import plot_gamma_figures
+from sofar_agents.evaluation.headroom import (HeadroomRow, fixed_gamma_rows, format_flips, format_headroom, headroom,
+                                              outcome_flips)
 from sofar_agents.evaluation.latency import (PAPER_LATENCY_MS, format_latency, latency_stats, machine_info,
                                              measure_latency, write_json)
 from sofar_agents.evaluation.pareto import (ParetoPoint, ParetoReport, hypervolume, pareto_front,
@@ -58,6 +62,12 @@ __all__ = [
     "PAPER_LATENCY_MS",
     "Strategy",
     "ParetoPoint",
+    "HeadroomRow",
+    "headroom",
+    "fixed_gamma_rows",
+    "format_headroom",
+    "outcome_flips",
+    "format_flips",
     "ParetoReport",
     "hypervolume",
     "pareto_front",
