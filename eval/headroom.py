@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from sofar_agents import evaluation as ev
 
@@ -34,22 +33,8 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    sets = {}
-    for path in args.csv:
-        p = Path(path)
-        if not p.is_file():
-            print(f"error: no such CSV: {p}", file=sys.stderr)
-            return 2
-        name = str(p.parent) if p.name == "table1_episodes.csv" else str(p)
-        if name in sets:
-            print(f"error: {p} is given twice", file=sys.stderr)
-            return 2
-        try:
-            sets[name] = ev.read_episode_csv(p)
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
     try:
+        sets = ev.read_seed_sets(args.csv)
         rows = ev.headroom(sets)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -60,8 +45,7 @@ def main(argv=None) -> int:
             text += f"\nOutcome flips [% of paired episodes], {name}:\n\n" + ev.format_flips(ev.outcome_flips(set_rows))
     print(text, end="")
     if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(text)
+        ev.write_markdown(args.out, text)
     return 0
 
 

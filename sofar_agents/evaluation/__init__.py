@@ -20,6 +20,8 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
   preference-conditioned policy, fronts and their hypervolumes (``run_pareto``; ``eval/pareto.py``);
 * :mod:`~sofar_agents.evaluation.headroom`: what an adaptive gamma could gain over the best fixed one,
   by oracles over the fixed-gamma rows of Table I (``headroom``; ``eval/headroom.py``);
+* :mod:`~sofar_agents.evaluation.paired`: two strategies compared on the same seeded episodes, with an
+  exact McNemar test (``paired_comparison``; ``eval/paired.py``);
 * :mod:`~sofar_agents.evaluation.latency`: Table III (``measure_latency``);
 * :mod:`~sofar_agents.evaluation.figures`: Fig. 5 (``plot_gamma_figures``);
 * :mod:`~sofar_agents.evaluation.training_curves`: learning curves from TensorBoard logs
@@ -36,6 +38,7 @@ from sofar_agents.evaluation.headroom import (HeadroomRow, fixed_gamma_rows, for
                                               outcome_flips)
 from sofar_agents.evaluation.latency import (PAPER_LATENCY_MS, format_latency, latency_stats, machine_info,
                                              measure_latency, write_json)
+from sofar_agents.evaluation.paired import PairedComparison, compare_to, format_paired, paired_comparison
 from sofar_agents.evaluation.pareto import (ParetoPoint, ParetoReport, hypervolume, pareto_front,
                                             preference_family, run_pareto, strategy_points)
 from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FULL_TABLE1_STEPS, RHOS,
@@ -43,7 +46,7 @@ from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FU
                                               build_strategies, episode_seed, miqp_ablation_tasks,
                                               resolve_policy_path, table1_tasks)
 from sofar_agents.evaluation.results import (EPISODE_COLUMNS, TRACE_COLUMNS, EpisodeResult, read_episode_csv,
-                                             read_trace_csv, select_rows)
+                                             read_seed_sets, read_trace_csv, select_rows, write_markdown)
 from sofar_agents.evaluation.sweep import SweepStats, run_sweep
 from sofar_agents.evaluation.training_curves import find_event_dirs, plot_training_curves, read_scalars
 from sofar_agents.evaluation.tables import (PAPER_TABLE1_SUCCESS, Summary, aggregate, format_table1,
@@ -68,6 +71,10 @@ __all__ = [
     "format_headroom",
     "outcome_flips",
     "format_flips",
+    "PairedComparison",
+    "paired_comparison",
+    "compare_to",
+    "format_paired",
     "ParetoReport",
     "hypervolume",
     "pareto_front",
@@ -91,6 +98,8 @@ __all__ = [
     "run_miqp_ablation",
     "TableReport",
     "read_episode_csv",
+    "read_seed_sets",
+    "write_markdown",
     "select_rows",
     "paper_comparison",
     "summarize",

@@ -159,6 +159,31 @@ def read_episode_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
     return rows
 
 
+def read_seed_sets(paths: Sequence[str | os.PathLike]) -> dict[str, list[dict[str, Any]]]:
+    """Per-episode CSVs, one per seed set, by name: the CSV's folder for a ``*_episodes.csv``, else its path.
+
+    Raises ``ValueError`` naming the file if one does not exist or is given twice.
+    """
+    sets: dict[str, list[dict[str, Any]]] = {}
+    for path in paths:
+        p = Path(path)
+        if not p.is_file():
+            raise ValueError(f"no such CSV: {p}")
+        name = str(p.parent) if p.name.endswith("_episodes.csv") else str(p)
+        if name in sets:
+            raise ValueError(f"{p} is given twice")
+        sets[name] = read_episode_csv(p)
+    return sets
+
+
+def write_markdown(path: str | os.PathLike, text: str) -> Path:
+    """Write a Markdown report to ``path``, creating its folder; returns the path."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(text)
+    return p
+
+
 _ADDED_COLUMNS = {"stack": "sofar", "n_opponents": "", "scenario": "paper", "stalled": ""}
 """Columns added after the first format, with the value that rows of older files stand for ("" of
 ``stalled``: unknown, see the module docstring)."""

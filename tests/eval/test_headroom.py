@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import sys
 from pathlib import Path
 
@@ -13,6 +12,8 @@ from sofar_agents import evaluation as ev
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "eval"))
 import headroom as headroom_cli  # noqa: E402
+
+from .episode_csv import write_episode_csv  # noqa: E402
 
 
 def _rows(outcomes, seed0=0, extra=None):
@@ -82,22 +83,9 @@ def test_bad_tables_are_refused(sets, match):
         ev.headroom(sets)
 
 
-def _write_csv(path: Path, rows):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    defaults = {"sim_time": 200.0, "laps": 1.0, "overtakes": 3, "collision": 0, "off_track": 0, "slack_steps": 0,
-                "steps": 2000, "mean_gamma": 0.5, "mpc_failures": 0, "miqp_failures": 0, "wall_time": 1.0,
-                "episode": 0, "duration": 200.0, "policy_id": "", "stack": "sofar", "n_opponents": "",
-                "scenario": "paper", "stalled": 0}
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=ev.EPISODE_COLUMNS)
-        w.writeheader()
-        for r in rows:
-            w.writerow({**defaults, **{k: int(v) if isinstance(v, bool) else v for k, v in r.items()}})
-
-
 def test_cli_reads_csvs_and_writes_markdown(tmp_path, capsys):
-    _write_csv(tmp_path / "a" / "table1_episodes.csv", _rows(SET_A))
-    _write_csv(tmp_path / "b" / "table1_episodes.csv", _rows(SET_B))
+    write_episode_csv(tmp_path / "a" / "table1_episodes.csv", _rows(SET_A))
+    write_episode_csv(tmp_path / "b" / "table1_episodes.csv", _rows(SET_B))
     out = tmp_path / "headroom.md"
     code = headroom_cli.main([str(tmp_path / "a" / "table1_episodes.csv"),
                               str(tmp_path / "b" / "table1_episodes.csv"), "--out", str(out)])
@@ -114,6 +102,6 @@ def test_cli_reads_csvs_and_writes_markdown(tmp_path, capsys):
     (lambda d: [str(d / "a" / "table1_episodes.csv")] * 2, "given twice"),
 ])
 def test_cli_bad_input(tmp_path, capsys, make_args, message):
-    _write_csv(tmp_path / "a" / "table1_episodes.csv", _rows(SET_A))
+    write_episode_csv(tmp_path / "a" / "table1_episodes.csv", _rows(SET_A))
     assert headroom_cli.main(make_args(tmp_path)) == 2
     assert message in capsys.readouterr().err

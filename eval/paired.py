@@ -1,0 +1,49 @@
+"""Is strategy A's success rate really different from B's? Paired exact tests on Table I episodes.
+
+    python eval/paired.py results/dynamic/pasta_dynamic_low/seed0/table1_episodes.csv \
+        results/dynamic/pasta_dynamic_low/seed21/table1_episodes.csv --a adaptive --b gamma=0.05
+    python eval/paired.py results/paper_stack/table1_episodes.csv results/paper_stack/seed21/table1_episodes.csv \
+        --a adaptive --out results/paper_stack/paired.md
+
+Each CSV is one seed set (from `eval/table.py`); the sets are pooled with their episodes kept apart.
+Strategy names are those of the CSV's `strategy` column (`adaptive`, `gamma=0.05`, ...). Without
+`--b`, A is compared with every other strategy. For each pair: the paired episodes, both success
+rates, the difference with its standard error, the episodes only one of them wins, and the two-sided
+exact McNemar p-value. No episode is run. The logic is in sofar_agents.evaluation.paired.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from sofar_agents import evaluation as ev
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("csv", nargs="+", help="per-episode CSVs (table1_episodes.csv), one per seed set")
+    p.add_argument("--a", default="adaptive", help="the strategy under test (default: adaptive)")
+    p.add_argument("--b", nargs="+", default=None, help="strategies to compare it with (default: every other one)")
+    p.add_argument("--out", default=None, help="also write the Markdown table to this file")
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    try:
+        sets = ev.read_seed_sets(args.csv)
+        rows = ev.compare_to(sets, args.a, args.b)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    text = f"Paired comparisons over {', '.join(sets)}:\n\n" + ev.format_paired(rows)
+    print(text, end="")
+    if args.out:
+        ev.write_markdown(args.out, text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
