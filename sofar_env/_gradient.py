@@ -40,6 +40,18 @@ class GridGradient:
             self._abc = (-(dx2) / (dx1 * (dx1 + dx2)), (dx2 - dx1) / (dx1 * dx2), dx1 / (dx2 * (dx1 + dx2)))
             self._dx_0, self._dx_n = dt[0], dt[-1]
 
+    def coefficients(self) -> tuple[bool, float, float, float, np.ndarray, np.ndarray, np.ndarray]:
+        """The precomputed formula, for compiled kernels that differentiate inline:
+        ``(uniform, 2 dx, dx_0, dx_n, a, b, c)``. Inside, the derivative at sample k is
+        ``(f[k+1] - f[k-1]) / (2 dx)`` on a uniform grid, else ``a[k-1] f[k-1] + b[k-1] f[k] + c[k-1]
+        f[k+1]`` (evaluated left to right); at the ends ``(f[1] - f[0]) / dx_0`` and ``(f[-1] - f[-2]) /
+        dx_n``. ``a, b, c`` are empty on a uniform grid."""
+        if self._uniform:
+            empty = np.zeros(0)
+            return True, float(self._two_dx), float(self._dx_0), float(self._dx_n), empty, empty, empty
+        a, b, c = self._abc
+        return False, 0.0, float(self._dx_0), float(self._dx_n), a, b, c
+
     def __call__(self, f: np.ndarray) -> np.ndarray:
         """The derivative of ``f`` (..., T) along its last axis, shape of ``f``."""
         f = np.asarray(f, dtype=float)

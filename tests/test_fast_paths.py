@@ -166,17 +166,6 @@ def test_ego_node_positions_follow_min_max_recurrence(laguna):
         np.testing.assert_array_equal(got, s)
 
 
-@pytest.mark.parametrize("values, finite", [
-    ([1.0, -2.0, 3e5], True), ([], True), ([1.0, np.nan], False), ([np.inf, 1.0], False),
-    ([np.inf, -np.inf], False), ([1e308, 1e308], True), ([1e308, 1e308, np.nan], False)])
-def test_mpc_finite_check_is_elementwise(values, finite):
-    from sofar_env.control.mpc.rti import _all_finite
-
-    a = np.array(values, dtype=float)
-    assert _all_finite(a) is finite is bool(np.isfinite(a).all())
-    assert _all_finite(a.reshape(-1, 1)) is finite
-
-
 def test_speed_cap_gradient_follows_the_grid():
     """The followed cars' speeds are np.gradient along the grid given, also when the grid changes."""
     from sofar_env.stack.follow import PassOrFollow
@@ -187,3 +176,62 @@ def test_speed_cap_gradient_follows_the_grid():
     for t in (np.arange(21) * 0.075, np.concatenate([np.arange(10) * 0.075, 0.675 + np.arange(1, 12) * 0.15]),
               np.arange(21) * 0.075):
         np.testing.assert_array_equal(pof._gradient(t, f), np.gradient(f, t, axis=1))
+
+
+def test_the_compiled_interpolation_is_numpys_to_the_bit():
+    """interp_at (inside compiled kernels) against np.interp: random points, the knots themselves, both
+    ends and beyond them, on a track's speed column and on random tables."""
+    from sofar_env._interp import interp_at, wrap_at
+    from sofar_env.tracks import Track
+
+    track = Track.load("LagunaSeca")
+    rng = np.random.default_rng(17)
+    tables = [(track._knots, track._tables["v"][0]), (track._knots, track._tables["kappa"][0])]
+    xp = np.cumsum(rng.uniform(0.01, 3.0, 50))
+    tables.append((xp, rng.normal(size=50) * 40.0))
+    for xp, fp in tables:
+        x = np.concatenate([rng.uniform(xp[0] - 5.0, xp[-1] + 5.0, 3000), xp, [xp[0], xp[-1], -np.inf, np.inf]])
+        got = np.array([interp_at(float(v), xp, fp) for v in x])
+        np.testing.assert_array_equal(got, np.interp(x, xp, fp))
+    L = track.length
+    for s in np.concatenate([rng.uniform(-3 * L, 3 * L, 2000), [0.0, -0.0, L, -L, 2 * L, -1e-300, L - 1e-12]]):
+        assert wrap_at(float(s), L) == track.wrap(float(s)) == float(track.wrap(np.array([s]))[0])
+
+
+def test_the_compiled_pace_prediction_is_the_numpy_form():
+    """OpponentPredictor (one compiled call) against its numpy expressions, bit for bit, across the
+    lap seam, for stopped and reversing rows."""
+    from sofar_env._interp import interp
+    from sofar_env.stack.prediction import OpponentPredictor
+    from sofar_env.tracks import Track
+
+    track = Track.load("Monza")
+    pred = OpponentPredictor(track)
+    rng = np.random.default_rng(23)
+    times = 0.15 * np.arange(40)
+    for ego_s in (0.0, 17.0, track.length - 3.0, 0.5 * track.length):
+        rows = np.column_stack([rng.uniform(-60.0, 200.0, 6), rng.uniform(-5, 5, 6), rng.uniform(-2.0, 90.0, 6)])
+        rows[0, 2] = 0.0
+        s_abs = np.asarray(track.wrap(ego_s + rows[:, 0]), float)
+        rho = np.maximum(rows[:, 2], 0.0) / np.maximum(np.asarray(track.speed(s_abs), float), 0.1)
+        t0 = interp(s_abs, pred._s, pred._t)
+        s_pred = interp(t0[:, None] + rho[:, None] * times[None, :], pred._t, pred._s)
+        np.testing.assert_array_equal(pred(ego_s, rows, times), rows[:, :1] + (s_pred - s_abs[:, None]))
+
+
+def test_the_compiled_footprint_edges_are_the_numpy_form():
+    """TrackEdges (one compiled call) against the narrowest widths over the footprint samples, computed with
+    the track's array interpolation, bit for bit, across the lap seam."""
+    from sofar_env.stack.edges import TrackEdges
+    from sofar_env.tracks import Track
+
+    track = Track.load("LagunaSeca")
+    edges = TrackEdges(track, AV21)
+    rng = np.random.default_rng(29)
+    s_abs = np.concatenate([rng.uniform(-10.0, track.length + 10.0, 500), [0.0, track.length, -1.0]])
+    pts = s_abs[:, None] + edges._offsets[None, :]
+    wr = np.asarray(track.width_right(pts.ravel()), float).reshape(pts.shape).min(axis=1)
+    wl = np.asarray(track.width_left(pts.ravel()), float).reshape(pts.shape).min(axis=1)
+    n_min, n_max = edges(s_abs)
+    np.testing.assert_array_equal(n_min, -wr)
+    np.testing.assert_array_equal(n_max, wl)

@@ -37,6 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._gradient import GridGradient
+from .._jit import kernel
 from .config import MIQPConfig
 
 __all__ = ["ClearanceWindow", "side_clusters", "ellipse_violation"]
@@ -47,21 +48,9 @@ class ClearanceWindow:
 
     def __init__(self, config: MIQPConfig):
         self.config = config
-        N = config.nodes
-        self.t = np.arange(N) * config.node_dt
+        self.t = np.arange(config.nodes) * config.node_dt
         """(nodes,) node times [s]."""
-        self._time_gradient = GridGradient(self.t)  # d/dt along the nodes (np.gradient, precomputed)
-        self._node_idx = np.arange(N)
-        # _thin_extension: whether a node at distance d (in nodes) from the box window is dropped
-        stride = int(config.closing_stride)
-        d = np.arange(8 * N + 1)
-        self._thin_drop = (d > 1) & ((d - 1) % stride != 0)
-
-    def closing_speed(self, gap: np.ndarray) -> np.ndarray:
-        """``-np.gradient(gap, self.t, axis=1)``: the closing speed when the opponent is ahead."""
-        out = self._time_gradient(gap)
-        np.negative(out, out=out)
-        return out
+        self._gradient = GridGradient(self.t).coefficients()  # d/dt along the nodes (np.gradient's formula)
 
     def clearance(self, s_nodes: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
         """(M, N) lateral clearance [m] that node k must keep from opponent i; 0: no constraint.
@@ -73,99 +62,136 @@ class ClearanceWindow:
         at both end nodes keeps it on the whole interval.
 
         Rows are independent; opponents that cannot come within the (extended) window of
-        the ego at any node or node interval get rows of zeros.
-
-        (The arrays are small: the cost is the number of numpy calls, which is kept low;
-        every value is computed with the same floating-point operations as the plain
-        formulas in the comments.)
+        the ego at any node or node interval get rows of zeros. One compiled call
+        (:func:`_clearance_table`).
         """
         cfg = self.config
         N = cfg.nodes
-        M = opp_s.shape[0]
-        if M == 0:
+        opp_s = np.asarray(opp_s, dtype=float)
+        if opp_s.shape[0] == 0:
             return np.zeros((0, N))
-        L = cfg.safe_lon
-        gap = opp_s - s_nodes[None, :]
-        closing = cfg.closing_decel > 0.0
-        two_decel = 2.0 * cfg.closing_decel
-        # (Rows that cannot come within the window, |gap| >= L + the largest extension of the row
-        # at every node and on every interval, come out as zeros; they are not filtered out first,
-        # since the cost here is per numpy call, not per row.)
+        uniform, two_dx, dx0, dxn, ga, gb, gc = self._gradient
+        return _clearance_table(np.asarray(s_nodes, dtype=float), opp_s, uniform, two_dx, dx0, dxn, ga, gb, gc,
+                                float(cfg.safe_lon), float(cfg.safe_lat), float(cfg.closing_decel),
+                                cfg.window_shape == "ellipse", int(cfg.closing_stride))
+
+
+@kernel
+def _max(a, b):
+    """``np.maximum`` of two floats (nan propagates)."""
+    return a if (a >= b or a != a) else b
+
+
+@kernel
+def _min(a, b):
+    """``np.minimum`` of two floats (nan propagates)."""
+    return a if (a <= b or a != a) else b
+
+
+@kernel
+def _required(g, ext, safe_lon, safe_lat, closing, ellipse):
+    """The clearance [m] required at longitudinal gap ``g`` [m] with window extension ``ext`` [m] on that side
+    (module docstring): ``safe_lat`` inside the box ``|g| < safe_lon``; in the extension the elliptic taper
+    ``safe_lat sqrt(1 - ((|g| - safe_lon) / ext)^2)``; with ``ellipse`` the ellipse of semi-axis
+    ``safe_lon + ext`` instead; 0 beyond."""
+    if ellipse:
+        r = g / (safe_lon + ext) if closing else g / safe_lon
+        return safe_lat * np.sqrt(_max(1.0 - r * r, 0.0))
+    over = abs(g) - safe_lon
+    if over < 0.0:
+        return safe_lat
+    if closing and over < ext:
+        r = over / ext
+        return safe_lat * np.sqrt(_max(1.0 - r * r, 0.0))
+    return 0.0
+
+
+@kernel
+def _clearance_table(s_nodes, opp_s, uniform, two_dx, dx0, dxn, ga, gb, gc,
+                     safe_lon, safe_lat, closing_decel, ellipse, stride):
+    """The (M, N) table of :meth:`ClearanceWindow.clearance`, row by row (module docstring).
+
+    Per row: the gap to the ego's nodes, the closing speed (minus its time derivative, the
+    formula of :meth:`GridGradient.coefficients`), the window extension on the side the cars
+    close in (``dv^2 / (2 closing_decel)``), the clearance at every node and at the point of every
+    node interval nearest to a zero gap (the larger extension of its two ends), each node keeping
+    the largest of its own and its two intervals'; then, with ``stride > 1``, only every
+    ``stride``-th constrained node outside the box window is kept, counted outwards from the box
+    (the node next to it always; rows with no box node count from their largest clearance).
+    """
+    M, N = opp_s.shape
+    out = np.zeros((M, N))
+    closing = closing_decel > 0.0
+    two_decel = 2.0 * closing_decel
+    gap = np.empty(N)
+    ext_a = np.zeros(N)  # extension ahead of the ego (g > 0), per node
+    ext_b = np.zeros(N)  # behind it
+    box = np.empty(N, dtype=np.bool_)
+    behind = np.empty(N, dtype=np.int64)  # distance to the last box node at or before k
+    for i in range(M):
+        w = out[i]
+        for k in range(N):
+            gap[k] = opp_s[i, k] - s_nodes[k]
         if closing:
-            dv = self.closing_speed(gap)
-        a, b = gap[:, :-1], gap[:, 1:]
-        # the point of each interval nearest to a zero gap (min(a, b) when both are positive,
-        # max(a, b) when both are negative, else 0: the median of a, b and 0); nodes (first N
-        # columns) and intervals (last N - 1) are evaluated together
-        g_near = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), 0.0))
-        g = np.concatenate([gap, g_near], axis=1)
-        safe_lat = cfg.safe_lat
-        over = np.abs(g) - L  # < 0 inside the box window |g| < L
-        if closing:
-            # window extension on the side the cars close in, per node: ext_a = max(dv, 0)^2 /
-            # (2 closing_decel) ahead of the ego (g > 0), ext_b = max(-dv, 0)^2 / (2 closing_decel)
-            # behind it, i.e. dv^2 / (2 closing_decel) where the sign of dv fits, else 0; per
-            # interval the larger one of its two ends
-            e_sq = dv ** 2 / two_decel
-            pos_dv = dv > 0.0
-            ext_a = np.where(pos_dv, e_sq, 0.0)
-            ext_b = np.where(pos_dv, 0.0, e_sq)
-            pos = g > 0.0
-            ext = np.concatenate([np.where(pos[:, :N], ext_a, ext_b),
-                                  np.where(pos[:, N:], np.maximum(ext_a[:, :-1], ext_a[:, 1:]),
-                                           np.maximum(ext_b[:, :-1], ext_b[:, 1:]))], axis=1)
-            # safe_lat inside the box, the elliptic taper safe_lat sqrt(1 - (over / ext)^2) in the
-            # extension (0 <= over < ext; 1 - r^2 <= 1), 0 beyond
-            if cfg.window_shape == "ellipse":
-                out = self._ellipse(g, L + ext)
+            for k in range(N):
+                if k == 0:
+                    d = (gap[1] - gap[0]) / dx0
+                elif k == N - 1:
+                    d = (gap[N - 1] - gap[N - 2]) / dxn
+                elif uniform:
+                    d = (gap[k + 1] - gap[k - 1]) / two_dx
+                else:
+                    d = ga[k - 1] * gap[k - 1] + gb[k - 1] * gap[k] + gc[k - 1] * gap[k + 1]
+                dv = -d
+                e_sq = dv * dv / two_decel
+                if dv > 0.0:
+                    ext_a[k], ext_b[k] = e_sq, 0.0
+                else:
+                    ext_a[k], ext_b[k] = 0.0, e_sq
+        for k in range(N):
+            g = gap[k]
+            box[k] = abs(g) - safe_lon < 0.0
+            w[k] = _required(g, ext_a[k] if g > 0.0 else ext_b[k], safe_lon, safe_lat, closing, ellipse)
+        for k in range(N - 1):
+            a, b = gap[k], gap[k + 1]
+            g = _max(_min(a, b), _min(_max(a, b), 0.0))  # the median of a, b and 0
+            if g > 0.0:
+                ext = _max(ext_a[k], ext_a[k + 1])
             else:
-                with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                    r = over / ext
-                    cap = safe_lat * np.sqrt(np.maximum(1.0 - r * r, 0.0))
-                out = np.where(over < 0.0, safe_lat, np.where(over < ext, cap, 0.0))
-        elif cfg.window_shape == "ellipse":
-            out = self._ellipse(g, L)
-        else:
-            out = np.where(over < 0.0, safe_lat, 0.0)
-        w = out[:, :N]
-        seg = out[:, N:]
-        np.maximum(w[:, :-1], seg, out=w[:, :-1])
-        np.maximum(w[:, 1:], seg, out=w[:, 1:])
-        if cfg.closing_stride > 1 and closing:
-            w = self._thin_extension(w, over[:, :N] < 0.0)
-        return np.ascontiguousarray(w)
-
-    def _ellipse(self, g: np.ndarray, semi: np.ndarray | float) -> np.ndarray:
-        """``safe_lat sqrt(1 - (g / semi)^2)`` inside the ellipse of longitudinal semi-axis ``semi``, 0 outside."""
-        r = g / semi
-        return self.config.safe_lat * np.sqrt(np.maximum(1.0 - r * r, 0.0))
-
-    def _thin_extension(self, w: np.ndarray, box: np.ndarray) -> np.ndarray:
-        """Keep every ``closing_stride``-th constrained node outside the box window, counted outwards
-        from it (the node next to the box is always kept). The clearance decreases away from the box,
-        so each kept node requires at least what the dropped nodes beyond it would have."""
-        outside = (w > 0.0) & ~box  # constrained nodes outside the box: the candidates
-        if not outside.any():
-            return w
-        N = w.shape[1]
-        k = self._node_idx
-        big = 4 * N
-        # distance (in nodes) to the nearest box node, from both sides
-        last = np.maximum.accumulate(np.where(box, k, -big), axis=1)
-        nxt = np.minimum.accumulate(np.where(box, k, 2 * big)[:, ::-1], axis=1)[:, ::-1]
-        dist = np.minimum(k - last, nxt - k)
-        # rows with candidates but no box node (window crossed between nodes): count from the
-        # largest clearance
-        empty = ~box.any(axis=1) & outside.any(axis=1)
-        if empty.any():
-            dist[empty] = np.abs(k[None, :] - np.argmax(w[empty], axis=1)[:, None])
-        # dropped: candidates at a distance d > 1 with (d - 1) % stride != 0
-        drop = outside & self._thin_drop[dist]
-        if not drop.any():
-            return w
-        out = w.copy()
-        out[drop] = 0.0
-        return out
+                ext = _max(ext_b[k], ext_b[k + 1])
+            seg = _required(g, ext, safe_lon, safe_lat, closing, ellipse)
+            w[k] = _max(w[k], seg)
+            w[k + 1] = _max(w[k + 1], seg)
+        if stride <= 1 or not closing:
+            continue
+        any_outside = False
+        any_box = False
+        for k in range(N):
+            any_outside = any_outside or (w[k] > 0.0 and not box[k])
+            any_box = any_box or box[k]
+        if not any_outside:
+            continue
+        peak = 0
+        if not any_box:
+            for k in range(N):
+                if w[k] > w[peak]:
+                    peak = k
+        last = -4 * N  # the last box node at or before k
+        for k in range(N):
+            if box[k]:
+                last = k
+            behind[k] = k - last
+        nxt = 8 * N  # the first box node at or after k
+        for k in range(N - 1, -1, -1):
+            if box[k]:
+                nxt = k
+            if any_box:
+                dist = min(behind[k], nxt - k)
+            else:
+                dist = abs(k - peak)
+            if w[k] > 0.0 and not box[k] and dist > 1 and (dist - 1) % stride != 0:
+                w[k] = 0.0
+    return out
 
 
 def side_clusters(pos: np.ndarray, act_rel: np.ndarray, cluster_gap: float,

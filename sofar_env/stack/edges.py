@@ -20,7 +20,8 @@ import math
 
 import numpy as np
 
-from .._interp import interp
+from .._interp import interp, interp_at
+from .._jit import kernel
 from ..vehicle import VehicleParams
 
 __all__ = ["TrackEdges"]
@@ -43,11 +44,9 @@ class TrackEdges:
         if not self.footprint_aware:
             return (-np.asarray(self.track.width_right(s_abs), float),
                     np.asarray(self.track.width_left(s_abs), float))
-        pts = s_abs[:, None] + self._offsets[None, :]
-        flat = pts.ravel()
-        wr = np.minimum.reduce(np.asarray(self.track.width_right(flat), float).reshape(pts.shape), axis=1)
-        wl = np.minimum.reduce(np.asarray(self.track.width_left(flat), float).reshape(pts.shape), axis=1)
-        return -wr, wl
+        knots, wl = self.track.table("wl")
+        _, wr = self.track.table("wr")
+        return _narrowest_edges(s_abs.reshape(-1), self._offsets, knots, wl, wr, float(self.track.length))
 
     def for_mpc(self, s_abs: np.ndarray, x_prev: np.ndarray | None, t: np.ndarray,
                 shift: float, edge_relative: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -83,3 +82,25 @@ class TrackEdges:
             n_min = n_min + swing
             n_max = n_max - swing
         return n_min, n_max
+
+
+@kernel
+def _narrowest_edges(s_abs, offsets, knots, wl, wr, length):
+    """(-min wr, min wl) over the points ``s_abs[k] + offsets`` of each ``s_abs[k]``, the widths interpolated
+    as the track interpolates them (:meth:`~sofar_env.tracks.Track.table`)."""
+    n = s_abs.shape[0]
+    n_min = np.empty(n)
+    n_max = np.empty(n)
+    for k in range(n):
+        lo = hi = 0.0
+        for j in range(offsets.shape[0]):
+            s = (s_abs[k] + offsets[j]) % length
+            r = interp_at(s, knots, wr)
+            left = interp_at(s, knots, wl)
+            if j == 0 or r < lo or r != r:
+                lo = r
+            if j == 0 or left < hi or left != left:
+                hi = left
+        n_min[k] = -lo
+        n_max[k] = hi
+    return n_min, n_max

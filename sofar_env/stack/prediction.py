@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._interp import interp
+from .._interp import interp, interp_at, wrap_at
+from .._jit import kernel
 from ..vehicle import VehicleParams
 
 __all__ = ["relative_opponents", "lateral_motion", "TravelTime", "OpponentPredictor", "ego_node_positions",
@@ -95,6 +96,7 @@ class OpponentPredictor:
         self.pace_ratio = bool(pace_ratio)
         table = TravelTime(track)
         self._s, self._t = table.s, table.t  # arc length [m] and travel time [s] over two laps
+        self._knots, self._v = track.table("v")  # the speed profile's interpolation table
 
     def __call__(self, ego_s: float, opp_rel: np.ndarray, times: np.ndarray) -> np.ndarray:
         """(M, len(times)) arc lengths [m] at ``times`` [s] of the opponents ``opp_rel`` (rows
@@ -105,33 +107,64 @@ class OpponentPredictor:
             return np.zeros((0, times.size))
         if not self.pace_ratio:
             return opp_rel[:, :1] + opp_rel[:, 2:3] * times[None, :]
-        s_abs = np.asarray(self.track.wrap(ego_s + opp_rel[:, 0]), float)
-        rho = np.maximum(opp_rel[:, 2], 0.0) / np.maximum(np.asarray(self.track.speed(s_abs), float), 0.1)
-        t0 = interp(s_abs, self._s, self._t)  # np.interp
-        s_pred = interp(t0[:, None] + rho[:, None] * times[None, :], self._t, self._s)
-        return opp_rel[:, :1] + (s_pred - s_abs[:, None])
+        return _pace_prediction(float(ego_s), opp_rel, times.reshape(-1), self._knots, self._v, self._s, self._t,
+                                float(self.track.length))
+
+
+@kernel
+def _pace_prediction(ego_s, opp_rel, times, knots, v_closed, s_table, t_table, length):
+    """:meth:`OpponentPredictor.__call__` with ``pace_ratio``: per opponent at ``s = wrap(ego_s + gap)``, the
+    pace ratio ``rho = max(v, 0) / max(v_profile(s), 0.1)``, its travel time ``T(s)``, and at each time the
+    arc length ``T^-1(T(s) + rho t)``, returned relative to the ego (``gap + s_pred - s``)."""
+    M, K = opp_rel.shape[0], times.shape[0]
+    out = np.empty((M, K))
+    for i in range(M):
+        gap = opp_rel[i, 0]
+        s_abs = wrap_at(ego_s + gap, length)
+        v_prof = interp_at(s_abs % length, knots, v_closed)
+        v = opp_rel[i, 2]
+        rho = (v if v >= 0.0 else 0.0) / (v_prof if v_prof >= 0.1 else 0.1)
+        t0 = interp_at(s_abs, s_table, t_table)
+        for k in range(K):
+            s_pred = interp_at(t0 + rho * times[k], t_table, s_table)
+            out[i, k] = gap + (s_pred - s_abs)
+    return out
 
 
 def ego_node_positions(track, ego_s: float, ego_v: float, node_t: np.ndarray, node_dt: float,
                        speed_factor: float, vehicle: VehicleParams) -> np.ndarray:
     """Ego arc length [m] at the node times ``node_t`` = 0, ``node_dt``, 2 ``node_dt``, ... [s] when
     it tracks ``speed_factor`` x the speed profile within the vehicle's acceleration limits."""
-    dt = node_dt
-    v0 = max(ego_v, 0.0)
-    dv_min, dv_max = vehicle.a_min * dt, vehicle.a_max * dt
-    s = v0 * node_t  # first guess: constant speed
-    for _ in range(2):  # two fixed-point passes: speed reference at the guessed positions
-        v_ref = speed_factor * np.asarray(track.speed(ego_s + s), float)
-        v = [v0]
+    knots, v_closed = track.table("v")
+    return _ego_nodes(float(ego_s), max(float(ego_v), 0.0), np.asarray(node_t, float), float(node_dt),
+                      float(speed_factor), vehicle.a_min * node_dt, vehicle.a_max * node_dt, knots, v_closed,
+                      float(track.length))
+
+
+@kernel
+def _ego_nodes(ego_s, v0, node_t, dt, speed_factor, dv_min, dv_max, knots, v_closed, length):
+    """:func:`ego_node_positions`: from the constant-speed guess ``v0 t``, two fixed-point passes of
+    ``v_{k+1} = min(max(v_ref_k, v_k + dv_min), v_k + dv_max)`` (as Python's ``min``/``max`` pick) with the
+    speed reference at the guessed positions, integrated by the trapezoidal rule (``s_0 = 0``)."""
+    N = node_t.shape[0]
+    s = np.empty(N)
+    for k in range(N):
+        s[k] = v0 * node_t[k]
+    v_ref = np.empty(N)
+    for _ in range(2):
+        for k in range(N):
+            v_ref[k] = speed_factor * interp_at((ego_s + s[k]) % length, knots, v_closed)
         last = v0
-        for vr in v_ref[:-1].tolist():  # v_k+1 = min(max(vr, v_k + dv_min), v_k + dv_max), as Python's min/max pick
+        acc = 0.0
+        s[0] = 0.0
+        for k in range(N - 1):
             lo, hi = last + dv_min, last + dv_max
-            last = lo if lo > vr else vr
-            if hi < last:
-                last = hi
-            v.append(last)
-        v = np.array(v)
-        s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+            nxt = lo if lo > v_ref[k] else v_ref[k]
+            if hi < nxt:
+                nxt = hi
+            acc = acc + 0.5 * (nxt + last) * dt
+            s[k + 1] = acc
+            last = nxt
     return s
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._interp import interp
+from .._jit import kernel
 from .curve import PeriodicCurve
 from .format import (
     EDGE_COLUMNS,
@@ -139,6 +140,7 @@ class Track:
         # periodic linear interpolation tables (closed with the first sample)
         self._knots = self._curve.knots
         self._knots_list = self._curve._knots_list
+        self._coefs = np.ascontiguousarray(np.vstack([self._curve.cx, self._curve.cy]).T)  # (K, 8) spline pieces
         self._tables = {}
         for key, col in (("kappa", self.kappa), ("wl", self.w_left), ("wr", self.w_right), ("v", self.v)):
             closed = np.append(col, col[0])
@@ -215,6 +217,16 @@ class Track:
         return (0.0 if r >= self.length else r) - half
 
     # ---------------------------------------------------- sampled quantities
+    def table(self, key: str) -> tuple[np.ndarray, np.ndarray]:
+        """(knots, values) of the periodic interpolation of the sampled column ``key`` ("kappa", "wl",
+        "wr" or "v"), closed with the first sample at s = L: what :meth:`curvature`, :meth:`width_left`,
+        :meth:`width_right` and :meth:`speed` interpolate at wrapped ``s``, for compiled kernels
+        (:func:`sofar_env._interp.interp_at`). Read-only views."""
+        knots, closed = self._knots.view(), self._tables[key][0].view()
+        knots.setflags(write=False)
+        closed.setflags(write=False)
+        return knots, closed
+
     def _interp(self, key: str, s):
         """Periodic linear interpolation of the sampled column ``key`` at ``s`` (scalar or array)."""
         closed, closed_list = self._tables[key]
@@ -389,41 +401,13 @@ class Track:
         return result
 
     def _newton_scalar(self, x: float, y: float, s: float, robust: bool = False):
-        """:meth:`_newton` for one point on Python floats; None if it has not converged (unless ``robust``)."""
+        """:meth:`_newton` for one point (one compiled call, :func:`_newton_point`); None if it has not
+        converged (unless ``robust``)."""
         curve = self._curve
-        # PeriodicCurve.eval_scalar and wrap_scalar inlined (the same operations in the same order)
-        knots, coefs, last, length = curve._knots_list, curve._coef_list, curve._last, curve.length
-        max_step = self._max_step
-        converged = False
-        for _ in range(_NEWTON_MAX_ITER):
-            i = bisect.bisect_right(knots, s) - 1
-            if i > last:
-                i = last
-            elif i < 0:
-                i = 0
-            t = s - knots[i]
-            a, b, c, d, e, f, g, hh = coefs[i]
-            px = ((a * t + b) * t + c) * t + d
-            py = ((e * t + f) * t + g) * t + hh
-            dx = (3.0 * a * t + 2.0 * b) * t + c
-            dy = (3.0 * e * t + 2.0 * f) * t + g
-            ddx = 6.0 * a * t + 2.0 * b
-            ddy = 6.0 * e * t + 2.0 * f
-            ex, ey = px - x, py - y
-            dd = dx * dx + dy * dy
-            h = dd + ex * ddx + ey * ddy
-            if h < 0.2 * dd:
-                h = dd
-            step = min(max(-(ex * dx + ey * dy) / h, -max_step), max_step)
-            s = (s + step) % length
-            if s >= length:
-                s = 0.0
-            if -_NEWTON_TOL < step < _NEWTON_TOL:
-                converged = True
-                break
+        converged, s, px, py, dx, dy = _newton_point(x, y, s, curve.knots, self._coefs, curve._last, curve.length,
+                                                     self._max_step, _NEWTON_MAX_ITER, _NEWTON_TOL)
         if not converged and not robust:
             return None
-        px, py, dx, dy = curve.tangent_scalar(s)
         return s, (dx * (y - py) - dy * (x - px)) / math.hypot(dx, dy)
 
     # ---------------------------------------------------------------- misc
@@ -431,3 +415,65 @@ class Track:
         """Curvature of the position spline itself [1/m] (for diagnostics)."""
         return self._curve.curvature(self._curve.wrap(np.asarray(s, dtype=float)))
 
+
+
+@kernel
+def _newton_point(x, y, s, knots, coefs, last, length, max_step, max_iter, tol):
+    """Newton projection of the point (x, y) onto the raceline spline from arc length ``s``:
+    ``(converged, s, x(s), y(s), x'(s), y'(s))``. Each iteration evaluates the cubic piece holding
+    ``s`` (the piece whose knot is the last one <= s, as ``bisect_right``), steps by ``-g / h`` (``g``
+    the gradient of half the squared distance, ``h`` its second derivative, replaced by ``|r'|^2``
+    where below ``0.2 |r'|^2``), the step clipped to ``max_step`` (as Python's ``min``/``max`` pick),
+    and wraps ``s`` into [0, length); it stops when the step is below ``tol``."""
+    converged = False
+    for _ in range(max_iter):
+        i = _piece(knots, s, last)
+        t = s - knots[i]
+        a, b, c, d, e, f, g, hh = coefs[i, 0], coefs[i, 1], coefs[i, 2], coefs[i, 3], coefs[i, 4], \
+            coefs[i, 5], coefs[i, 6], coefs[i, 7]
+        px = ((a * t + b) * t + c) * t + d
+        py = ((e * t + f) * t + g) * t + hh
+        dx = (3.0 * a * t + 2.0 * b) * t + c
+        dy = (3.0 * e * t + 2.0 * f) * t + g
+        ddx = 6.0 * a * t + 2.0 * b
+        ddy = 6.0 * e * t + 2.0 * f
+        ex, ey = px - x, py - y
+        dd = dx * dx + dy * dy
+        h = dd + ex * ddx + ey * ddy
+        if h < 0.2 * dd:
+            h = dd
+        step = -(ex * dx + ey * dy) / h
+        if -max_step > step:
+            step = -max_step
+        if max_step < step:
+            step = max_step
+        s = (s + step) % length
+        if s >= length:
+            s = 0.0
+        if -tol < step < tol:
+            converged = True
+            break
+    i = _piece(knots, s, last)
+    t = s - knots[i]
+    a, b, c, d, e, f, g, hh = coefs[i, 0], coefs[i, 1], coefs[i, 2], coefs[i, 3], coefs[i, 4], coefs[i, 5], \
+        coefs[i, 6], coefs[i, 7]
+    return (converged, s, ((a * t + b) * t + c) * t + d, ((e * t + f) * t + g) * t + hh,
+            (3.0 * a * t + 2.0 * b) * t + c, (3.0 * e * t + 2.0 * f) * t + g)
+
+
+@kernel
+def _piece(knots, s, last):
+    """``bisect_right(knots, s) - 1`` clipped to ``[0, last]``: the spline piece holding ``s``."""
+    lo, hi = 0, knots.shape[0]
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if s < knots[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    i = lo - 1
+    if i > last:
+        return last
+    if i < 0:
+        return 0
+    return i

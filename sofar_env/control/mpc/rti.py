@@ -68,10 +68,11 @@ import numpy as np
 from ...vehicle import AV21, VehicleParams
 from ..barrier import barrier
 from ..codegen import CodegenInfo
+from .assembly import STATUS_INCONSISTENT, STATUS_NONFINITE, assemble, violated_rows
 from .backends import dcbf_margin, solve_qp
 from .layout import N_FIXED, QPStructure
 from .linearisation import StageLinearisation
-from .model import relevant_slots, select_opponents, stage_reference, track_limits, variable_box
+from .model import relevant_slots, select_opponents, track_limits, variable_box
 from .reference import IpoptReference
 from .types import (STATUS_FALLBACK_BRAKE, STATUS_FALLBACK_SHIFT, STATUS_SOLVED, MPCConfig, MPCResult,
                     MPCStageData, validate_arguments)
@@ -93,12 +94,6 @@ _BOX_DROP_DISTANCE = np.array([2.0, 0.15, np.inf, np.inf, np.inf, 5.0, 0.08])
 _ROWS_CHECK_TOL = 1e-6
 # A restart's solution replaces the warm-started one when its largest DCBF slack is smaller by this [-]
 _RESTART_GAIN = 1e-3
-
-
-
-def _all_finite(a: np.ndarray) -> bool:
-    """``np.isfinite(a).all()``, without the Python wrapper of the ndarray method."""
-    return bool(np.logical_and.reduce(np.isfinite(a), axis=None))
 
 
 class MPCDCBF:
@@ -244,9 +239,9 @@ class MPCDCBF:
             box_dist = None if all_boxes else _BOX_DROP_DISTANCE
             while True:
                 qs = self._structure(m, lat, trk)
-                data = self._assemble(qs, xbar, ubar, arrays, gamma, box_dist)
+                data, status = self._assemble(qs, xbar, ubar, arrays, gamma, box_dist)
                 t_qp = time.perf_counter()
-                z, it, message = self._qp_solve(qs, data)
+                z, it, message = self._qp_solve(qs, data, status)
                 qp_time += time.perf_counter() - t_qp
                 qp_iters += it
                 if z is None:
@@ -356,61 +351,38 @@ class MPCDCBF:
     def _rows_violated(self, qs: QPStructure, box_dist: np.ndarray | None,
                        zz: np.ndarray) -> tuple[bool, bool, np.ndarray | None]:
         """Left-out constraints that the QP solution ``zz`` violates: (lateral-acceleration rows,
-        track rows, None or the columns of the box (as in ``_BOX_DROP_DISTANCE``) with a violated bound)."""
-        lat = trk = False
-        box = None
-        if not qs.lat:
-            lin = self._lin
-            alat = np.abs((lin.dalat[1:] * zz[:, 5:7]).sum(axis=1) + lin.alat[1:])
-            lat = alat.max() > self.vehicle.lat_acc_max + _ROWS_CHECK_TOL
-        if not qs.trk:  # the track rows' bounds on dn were written by _track_bounds
-            trk = max((zz[:, 3] - self._trk_hi).max(), (self._trk_lo - zz[:, 3]).max()) > _ROWS_CHECK_TOL
-        if box_dist is not None:
-            dz = zz[:, :N_FIXED]
-            worst = np.maximum((self._box_lo - dz).max(axis=0), (dz - self._box_hi).max(axis=0))
-            if worst.max() > _ROWS_CHECK_TOL:
-                box = worst > _ROWS_CHECK_TOL
-        return bool(lat), bool(trk), box
+        track rows, None or the columns of the box (as in ``_BOX_DROP_DISTANCE``) with a violated bound);
+        one compiled call (:func:`.assembly.violated_rows`)."""
+        lin = self._lin
+        box = np.empty(N_FIXED, dtype=np.bool_)
+        lat, trk, any_box = violated_rows(zz, not qs.lat, lin.dalat, lin.alat, self.vehicle.lat_acc_max,
+                                          not qs.trk, self._trk_lo, self._trk_hi, self._box_lo, self._box_hi,
+                                          box_dist is not None, _ROWS_CHECK_TOL, box)
+        return lat, trk, (box if any_box else None)
 
     def _assemble(self, qs: QPStructure, xbar, ubar, arrays, gamma, box_dist: np.ndarray | None = None):
-        """QP vectors (c, b, h_l, h_u, x_l, x_u) in the buffers of ``qs``; A and G are written in place.
-        ``box_dist``: None (every box bound), or per column of (du_k, dx_{k+1}) the distance from
-        the linearisation point beyond which a bound is left out (see :meth:`_rows_needed`)."""
-        p = self.vehicle
+        """QP vectors (c, b, h_l, h_u, x_l, x_u) in the buffers of ``qs`` and the values of A and G, in one
+        compiled call (:func:`.assembly.assemble`); returns ``(data, status)``. ``box_dist``: None (every box
+        bound), or per column of (du_k, dx_{k+1}) the distance from the linearisation point beyond which a
+        bound is left out (see :meth:`_rows_needed`)."""
         lin = self._lin
-        x7 = np.hstack([ubar, xbar[1:]])  # linearisation point of the blocks (du_k, dx_{k+1})
-        # cost: c = 2 R ubar, 2 Q (xbar - xref); the slack L1 weights are constant
-        qs.c_buf[:, :N_FIXED] = qs.w7 * (x7 - stage_reference(arrays))
-        qs.fill_matrices(lin.flat, self._act, gamma)
-        qs.b_buf[:] = lin.f[:-1] - xbar[1:]
-        if qs.lat:
-            alat = lin.alat[1:]
-            qs.hu_buf[:, qs.row_lat] = p.lat_acc_max - alat
-            qs.hl_buf[:, qs.row_lat + 1] = -p.lat_acc_max - alat
-        if qs.trk:  # bounds computed by _track_bounds at this linearisation
-            qs.hu_buf[:, qs.row_trk] = self._trk_hi
-            qs.hl_buf[:, qs.row_trk + 1] = self._trk_lo
-        if qs.m:
-            h = lin.h[:, self._act]
-            qs.hu_buf[:, qs.row_cbf:] = h[1:] - (1.0 - gamma) * h[:-1]
-        # variable bounds (du_k, dx_{k+1}): the full box, then without the bounds left out
-        self._box_lo = lo = self._box[0] - x7
-        self._box_hi = hi = self._box[1] - x7
-        if box_dist is not None:
-            lo = np.where(lo < -box_dist, -np.inf, lo)
-            hi = np.where(hi > box_dist, np.inf, hi)
-        qs.xl_buf[:, :N_FIXED] = lo
-        qs.xu_buf[:, :N_FIXED] = hi
-        return qs.data()
+        n = self._n
+        if self._box_lo is None:
+            self._box_lo, self._box_hi = np.empty((n, N_FIXED)), np.empty((n, N_FIXED))
+        status = assemble(
+            xbar, ubar, arrays[1, 1:], arrays[2, 1:], qs.w7, self._box[0], self._box[1], box_dist is not None,
+            _BOX_DROP_DISTANCE if box_dist is None else box_dist,
+            lin.flat, qs.a_src, qs.a_fac, qs.A.data, qs.g_src, qs.g_slot, qs.g_gam, qs.g_fac, self._act,
+            float(gamma), qs.G.data, lin.f, lin.alat, lin.h,
+            qs.lat, qs.row_lat, self.vehicle.lat_acc_max, qs.trk, qs.row_trk, self._trk_lo, self._trk_hi, qs.row_cbf,
+            qs.c_buf, qs.b_buf, qs.hl_buf, qs.hu_buf, qs.xl_buf, qs.xu_buf, self._box_lo, self._box_hi)
+        return qs.data(), status
 
-    def _qp_solve(self, qs: QPStructure, data) -> tuple[np.ndarray | None, int, str]:
-        """(z or None, iterations, message); the matrices are already in qs.A / qs.G."""
-        c, b, hl, hu, xl, xu = data
-        # every linearisation output enters one of these (a NaN or inf anywhere shows up)
-        checked = [b, c, qs.A.data, qs.G.data, self._lin.alat] + ([self._lin.h[:, self._act]] if qs.m else [])
-        if not all(_all_finite(a) for a in checked):
+    def _qp_solve(self, qs: QPStructure, data, status: int) -> tuple[np.ndarray | None, int, str]:
+        """(z or None, iterations, message); ``status`` of the assembly (:func:`.assembly.assemble`)."""
+        if status == STATUS_NONFINITE:
             return None, 0, "non-finite QP data"
-        if (xl > xu).any():
+        if status == STATUS_INCONSISTENT:
             return None, 0, "inconsistent hard bounds"
         return solve_qp(qs, data, self.config)
 

@@ -1,0 +1,30 @@
+"""Compilation of the per-step kernels: one numba setting for the whole package.
+
+The per-step hot paths (the passing-side planner's clearance table, ...) are loops over
+small arrays; as numpy expressions their cost is the number of numpy calls (about 1 us
+each), not the arithmetic. :func:`kernel` compiles such a loop once with numba:
+
+- ``cache=True``: the machine code is stored next to the module (``__pycache__``) on the
+  first call and loaded by every later process (the first call of a fresh install
+  compiles, a few seconds per kernel; later ones take milliseconds);
+- ``error_model="numpy"``: a float division by zero gives inf or nan as in numpy, instead of
+  raising;
+- no ``fastmath``: every operation is IEEE-754 in the order written, so a kernel that
+  evaluates the same formulas in the same order as numpy gives the same bits (each kernel's
+  tests compare it with the plain numpy form bit for bit).
+
+Kernels written for this must avoid what differs between numpy and a loop: sums of
+more than two terms (numpy sums pairwise), matrix products (BLAS) and transcendental
+functions of arrays (numpy's SIMD versions); max, min, sqrt and the four operations are exact.
+"""
+
+from __future__ import annotations
+
+import numba
+
+__all__ = ["kernel"]
+
+
+def kernel(fn):
+    """``fn`` compiled with the package's numba setting (module docstring)."""
+    return numba.njit(cache=True, error_model="numpy", fastmath=False, nogil=True)(fn)
