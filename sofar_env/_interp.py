@@ -21,24 +21,27 @@ try:
 except ImportError:  # pragma: no cover - other numpy layouts
     interp = np.interp
 
-__all__ = ["interp", "interp_at", "wrap_at"]
+__all__ = ["interp", "interp_at", "interp_located", "locate", "wrap_at"]
 
 
 @kernel
-def interp_at(x, xp, fp):
-    """``np.interp(x, xp, fp)`` at one float ``x`` (``xp`` strictly increasing, at least 2 samples).
-
-    numpy's arithmetic: ``fp[0]`` left of ``xp[0]``, ``fp[-1]`` from ``xp[-1]`` on, ``fp[j]`` at a
-    knot, else ``slope (x - xp[j]) + fp[j]`` with ``slope = (fp[j+1] - fp[j]) / (xp[j+1] - xp[j])``
-    (and numpy's retry from the right end of the interval if that is nan); nan for a nan ``x``.
-    """
+def locate(x, xp, guess):
+    """Where ``x`` falls in the strictly increasing ``xp`` (at least 2 samples): ``j`` with ``xp[j] <= x <
+    xp[j + 1]``; ``-1`` left of ``xp[0]``, ``len(xp) - 1`` from ``xp[-1]`` on, ``-2`` for a nan ``x``. A
+    ``guess`` (e.g. the previous point's ``j`` for increasing points) is tried first, then its next
+    interval, then a binary search: the result does not depend on it."""
     n = xp.shape[0]
     if x != x:
-        return x
+        return -2
     if x < xp[0]:
-        return fp[0]
+        return -1
     if x >= xp[n - 1]:
-        return fp[n - 1]
+        return n - 1
+    if 0 <= guess < n - 1 and xp[guess] <= x:
+        if x < xp[guess + 1]:
+            return guess
+        if guess + 2 < n and x < xp[guess + 2]:
+            return guess + 1
     lo, hi = 0, n - 1  # xp[lo] <= x < xp[hi]
     while hi - lo > 1:
         mid = (lo + hi) >> 1
@@ -46,15 +49,38 @@ def interp_at(x, xp, fp):
             lo = mid
         else:
             hi = mid
-    if xp[lo] == x:
-        return fp[lo]
-    slope = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo])
-    y = slope * (x - xp[lo]) + fp[lo]
+    return lo
+
+
+@kernel
+def interp_located(j, x, xp, fp):
+    """``np.interp(x, xp, fp)`` with ``j = locate(x, xp, ...)``: numpy's arithmetic: ``fp[0]`` left of
+    ``xp[0]``, ``fp[-1]`` from ``xp[-1]`` on, ``fp[j]`` at a knot, else ``slope (x - xp[j]) + fp[j]`` with
+    ``slope = (fp[j+1] - fp[j]) / (xp[j+1] - xp[j])`` (and numpy's retry from the right end of the
+    interval if that is nan); nan for a nan ``x``. Tables that share ``xp`` share one ``locate``."""
+    n = xp.shape[0]
+    if j == -2:
+        return x
+    if j == -1:
+        return fp[0]
+    if j == n - 1:
+        return fp[n - 1]
+    if xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    y = slope * (x - xp[j]) + fp[j]
     if y != y:
-        y = slope * (x - xp[lo + 1]) + fp[lo + 1]
-        if y != y and fp[lo] == fp[lo + 1]:
-            y = fp[lo]
+        y = slope * (x - xp[j + 1]) + fp[j + 1]
+        if y != y and fp[j] == fp[j + 1]:
+            y = fp[j]
     return y
+
+
+@kernel
+def interp_at(x, xp, fp):
+    """``np.interp(x, xp, fp)`` at one float ``x`` (``xp`` strictly increasing, at least 2 samples), to
+    numpy's bits (:func:`interp_located`)."""
+    return interp_located(locate(x, xp, -1), x, xp, fp)
 
 
 @kernel

@@ -235,3 +235,18 @@ def test_the_compiled_footprint_edges_are_the_numpy_form():
     n_min, n_max = edges(s_abs)
     np.testing.assert_array_equal(n_min, -wr)
     np.testing.assert_array_equal(n_max, wl)
+
+
+def test_locate_does_not_depend_on_its_guess():
+    """The interval found is searchsorted's, whatever the guess (a good one, a wrong one, out of range)."""
+    from sofar_env._interp import locate
+
+    rng = np.random.default_rng(31)
+    xp = np.cumsum(rng.uniform(0.01, 2.0, 200))
+    n = xp.size
+    for x in np.concatenate([rng.uniform(xp[0] - 3.0, xp[-1] + 3.0, 2000), xp]):
+        want = int(np.searchsorted(xp, x, side="right")) - 1
+        want = min(want, n - 1)
+        for guess in (-5, -1, 0, want - 1, want, want + 1, want + 3, n - 2, n - 1, n + 4, int(rng.integers(n))):
+            assert locate(float(x), xp, guess) == want
+    assert locate(float("nan"), xp, 3) == -2

@@ -45,6 +45,11 @@ def log_update(writer: Any, agent: PASTA, stats: dict[str, Any]) -> None:
     writer.add_scalar("pasta/mu", stats["mu"], step)
     writer.add_scalar("pasta/conflict_ratio", stats["conflict_ratio"], step)
     writer.add_scalar("charts/sps", stats["sps"], step)
+    if "collect_time" in stats:  # where the time goes: env steps (collection) or the learner (update)
+        n_collected = stats["rollout"].rewards.shape[0] * stats["rollout"].rewards.shape[1]
+        writer.add_scalar("charts/collect_sps", n_collected / max(stats["collect_time"], 1e-9), step)
+        writer.add_scalar("time/collect_s", stats["collect_time"], step)
+    writer.add_scalar("time/update_s", stats["update_time"], step)
     writer.add_scalar("charts/epochs", stats["epochs"], step)
     for j, name in enumerate(names):
         writer.add_scalar(f"attention/{name}", stats["attention"][j], step)
@@ -86,7 +91,10 @@ def console_line(agent: PASTA, stats: dict[str, Any], total_steps: int) -> str:
         line += f"  mean returns of the last {len(recent)}: " + format_returns(agent.objective_names, returns)
     else:
         line += "  (no episode finished yet)"
-    return line + f"  mu {stats['mu']:.2f}  conflict {stats['conflict_ratio']:.2f}  sps {stats['sps']:.0f}"
+    line += f"  mu {stats['mu']:.2f}  conflict {stats['conflict_ratio']:.2f}  sps {stats['sps']:.0f}"
+    if "collect_time" in stats:
+        line += f" (collection {stats['collect_time']:.1f} s, update {stats['update_time']:.1f} s)"
+    return line
 
 
 def check_out(out: Path, force: bool) -> None:

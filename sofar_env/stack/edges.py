@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from .._interp import interp, interp_at
+from .._interp import interp, interp_located, locate
 from .._jit import kernel
 from ..vehicle import VehicleParams
 
@@ -87,19 +87,21 @@ class TrackEdges:
 @kernel
 def _narrowest_edges(s_abs, offsets, knots, wl, wr, length):
     """(-min wr, min wl) over the points ``s_abs[k] + offsets`` of each ``s_abs[k]``, the widths interpolated
-    as the track interpolates them (:meth:`~sofar_env.tracks.Track.table`)."""
+    as the track interpolates them (:meth:`~sofar_env.tracks.Track.table`; both columns share the knots)."""
     n = s_abs.shape[0]
     n_min = np.empty(n)
     n_max = np.empty(n)
+    j = -1
     for k in range(n):
         lo = hi = 0.0
-        for j in range(offsets.shape[0]):
-            s = (s_abs[k] + offsets[j]) % length
-            r = interp_at(s, knots, wr)
-            left = interp_at(s, knots, wl)
-            if j == 0 or r < lo or r != r:
+        for i in range(offsets.shape[0]):
+            s = (s_abs[k] + offsets[i]) % length
+            j = locate(s, knots, j)
+            r = interp_located(j, s, knots, wr)
+            left = interp_located(j, s, knots, wl)
+            if i == 0 or r < lo or r != r:
                 lo = r
-            if j == 0 or left < hi or left != left:
+            if i == 0 or left < hi or left != left:
                 hi = left
         n_min[k] = -lo
         n_max[k] = hi

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._interp import interp, interp_at, wrap_at
+from .._interp import interp, interp_at, interp_located, locate, wrap_at
 from .._jit import kernel
 from ..vehicle import VehicleParams
 
@@ -125,9 +125,11 @@ def _pace_prediction(ego_s, opp_rel, times, knots, v_closed, s_table, t_table, l
         v = opp_rel[i, 2]
         rho = (v if v >= 0.0 else 0.0) / (v_prof if v_prof >= 0.1 else 0.1)
         t0 = interp_at(s_abs, s_table, t_table)
+        j = -1
         for k in range(K):
-            s_pred = interp_at(t0 + rho * times[k], t_table, s_table)
-            out[i, k] = gap + (s_pred - s_abs)
+            t = t0 + rho * times[k]
+            j = locate(t, t_table, j)
+            out[i, k] = gap + (interp_located(j, t, t_table, s_table) - s_abs)
     return out
 
 
@@ -152,8 +154,11 @@ def _ego_nodes(ego_s, v0, node_t, dt, speed_factor, dv_min, dv_max, knots, v_clo
         s[k] = v0 * node_t[k]
     v_ref = np.empty(N)
     for _ in range(2):
+        j = -1
         for k in range(N):
-            v_ref[k] = speed_factor * interp_at((ego_s + s[k]) % length, knots, v_closed)
+            x = (ego_s + s[k]) % length
+            j = locate(x, knots, j)
+            v_ref[k] = speed_factor * interp_located(j, x, knots, v_closed)
         last = v0
         acc = 0.0
         s[0] = 0.0
