@@ -250,3 +250,34 @@ def test_locate_does_not_depend_on_its_guess():
         for guess in (-5, -1, 0, want - 1, want, want + 1, want + 3, n - 2, n - 1, n + 4, int(rng.integers(n))):
             assert locate(float(x), xp, guess) == want
     assert locate(float("nan"), xp, 3) == -2
+
+
+def test_the_compiled_edge_envelope_is_the_numpy_form():
+    """EdgeBand.envelope (one compiled call) against its numpy expressions, bit for bit: slow and fast cars,
+    a band that narrows ahead, the lap seam, a zero lateral acceleration."""
+    from sofar_env.opponents.lateral import _LOOKAHEAD, _LOOKAHEAD_TIME, EdgeBand
+    from sofar_env.tracks import Track
+
+    track = Track.load("Kentucky")
+    band = EdgeBand(track, inner=1.5, half_width=0.95, half_length=2.45)
+
+    def numpy_form(s, v, lateral_speed, lateral_accel):
+        reach = max(_LOOKAHEAD_TIME * v, 50.0)
+        d = reach * _LOOKAHEAD
+        lo, hi = band.soft(s + d)
+        t = d / max(v, 1e-3)
+        u, a = lateral_speed, max(lateral_accel, 1e-9)
+        t_ramp = u / a
+        back = np.where(t < t_ramp, 0.5 * a * t * t, u * t - 0.5 * u * t_ramp)
+        lo_e, hi_e = float(np.max(lo - back)), float(np.min(hi + back))
+        if lo_e > hi_e:
+            lo_e = hi_e = 0.5 * (lo_e + hi_e)
+        return lo_e, hi_e
+
+    rng = np.random.default_rng(37)
+    cases = [(float(s), float(v), float(u), float(a)) for s, v, u, a in zip(
+        rng.uniform(-50.0, track.length + 50.0, 400), rng.uniform(0.0, 90.0, 400),
+        rng.uniform(0.0, 3.0, 400), rng.uniform(0.0, 6.0, 400))]
+    cases += [(track.length - 1.0, 60.0, 1.5, 3.0), (0.0, 0.0, 1.5, 0.0), (10.0, 30.0, 0.0, 2.0)]
+    for case in cases:
+        assert band.envelope(*case) == numpy_form(*case)

@@ -23,7 +23,8 @@ import math
 import numpy as np
 from scipy.ndimage import minimum_filter1d
 
-from .._interp import interp
+from .._interp import interp, interp_located, locate
+from .._jit import kernel
 
 __all__ = ["track_target", "keep_clear", "EdgeBand"]
 
@@ -134,18 +135,9 @@ class EdgeBand:
     def envelope(self, s: float, v: float, lateral_speed: float, lateral_accel: float) -> tuple[float, float]:
         """The soft band at ``s`` tightened so that a car at speed ``v`` [m/s] that starts moving back
         from rest (accelerating at ``lateral_accel`` [m/s^2] up to ``lateral_speed`` [m/s]) stays inside
-        it as it narrows ahead (looking 8 s or at least 50 m ahead)."""
-        reach = max(_LOOKAHEAD_TIME * v, 50.0)
-        d = reach * _LOOKAHEAD
-        lo, hi = self.soft(s + d)
-        t = d / max(v, 1e-3)
-        u, a = lateral_speed, max(lateral_accel, 1e-9)
-        t_ramp = u / a
-        back = np.where(t < t_ramp, 0.5 * a * t * t, u * t - 0.5 * u * t_ramp)  # room gained by moving back
-        lo_e, hi_e = float(np.maximum.reduce(lo - back)), float(np.minimum.reduce(hi + back))  # np.max, np.min
-        if lo_e > hi_e:
-            lo_e = hi_e = 0.5 * (lo_e + hi_e)
-        return lo_e, hi_e
+        it as it narrows ahead (looking 8 s or at least 50 m ahead). One compiled call (:func:`_envelope`)."""
+        return _envelope(float(s), float(v), float(lateral_speed), float(lateral_accel), self._knots,
+                         self._soft[0], self._soft[1], _LOOKAHEAD, _LOOKAHEAD_TIME, float(self.track.length))
 
     def room(self, s: float, distance: float) -> float:
         """Narrowest width of the soft band over ``[s, s + distance]`` [m] (sampled every <= 5 m)."""
@@ -163,3 +155,37 @@ class EdgeBand:
         wl, wr = self.widths(float(s))
         lo, hi = reach - wr, wl - reach
         return (lo, hi) if lo <= hi else (0.5 * (lo + hi),) * 2
+
+
+@kernel
+def _envelope(s, v, lateral_speed, lateral_accel, knots, soft_lo, soft_hi, lookahead, lookahead_time, length):
+    """:meth:`EdgeBand.envelope`: at the points ``s + d``, ``d = max(lookahead_time v, 50) lookahead``, the soft
+    band widened by the room ``back`` a car gains by moving back from rest in the time ``d / max(v, 1e-3)`` it
+    takes to get there (``a t^2 / 2`` while accelerating, then ``u t - u t_ramp / 2``); the largest lower and
+    the smallest upper bound (their middle if they cross). Python's ``max`` picks and numpy's arithmetic."""
+    x = lookahead_time * v
+    reach = 50.0 if 50.0 > x else x
+    v_div = 1e-3 if 1e-3 > v else v
+    u = lateral_speed
+    a = 1e-9 if 1e-9 > lateral_accel else lateral_accel
+    t_ramp = u / a
+    lo_e = hi_e = 0.0
+    j = -1
+    for k in range(lookahead.shape[0]):
+        d = reach * lookahead[k]
+        p = (s + d) % length
+        j = locate(p, knots, j)
+        t = d / v_div
+        back = 0.5 * a * t * t if t < t_ramp else u * t - 0.5 * u * t_ramp
+        lo = interp_located(j, p, knots, soft_lo) - back
+        hi = interp_located(j, p, knots, soft_hi) + back
+        if k == 0:
+            lo_e, hi_e = lo, hi
+            continue
+        if lo_e == lo_e and (lo > lo_e or lo != lo):  # np.max: a nan stays
+            lo_e = lo
+        if hi_e == hi_e and (hi < hi_e or hi != hi):  # np.min
+            hi_e = hi
+    if lo_e > hi_e:
+        lo_e = hi_e = 0.5 * (lo_e + hi_e)
+    return lo_e, hi_e
