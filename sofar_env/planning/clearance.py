@@ -26,10 +26,9 @@ Clusters. Relevant opponents closer than ``cluster_gap`` to each other at a node
 where the ego overlaps either of them share one binary (connected components), so
 the planner never threads between them.
 
-Cost. The window is evaluated for the nodes and node intervals of all opponents at
-once (the arrays are small: the cost is the number of numpy calls, not the number
-of opponents); the time-derivative coefficients and index tables are computed once
-per window.
+Cost. The table of all opponents is one compiled call (:mod:`sofar_env._jit`) that
+evaluates the formulas above in numpy's order (its tests compare it with a plain numpy
+form bit for bit); the time-derivative coefficients are computed once per window.
 """
 
 from __future__ import annotations
