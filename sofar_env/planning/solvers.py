@@ -38,6 +38,7 @@ import logging
 
 import numpy as np
 
+from .._jit import kernel
 from .problem import SideProblem
 
 try:  # DAQP is a hard dependency, but the planner must never raise because of it.
@@ -55,6 +56,7 @@ _Q_SLACK = 1e-2      # curvature added to each slack [1/m^2] (DAQP needs H > 0)
 _DAQP_OK = (1, 2)    # DAQP exit flags that mean "optimal" (2: optimal with soft constraints)
 _SENSE_BINARY = 16
 _SENSE_ACTIVE_LOWER = 3   # DAQP: ACTIVE (1) | LOWER (2): start with this bound in the working set
+_NO_FIXED = np.zeros(0, dtype=np.int64)
 
 
 def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tuple[np.ndarray, np.ndarray] | None:
@@ -67,11 +69,6 @@ def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tu
         return None
     C, N, P = prob.n_clusters, prob.lo.size, prob.pair_k.size
     nv = C + P + N
-    sl = prob.pair_w
-    lo_k, hi_k = prob.lo[prob.pair_k], prob.hi[prob.pair_k]
-    Ma = np.maximum(0.0, hi_k - prob.pair_n + sl)
-    Mb = np.maximum(0.0, prob.pair_n + sl - lo_k)
-
     key = (C, P)
     cached = cache.get(key)
     if cached is None:
@@ -84,48 +81,69 @@ def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tu
         # Slacks start at their bound xi = 0: without this warm start the active set
         # needs one iteration per pair just to add the xi >= 0 bounds.
         sense[C:C + P] = _SENSE_ACTIVE_LOWER
-        r2 = np.arange(2 * P)
-        slack_col = C + np.concatenate([np.arange(P), np.arange(P)])
-        slack_val = np.concatenate([-np.ones(P), np.ones(P)])
-        # the constant parts of the bounds (the others are written per call)
-        bupper = np.empty(C + P + N + 2 * P)
-        bupper[:C] = 1.0
-        bupper[C:C + P] = _INF
-        bupper[C + 2 * P + N:] = _INF
-        blower = np.empty(C + P + N + 2 * P)
-        blower[:C + P] = 0.0
-        blower[C + P + N:C + 2 * P + N] = -_INF
-        cached = (np.diag(Hv), sense, N + r2, slack_col, slack_val, bupper, blower)
+        cached = (np.diag(Hv), sense)
         if len(cache) > 64:
             cache.clear()
         cache[key] = cached
-    H, sense, rows2, slack_col, slack_val, bupper, blower = cached
-    f = np.empty(nv)
-    f[:C] = prob.f_b - 0.5 * _Q_BIN
-    f[C:C + P] = w_slack
-    f[C + P:] = prob.RinvT @ prob.f_d
-    A = np.zeros((N + 2 * P, nv))
-    A[:N, C + P:] = prob.Rinv
-    pk2 = np.concatenate([prob.pair_k, prob.pair_k])
-    A[N:, C + P:] = prob.Rinv[pk2]
-    A[rows2, np.concatenate([prob.pair_c, prob.pair_c])] = -np.concatenate([Ma, Mb])
-    A[rows2, slack_col] = slack_val
-    bupper = bupper.copy()
-    blower = blower.copy()
-    if prob.b_fixed is not None:  # locked sides: the binary's bounds pinned to its value
-        fixed = prob.b_fixed >= 0
-        bupper[:C] = np.where(fixed, prob.b_fixed, 1.0)
-        blower[:C] = np.where(fixed, prob.b_fixed, 0.0)
-    bupper[C + P:C + P + N] = prob.hi
-    bupper[C + P + N:C + 2 * P + N] = prob.pair_n - sl
-    blower[C + P:C + P + N] = prob.lo
-    blower[C + 2 * P + N:] = prob.pair_n + sl - Mb
+    H, sense = cached
+    b_fixed = prob.b_fixed if prob.b_fixed is not None else _NO_FIXED
+    f, A, bupper, blower = _bnb_data(C, prob.Rinv, prob.RinvT @ prob.f_d, prob.f_b, float(w_slack), prob.lo, prob.hi,
+                                     prob.pair_k, prob.pair_c, prob.pair_n, prob.pair_w,
+                                     prob.b_fixed is not None, b_fixed)
     x, _, flag, _ = daqp.solve(H, f, A, bupper, blower, sense.copy(), presolve=0)
     if flag not in _DAQP_OK:
         logger.debug("DAQP branch-and-bound exit flag %d", flag)
         return None
     x = np.asarray(x)
     return prob.Rinv @ x[C + P:], x[:C].round()
+
+
+@kernel
+def _bnb_data(C, Rinv, f_u, f_b, w_slack, lo, hi, pair_k, pair_c, pair_n, pair_w, has_fixed, b_fixed):
+    """Cost vector, constraint matrix and bounds of :func:`solve_branch_and_bound` over x = [b (C), xi (P),
+    u (N)] (``f_u = R^-T f_d`` is given): ``f = (f_b - Q_BIN / 2, w_slack, f_u)``; simple bounds b in [0, 1]
+    (pinned where ``b_fixed >= 0``) and xi >= 0; general rows: the corridor ``lo <= Rinv u <= hi``, then per
+    pair r (node k, cluster c) ``Rinv_k u - Ma b_c - xi_r <= n - w`` and ``Rinv_k u - Mb b_c + xi_r >= n + w -
+    Mb`` with ``Ma = max(0, hi_k - n + w)`` and ``Mb = max(0, n + w - lo_k)`` (module docstring). Each value
+    with the operations of the numpy form it replaced, in the same order."""
+    N = lo.shape[0]
+    P = pair_k.shape[0]
+    nv = C + P + N
+    f = np.empty(nv)
+    A = np.zeros((N + 2 * P, nv))
+    bupper = np.empty(C + P + N + 2 * P)
+    blower = np.empty(C + P + N + 2 * P)
+    for c in range(C):
+        f[c] = f_b[c] - 0.5 * _Q_BIN
+        if has_fixed and b_fixed[c] >= 0:
+            bupper[c] = blower[c] = float(b_fixed[c])
+        else:
+            bupper[c], blower[c] = 1.0, 0.0
+    for r in range(P):
+        f[C + r] = w_slack
+        bupper[C + r], blower[C + r] = _INF, 0.0
+    for k in range(N):
+        f[C + P + k] = f_u[k]
+        bupper[C + P + k], blower[C + P + k] = hi[k], lo[k]
+        for j in range(N):
+            A[k, C + P + j] = Rinv[k, j]
+    for r in range(P):
+        k = pair_k[r]
+        sl, n = pair_w[r], pair_n[r]
+        x = hi[k] - n + sl
+        ma = 0.0 if 0.0 >= x else x
+        x = n + sl - lo[k]
+        mb = 0.0 if 0.0 >= x else x
+        for j in range(N):
+            A[N + r, C + P + j] = Rinv[k, j]
+            A[N + P + r, C + P + j] = Rinv[k, j]
+        A[N + r, pair_c[r]] = -ma
+        A[N + P + r, pair_c[r]] = -mb
+        A[N + r, C + r] = -1.0
+        A[N + P + r, C + r] = 1.0
+        bupper[C + P + N + r], blower[C + P + N + r] = n - sl, -_INF
+        bupper[C + 2 * P + N + r], blower[C + 2 * P + N + r] = _INF, n + sl - mb
+    return f, A, bupper, blower
 
 
 def solve_enumeration(prob: SideProblem, w_slack: float) -> tuple[np.ndarray, np.ndarray] | None:
