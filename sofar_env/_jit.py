@@ -22,9 +22,22 @@ from __future__ import annotations
 
 import numba
 
-__all__ = ["kernel"]
+__all__ = ["kernel", "maximum", "minimum"]
 
 
 def kernel(fn):
     """``fn`` compiled with the package's numba setting (module docstring)."""
     return numba.njit(cache=True, error_model="numpy", fastmath=False, nogil=True)(fn)
+
+
+@kernel
+def maximum(a, b):
+    """``np.maximum`` of two floats inside a kernel (a nan propagates; ``acc = maximum(acc, x)`` is
+    ``np.max``'s reduction)."""
+    return a if (a >= b or a != a) else b
+
+
+@kernel
+def minimum(a, b):
+    """``np.minimum`` of two floats inside a kernel (a nan propagates)."""
+    return a if (a <= b or a != a) else b

@@ -24,7 +24,7 @@ import numpy as np
 from scipy.ndimage import minimum_filter1d
 
 from .._interp import interp, interp_located, locate
-from .._jit import kernel
+from .._jit import kernel, maximum, minimum
 
 __all__ = ["track_target", "keep_clear", "EdgeBand"]
 
@@ -169,7 +169,7 @@ def _envelope(s, v, lateral_speed, lateral_accel, knots, soft_lo, soft_hi, looka
     u = lateral_speed
     a = 1e-9 if 1e-9 > lateral_accel else lateral_accel
     t_ramp = u / a
-    lo_e = hi_e = 0.0
+    lo_e, hi_e = -np.inf, np.inf
     j = -1
     for k in range(lookahead.shape[0]):
         d = reach * lookahead[k]
@@ -177,15 +177,8 @@ def _envelope(s, v, lateral_speed, lateral_accel, knots, soft_lo, soft_hi, looka
         j = locate(p, knots, j)
         t = d / v_div
         back = 0.5 * a * t * t if t < t_ramp else u * t - 0.5 * u * t_ramp
-        lo = interp_located(j, p, knots, soft_lo) - back
-        hi = interp_located(j, p, knots, soft_hi) + back
-        if k == 0:
-            lo_e, hi_e = lo, hi
-            continue
-        if lo_e == lo_e and (lo > lo_e or lo != lo):  # np.max: a nan stays
-            lo_e = lo
-        if hi_e == hi_e and (hi < hi_e or hi != hi):  # np.min
-            hi_e = hi
+        lo_e = maximum(lo_e, interp_located(j, p, knots, soft_lo) - back)  # np.max
+        hi_e = minimum(hi_e, interp_located(j, p, knots, soft_hi) + back)  # np.min
     if lo_e > hi_e:
         lo_e = hi_e = 0.5 * (lo_e + hi_e)
     return lo_e, hi_e

@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._gradient import GridGradient
-from .._jit import kernel
+from .._jit import kernel, maximum, minimum
 from .config import MIQPConfig
 
 __all__ = ["ClearanceWindow", "side_clusters", "ellipse_violation"]
@@ -76,18 +76,6 @@ class ClearanceWindow:
 
 
 @kernel
-def _max(a, b):
-    """``np.maximum`` of two floats (nan propagates)."""
-    return a if (a >= b or a != a) else b
-
-
-@kernel
-def _min(a, b):
-    """``np.minimum`` of two floats (nan propagates)."""
-    return a if (a <= b or a != a) else b
-
-
-@kernel
 def _required(g, ext, safe_lon, safe_lat, closing, ellipse):
     """The clearance [m] required at longitudinal gap ``g`` [m] with window extension ``ext`` [m] on that side
     (module docstring): ``safe_lat`` inside the box ``|g| < safe_lon``; in the extension the elliptic taper
@@ -95,13 +83,13 @@ def _required(g, ext, safe_lon, safe_lat, closing, ellipse):
     ``safe_lon + ext`` instead; 0 beyond."""
     if ellipse:
         r = g / (safe_lon + ext) if closing else g / safe_lon
-        return safe_lat * np.sqrt(_max(1.0 - r * r, 0.0))
+        return safe_lat * np.sqrt(maximum(1.0 - r * r, 0.0))
     over = abs(g) - safe_lon
     if over < 0.0:
         return safe_lat
     if closing and over < ext:
         r = over / ext
-        return safe_lat * np.sqrt(_max(1.0 - r * r, 0.0))
+        return safe_lat * np.sqrt(maximum(1.0 - r * r, 0.0))
     return 0.0
 
 
@@ -153,14 +141,14 @@ def _clearance_table(s_nodes, opp_s, uniform, two_dx, dx0, dxn, ga, gb, gc,
             w[k] = _required(g, ext_a[k] if g > 0.0 else ext_b[k], safe_lon, safe_lat, closing, ellipse)
         for k in range(N - 1):
             a, b = gap[k], gap[k + 1]
-            g = _max(_min(a, b), _min(_max(a, b), 0.0))  # the median of a, b and 0
+            g = maximum(minimum(a, b), minimum(maximum(a, b), 0.0))  # the median of a, b and 0
             if g > 0.0:
-                ext = _max(ext_a[k], ext_a[k + 1])
+                ext = maximum(ext_a[k], ext_a[k + 1])
             else:
-                ext = _max(ext_b[k], ext_b[k + 1])
+                ext = maximum(ext_b[k], ext_b[k + 1])
             seg = _required(g, ext, safe_lon, safe_lat, closing, ellipse)
-            w[k] = _max(w[k], seg)
-            w[k + 1] = _max(w[k + 1], seg)
+            w[k] = maximum(w[k], seg)
+            w[k + 1] = maximum(w[k + 1], seg)
         if stride <= 1 or not closing:
             continue
         any_outside = False

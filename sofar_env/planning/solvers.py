@@ -88,8 +88,7 @@ def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tu
     H, sense = cached
     b_fixed = prob.b_fixed if prob.b_fixed is not None else _NO_FIXED
     f, A, bupper, blower = _bnb_data(C, prob.Rinv, prob.RinvT @ prob.f_d, prob.f_b, float(w_slack), prob.lo, prob.hi,
-                                     prob.pair_k, prob.pair_c, prob.pair_n, prob.pair_w,
-                                     prob.b_fixed is not None, b_fixed)
+                                     prob.pair_k, prob.pair_c, prob.pair_n, prob.pair_w, b_fixed)
     x, _, flag, _ = daqp.solve(H, f, A, bupper, blower, sense.copy(), presolve=0)
     if flag not in _DAQP_OK:
         logger.debug("DAQP branch-and-bound exit flag %d", flag)
@@ -99,10 +98,10 @@ def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tu
 
 
 @kernel
-def _bnb_data(C, Rinv, f_u, f_b, w_slack, lo, hi, pair_k, pair_c, pair_n, pair_w, has_fixed, b_fixed):
+def _bnb_data(C, Rinv, f_u, f_b, w_slack, lo, hi, pair_k, pair_c, pair_n, pair_w, b_fixed):
     """Cost vector, constraint matrix and bounds of :func:`solve_branch_and_bound` over x = [b (C), xi (P),
     u (N)] (``f_u = R^-T f_d`` is given): ``f = (f_b - Q_BIN / 2, w_slack, f_u)``; simple bounds b in [0, 1]
-    (pinned where ``b_fixed >= 0``) and xi >= 0; general rows: the corridor ``lo <= Rinv u <= hi``, then per
+    (pinned where ``b_fixed >= 0``; ``b_fixed`` empty: none pinned) and xi >= 0; general rows: the corridor ``lo <= Rinv u <= hi``, then per
     pair r (node k, cluster c) ``Rinv_k u - Ma b_c - xi_r <= n - w`` and ``Rinv_k u - Mb b_c + xi_r >= n + w -
     Mb`` with ``Ma = max(0, hi_k - n + w)`` and ``Mb = max(0, n + w - lo_k)`` (module docstring). Each value
     with the operations of the numpy form it replaced, in the same order."""
@@ -115,7 +114,7 @@ def _bnb_data(C, Rinv, f_u, f_b, w_slack, lo, hi, pair_k, pair_c, pair_n, pair_w
     blower = np.empty(C + P + N + 2 * P)
     for c in range(C):
         f[c] = f_b[c] - 0.5 * _Q_BIN
-        if has_fixed and b_fixed[c] >= 0:
+        if b_fixed.shape[0] > 0 and b_fixed[c] >= 0:
             bupper[c] = blower[c] = float(b_fixed[c])
         else:
             bupper[c], blower[c] = 1.0, 0.0

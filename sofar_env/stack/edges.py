@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from .._interp import interp, interp_located, locate
-from .._jit import kernel
+from .._jit import kernel, minimum
 from ..vehicle import VehicleParams
 
 __all__ = ["TrackEdges"]
@@ -36,6 +36,9 @@ class TrackEdges:
         self._reach = max(vehicle.cg_to_front, vehicle.cg_to_rear)
         # footprint samples along the track, from the rear end to the front end
         self._offsets = np.linspace(-vehicle.cg_to_rear, vehicle.cg_to_front, 5)
+        self._knots, self._wl = track.table("wl")
+        self._wr = track.table("wr")[1]
+        self._length = float(track.length)
 
     def __call__(self, s_abs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n_min, n_max) at arc lengths ``s_abs`` [m]: with ``footprint_aware`` the narrowest
@@ -44,9 +47,7 @@ class TrackEdges:
         if not self.footprint_aware:
             return (-np.asarray(self.track.width_right(s_abs), float),
                     np.asarray(self.track.width_left(s_abs), float))
-        knots, wl = self.track.table("wl")
-        _, wr = self.track.table("wr")
-        return _narrowest_edges(s_abs.reshape(-1), self._offsets, knots, wl, wr, float(self.track.length))
+        return _narrowest_edges(s_abs.reshape(-1), self._offsets, self._knots, self._wl, self._wr, self._length)
 
     def for_mpc(self, s_abs: np.ndarray, x_prev: np.ndarray | None, t: np.ndarray,
                 shift: float, edge_relative: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -93,16 +94,12 @@ def _narrowest_edges(s_abs, offsets, knots, wl, wr, length):
     n_max = np.empty(n)
     j = -1
     for k in range(n):
-        lo = hi = 0.0
+        lo = hi = np.inf
         for i in range(offsets.shape[0]):
             s = (s_abs[k] + offsets[i]) % length
             j = locate(s, knots, j)
-            r = interp_located(j, s, knots, wr)
-            left = interp_located(j, s, knots, wl)
-            if i == 0 or r < lo or r != r:
-                lo = r
-            if i == 0 or left < hi or left != left:
-                hi = left
+            lo = minimum(lo, interp_located(j, s, knots, wr))
+            hi = minimum(hi, interp_located(j, s, knots, wl))
         n_min[k] = -lo
         n_max[k] = hi
     return n_min, n_max

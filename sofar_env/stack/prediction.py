@@ -121,7 +121,7 @@ def _pace_prediction(ego_s, opp_rel, times, knots, v_closed, s_table, t_table, l
     for i in range(M):
         gap = opp_rel[i, 0]
         s_abs = wrap_at(ego_s + gap, length)
-        v_prof = interp_at(s_abs % length, knots, v_closed)
+        v_prof = interp_at(s_abs, knots, v_closed)  # s_abs is in [0, length) already
         v = opp_rel[i, 2]
         rho = (v if v >= 0.0 else 0.0) / (v_prof if v_prof >= 0.1 else 0.1)
         t0 = interp_at(s_abs, s_table, t_table)

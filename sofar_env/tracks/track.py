@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .._interp import interp
+from .._interp import interp, locate
 from .._jit import kernel
 from .curve import PeriodicCurve
 from .format import (
@@ -145,6 +145,12 @@ class Track:
         for key, col in (("kappa", self.kappa), ("wl", self.w_left), ("wr", self.w_right), ("v", self.v)):
             closed = np.append(col, col[0])
             self._tables[key] = (closed, closed.tolist())
+        self._table_views = {}  # read-only (knots, values) views for table()
+        for key, (closed, _) in self._tables.items():
+            views = (self._knots.view(), closed.view())
+            for v in views:
+                v.setflags(write=False)
+            self._table_views[key] = views
 
     # ---------------------------------------------------------------- loading
     @classmethod
@@ -222,10 +228,7 @@ class Track:
         "wr" or "v"), closed with the first sample at s = L: what :meth:`curvature`, :meth:`width_left`,
         :meth:`width_right` and :meth:`speed` interpolate at wrapped ``s``, for compiled kernels
         (:func:`sofar_env._interp.interp_at`). Read-only views."""
-        knots, closed = self._knots.view(), self._tables[key][0].view()
-        knots.setflags(write=False)
-        closed.setflags(write=False)
-        return knots, closed
+        return self._table_views[key]
 
     def _interp(self, key: str, s):
         """Periodic linear interpolation of the sampled column ``key`` at ``s`` (scalar or array)."""
@@ -464,16 +467,5 @@ def _newton_point(x, y, s, knots, coefs, last, length, max_step, max_iter, tol):
 @kernel
 def _piece(knots, s, last):
     """``bisect_right(knots, s) - 1`` clipped to ``[0, last]``: the spline piece holding ``s``."""
-    lo, hi = 0, knots.shape[0]
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if s < knots[mid]:
-            hi = mid
-        else:
-            lo = mid + 1
-    i = lo - 1
-    if i > last:
-        return last
-    if i < 0:
-        return 0
-    return i
+    i = locate(s, knots, -1)
+    return min(max(i, 0), last)
