@@ -233,13 +233,7 @@ def reference_workload_ms(repeats: int = 5) -> float:
 
 
 def _load_average() -> float | None:
-    """With ``--compare REV`` the script instead runs an interleaved A/B against the git revision
-``REV`` (see :mod:`bench_compare`, next to this script): the revision is exported into a
-temporary directory, and rounds of one timed pass of the old code and one of the working
-tree alternate, each in a fresh subprocess whose ``PYTHONPATH`` selects the package; the
-medians, spreads, per-component breakdowns and their ratio are reported.
-
-The host's 1-minute load average (None where the OS has none): a busy host slows every pass."""
+    """The host's 1-minute load average (None where the OS has none): a busy host slows every pass."""
     try:
         return float(os.getloadavg()[0])
     except (AttributeError, OSError):

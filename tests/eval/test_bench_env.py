@@ -80,3 +80,44 @@ def test_bench_train_rejects_zero_rounds():
     proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_train.py"), "--compare", "HEAD", "--rounds", "0"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0 and "--rounds" in proc.stderr
+
+
+def test_bench_vector_reports_the_synthetic_ceiling(tmp_path):
+    out = tmp_path / "vector.json"
+    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_vector.py"), "--no-sofar", "--steps", "20",
+                    "--rounds", "2", "--work-ms", "0.5", "--json", str(out)],
+                   check=True, capture_output=True, text=True, timeout=300)
+    result = json.loads(out.read_text())
+    assert "sofar_async_vector" not in result
+    one = result["synthetic_one_process"]
+    assert one["ratio_to_one_process"] == 1.0 and len(one["per_round"]) == 2
+    for name in ("synthetic_async_vector", "synthetic_bare_pipes"):
+        row = result[name]
+        assert row["steps_per_s"] > 0 and len(row["ratio_per_round"]) == 2
+        # each ratio is its round's vector figure over the same round's one-process figure
+        assert row["ratio_per_round"][0] == pytest.approx(row["per_round"][0] / one["per_round"][0])
+
+
+def test_synthetic_env_burns_the_cpu_time_it_is_given():
+    sys.path.insert(0, str(ROOT / "eval"))
+    try:
+        from bench_vector import SyntheticEnv
+    finally:
+        sys.path.remove(str(ROOT / "eval"))
+    env = SyntheticEnv(work_ms=20.0, info_keys=5)
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    import time
+
+    t0 = time.thread_time()
+    _, _, terminated, truncated, info = env.step(env.action_space.sample())
+    assert time.thread_time() - t0 >= 0.020
+    assert len(info) == 5 and not terminated and not truncated
+
+
+@pytest.mark.parametrize("bad", [["--workers", "0"], ["--steps", "0"], ["--rounds", "0"], ["--work-ms", "0"],
+                                 ["--info-keys", "-1"]])
+def test_bench_vector_rejects_bad_options(bad):
+    proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_vector.py"), "--no-sofar", *bad],
+                          check=False, capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0 and bad[0] in proc.stderr
