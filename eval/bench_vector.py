@@ -27,6 +27,7 @@ below N, the lock-step on this host is the limit, not the env's own cost.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import multiprocessing as mp
 import os
@@ -165,8 +166,6 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--work-ms must be > 0, got {args.work_ms}")
     if args.info_keys < 0:
         parser.error(f"--info-keys must be >= 0, got {args.info_keys}")
-
-    import functools
 
     synthetic = functools.partial(SyntheticEnv, work_ms=args.work_ms, info_keys=args.info_keys)
     runs: dict[str, list[float]] = {k: [] for k in ("synthetic_one", "synthetic_vector", "pipe",
