@@ -55,8 +55,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BarrierParams", "barrier_expr", "barrier", "casadi_barrier", "casadi_ops", "min_barrier", "semi_axis_s",
-           "softplus"]
+from .._jit import kernel, minimum
+
+__all__ = ["BarrierParams", "barrier_expr", "barrier", "barrier_table", "casadi_barrier", "casadi_ops", "min_barrier",
+           "semi_axis_s", "softplus"]
 
 
 @dataclass(frozen=True)
@@ -157,6 +159,74 @@ def barrier(ego: Any, opponents: Any, p: BarrierParams = BarrierParams()) -> np.
     return barrier_expr(s, n, v, opponents[..., 0], opponents[..., 1], opponents[..., 2], p, _NUMPY_OPS, e, course)
 
 
+def barrier_table(xs: np.ndarray, opponents: np.ndarray, p: BarrierParams) -> tuple[np.ndarray, np.ndarray, float]:
+    """h of the ego states ``xs`` (K, 5) against M opponents: ``(h (K, M), h.min(axis=0) (M,), h.min())``.
+
+    ``opponents`` is (K, M, 3 or 4), row k the opponents at the time of ``xs[k]``, or (1, M, 3 or 4), the
+    same opponents for every state; the values are those of ``barrier(xs[:, None, :], opponents, p)``
+    to the bit. K and M must be >= 1. Without ``heading_extent`` the arithmetic runs in three compiled
+    calls (:mod:`sofar_env._jit`) around numpy's tanh, exp and log1p, applied to the very arrays
+    :func:`barrier_expr` applies them to (so the same SIMD loops); with it, through :func:`barrier`.
+    """
+    if p.heading_extent != 0.0:
+        h = barrier(xs[:, None, :], opponents, p)
+        hk = h.min(axis=0)
+        return h, hk, float(hk.min())
+    w = _table_gaps(xs, opponents, p.sigma)
+    np.tanh(w[3], out=w[3])
+    _table_close(w, p.sharpness)
+    np.exp(w[3], out=w[3])
+    np.log1p(w[3], out=w[3])
+    return _table_finish(w, p.sharpness, p.a0, p.a_brake, p.b)
+
+
+@kernel
+def _table_gaps(xs, o, sigma):
+    """(4, K, M) work array of :func:`barrier_table`: ds, dn, v - v_o, ds / sigma."""
+    n_k, n_m = xs.shape[0], o.shape[1]
+    w = np.empty((4, n_k, n_m))
+    for k in range(n_k):
+        j = k if o.shape[0] > 1 else 0
+        for i in range(n_m):
+            ds = o[j, i, 0] - xs[k, 0]
+            w[0, k, i] = ds
+            w[1, k, i] = o[j, i, 1] - xs[k, 1]
+            w[2, k, i] = xs[k, 3] - o[j, i, 2]
+            w[3, k, i] = ds / sigma
+    return w
+
+
+@kernel
+def _table_close(w, k):
+    """``w[2]``: the closing speed (v - v_o) tanh(ds / sigma) (w[3] holds the tanh); ``w[3]``: -k |that|."""
+    for a in range(w.shape[1]):
+        for i in range(w.shape[2]):
+            vc = w[2, a, i] * w[3, a, i]
+            w[2, a, i] = vc
+            w[3, a, i] = -k * abs(vc)
+
+
+@kernel
+def _table_finish(w, k, a0, a_brake, b):
+    """h from the closing speed ``w[2]`` and log1p(exp(-k |v_close|)) in ``w[3]`` (:func:`barrier_expr`)."""
+    n_k, n_m = w.shape[1], w.shape[2]
+    h = np.empty((n_k, n_m))
+    hk = np.empty(n_m)
+    hmin = np.inf
+    for a in range(n_k):
+        for i in range(n_m):
+            vc = w[2, a, i]
+            sp = 0.5 * (vc + abs(vc)) + w[3, a, i] / k
+            ax = a0 + sp * sp / (2.0 * a_brake)
+            r = w[0, a, i] / ax
+            q = w[1, a, i] / b
+            v = r * r + q * q - 1.0
+            h[a, i] = v
+            hk[i] = v if a == 0 else minimum(hk[i], v)
+            hmin = v if (a == 0 and i == 0) else minimum(hmin, v)
+    return h, hk, hmin
+
+
 def casadi_barrier(p: BarrierParams = BarrierParams()):
     """CasADi function ``h(x[5], o[3]) -> h``: ego Frenet state, opponent ``(s, n, v)``."""
     import casadi as ca
@@ -167,18 +237,30 @@ def casadi_barrier(p: BarrierParams = BarrierParams()):
     return ca.Function("barrier", [x, o], [h], ["x", "o"], ["h"])
 
 
-_MATH_OPS = SimpleNamespace(abs=abs, exp=math.exp, log1p=math.log1p, tanh=math.tanh, sin=math.sin, sqrt=math.sqrt)
-
-
 def min_barrier(track, ego_frenet: np.ndarray, opponents: np.ndarray, params: BarrierParams) -> float:
     """Smallest barrier value h of the ego (s, n, e, v, delta) against the opponent rows (s, n, v[, ...]) now;
     inf without opponents.
 
-    :func:`barrier_expr` evaluated on Python floats (the field is small), with s taken relative to the ego.
+    :func:`barrier_expr` on Python floats (the field is small), with s taken relative to the ego, written
+    out inline: the same operations in the same order and the same libm calls (``math``; ``** 2`` stays
+    Python's float power), without the per-opponent calls through the ``ops`` namespace.
     """
     s, n, v, e = float(ego_frenet[0]), float(ego_frenet[1]), float(ego_frenet[3]), float(ego_frenet[2])
+    p = params
+    k, sigma, a0, two_brake = p.sharpness, p.sigma, p.a0, 2.0 * p.a_brake
+    if p.heading_extent == 0.0:
+        b = p.b
+    else:  # sin_course_o = 0.0, as barrier_expr's default
+        sin_e = math.sin(e)
+        eps2 = _HEADING_EPS ** 2
+        b = p.b + p.heading_extent * (math.sqrt(sin_e * sin_e + eps2) + math.sqrt(0.0 * 0.0 + eps2) - 2.0 * _HEADING_EPS)
     h = math.inf
     for row in np.asarray(opponents, float).tolist():
-        s_o, n_o, v_o = row[0], row[1], row[2]
-        h = min(h, barrier_expr(0.0, n, v, track.gap(s_o, s), n_o, v_o, params, _MATH_OPS, e))
+        ds = track.gap(row[0], s) - 0.0
+        dn = row[1] - n
+        x = (v - row[2]) * math.tanh(ds / sigma)
+        ax = abs(x)
+        sp = 0.5 * (x + ax) + math.log1p(math.exp(-k * ax)) / k
+        a = a0 + sp * sp / two_brake
+        h = min(h, (ds / a) ** 2 + (dn / b) ** 2 - 1.0)
     return h

@@ -144,3 +144,70 @@ def test_heading_extent_also_covers_the_opponents_course():
     assert float(barrier(ego, np.append(row, c), P)) == float(barrier(ego, row, P))
     with pytest.raises(ValueError, match="opponents must end in 3 values"):
         barrier(ego, np.zeros(5), wide)
+
+
+def _table_numpy(xs, opp, p):
+    """The form barrier_table replaced: barrier() on broadcast rows, then numpy reductions."""
+    h = barrier(xs[:, None, :], opp, p)
+    return h, h.min(axis=0), float(h.min())
+
+
+@pytest.mark.parametrize("heading", [0.0, 2.45])
+def test_barrier_table_is_the_numpy_barrier_to_the_bit(heading):
+    from sofar_env.control.barrier import barrier_table
+
+    p = BarrierParams(heading_extent=heading)
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        k, m = int(rng.integers(1, 23)), int(rng.integers(1, 9))
+        xs = np.column_stack([rng.uniform(-5, 5, k), rng.uniform(-4, 4, k), rng.uniform(-0.4, 0.4, k),
+                              rng.uniform(0, 80, k), rng.uniform(-0.25, 0.25, k)])
+        opp = np.stack([rng.uniform(-60, 160, (k if trial % 2 else 1, m)), rng.uniform(-5, 5, (k if trial % 2 else 1, m)),
+                        rng.uniform(0, 80, (k if trial % 2 else 1, m)), rng.uniform(-1, 1, (k if trial % 2 else 1, m))],
+                       axis=-1)
+        if trial % 5 == 0:  # ties and zeros: equal speeds, zero gaps, the ego at the opponent
+            opp[..., 2] = xs[0, 3]
+            opp[..., 0] = xs[0, 0]
+        if trial % 3 == 0:
+            opp = opp[..., :3]
+        if trial % 7 == 0:  # a view, as rti passes opp[None, :, :3]
+            opp = np.concatenate([opp, opp], axis=-1)[..., :3]
+        got = barrier_table(xs, opp, p)
+        want = _table_numpy(xs, opp, p)
+        assert got[0].tobytes() == want[0].tobytes()
+        assert got[1].tobytes() == want[1].tobytes()
+        assert np.float64(got[2]).tobytes() == np.float64(want[2]).tobytes()
+    # a nan propagates through both minima, as in numpy
+    xs = np.array([[0.0, 0.0, 0.0, np.nan, 0.0], [0.0, 0.0, 0.0, 30.0, 0.0]])
+    got, want = barrier_table(xs, np.array([[[10.0, 0.0, 20.0]]]), p), _table_numpy(xs, np.array([[[10.0, 0.0, 20.0]]]), p)
+    assert np.isnan(got[1]).all() and np.isnan(got[2]) and np.isnan(want[2])
+
+
+@pytest.mark.parametrize("heading", [0.0, 2.45])
+def test_min_barrier_is_barrier_expr_on_floats(heading):
+    """The inlined min_barrier against the generic expression evaluated with math's functions, to the bit."""
+    import math
+    from types import SimpleNamespace
+
+    from sofar_env.control.barrier import barrier_expr, min_barrier
+
+    ops = SimpleNamespace(abs=abs, exp=math.exp, log1p=math.log1p, tanh=math.tanh, sin=math.sin, sqrt=math.sqrt)
+
+    class Ring:
+        def gap(self, s_o, s):
+            return (s_o - s + 500.0) % 1000.0 - 500.0
+
+    p = BarrierParams(heading_extent=heading)
+    rng = np.random.default_rng(9)
+    for trial in range(300):
+        ego = np.array([rng.uniform(0, 1000), rng.uniform(-5, 5), rng.uniform(-0.5, 0.5), rng.uniform(0, 80), 0.0])
+        m = int(rng.integers(0, 6))
+        opp = np.column_stack([rng.uniform(0, 1000, m), rng.uniform(-5, 5, m), rng.uniform(0, 80, m)])
+        if trial % 4 == 0 and m:
+            opp[0] = [ego[0], ego[1], ego[3]]  # on top of the ego, equal speeds
+        want = math.inf
+        for s_o, n_o, v_o in opp.tolist():
+            want = min(want, barrier_expr(0.0, float(ego[1]), float(ego[3]), Ring().gap(s_o, float(ego[0])), n_o, v_o,
+                                          p, ops, float(ego[2])))
+        got = min_barrier(Ring(), ego, opp, p)
+        assert np.float64(got).tobytes() == np.float64(want).tobytes()

@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..._jit import kernel
+from ..._jit import kernel, maximum, minimum
 
-__all__ = ["assemble", "STATUS_OK", "STATUS_NONFINITE", "STATUS_INCONSISTENT"]
+__all__ = ["assemble", "all_finite", "track_rows", "STATUS_OK", "STATUS_NONFINITE", "STATUS_INCONSISTENT"]
 
 STATUS_OK = 0
 STATUS_NONFINITE = 1
@@ -142,3 +142,39 @@ def violated_rows(zz, check_lat, dalat, alat, lat_acc_max, check_trk, trk_lo, tr
             box_out[i] = worst
             box = box or worst
     return lat, trk, box
+
+
+@kernel
+def track_rows(arrays, margin, xbar, alat, lat_limit, trk_margin, trk_lo, trk_hi):
+    """Bounds on ``dn_{k+1}`` of the track rows and which rows a QP at ``xbar`` starts with.
+
+    Writes ``trk_lo = (n_min + margin) - nbar`` and ``trk_hi = (n_max - margin) - nbar`` (N,) for
+    stages 1..N (``arrays``: the (5, N+1) stage rows, ``xbar`` (N+1, 5)); returns ``(lat, trk)``:
+    ``max |alat_{1..N}| > lat_limit`` and ``min trk_hi < trk_margin or max trk_lo > -trk_margin``,
+    with numpy's nan rules of ``max``/``min`` (what :meth:`~.rti.MPCDCBF._rows_needed` computed as
+    numpy expressions).
+    """
+    n = trk_lo.shape[0]
+    amax = abs(alat[1])
+    lo_max = -np.inf
+    hi_min = np.inf
+    for k in range(n):
+        nb = xbar[k + 1, 1]
+        lo = (arrays[3, k + 1] + margin) - nb
+        hi = (arrays[4, k + 1] - margin) - nb
+        trk_lo[k] = lo
+        trk_hi[k] = hi
+        lo_max = lo if k == 0 else maximum(lo_max, lo)
+        hi_min = hi if k == 0 else minimum(hi_min, hi)
+        if k > 0:
+            amax = maximum(amax, abs(alat[k + 1]))
+    return amax > lat_limit, hi_min < trk_margin or lo_max > -trk_margin
+
+
+@kernel
+def all_finite(a):
+    """``np.isfinite(a).all()`` of a float array of any shape."""
+    for v in a.flat:
+        if not _finite(v):
+            return False
+    return True

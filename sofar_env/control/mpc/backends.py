@@ -23,6 +23,7 @@ import numpy as np
 import piqp
 import scipy.sparse as sp
 
+from .assembly import all_finite
 from .layout import QPStructure
 from .types import MPCConfig
 
@@ -45,7 +46,7 @@ def solve_qp(qs: QPStructure, data: tuple, cfg: MPCConfig) -> tuple[np.ndarray |
     if z is None:
         qs.solver = None  # a fresh set-up (and scaling) next time
         return None, iters, status
-    if not np.isfinite(z).all():
+    if not all_finite(z):
         return None, iters, f"{qs.backend} returned non-finite values"
     return z, iters, "solved"
 

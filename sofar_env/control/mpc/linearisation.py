@@ -14,11 +14,11 @@ import math
 
 import numpy as np
 
+from ..._jit import kernel
 from ...vehicle import VehicleParams
 from ..codegen import CodegenInfo, compile_function
 from .layout import LinearisationLayout
-from .model import (DUMMY_OPPONENT, OPPONENT_ROWS, definition_name, linearisation_function, predict_opponents,
-                    stage_function)
+from .model import DUMMY_OPPONENT, OPPONENT_ROWS, definition_name, linearisation_function, predict_into, stage_function
 from .types import MPCConfig
 
 __all__ = ["StageLinearisation"]
@@ -57,6 +57,7 @@ class StageLinearisation:
         self.dt = np.concatenate([dts, [cfg.ts]])
         self.o = np.zeros((k1, slots, OPPONENT_ROWS))
         self.o[:] = DUMMY_OPPONENT
+        self._dummy = np.asarray(DUMMY_OPPONENT, dtype=float)
         self.f = np.zeros((k1, 5))
         self.layout = lay = LinearisationLayout(
             slots=slots, nnz_a=nnz_a, nnz_b=nnz_b, stages=k1, lat_scale=1.0 / math.sqrt(cfg.lat_acc_slack[1]),
@@ -81,14 +82,20 @@ class StageLinearisation:
 
     def set_opponents(self, rows: np.ndarray, t: np.ndarray) -> None:
         """Slots 0..M-1: the (M, 3 or 4) ``rows`` predicted at the times ``t``; the others: the dummy."""
-        m = len(rows)
-        self.o[:, :m] = predict_opponents(rows, t)
-        self.o[:, m:] = DUMMY_OPPONENT
+        predict_into(rows, t, self.o, self._dummy)
 
     def evaluate(self, xbar: np.ndarray, ubar: np.ndarray, kappa: np.ndarray) -> None:
         """Evaluate at states ``xbar`` (N+1, 5), inputs ``ubar`` (N, 2), curvatures ``kappa`` (N+1,)."""
-        self.x[:] = xbar
-        self.u[:-1] = ubar
-        self.u[-1] = 0.0
-        self.kappa[:] = kappa
+        _load(xbar, ubar, kappa, self.x, self.u, self.kappa)
         self._eval()
+
+
+@kernel
+def _load(xbar, ubar, kappa, x, u, kappa_in):
+    """The inputs of :meth:`StageLinearisation.evaluate` copied into its buffers (``u[N] = 0``); one compiled
+    call instead of four numpy assignments (:mod:`sofar_env._jit`)."""
+    x[:] = xbar
+    n = ubar.shape[0]
+    u[:n] = ubar
+    u[n:] = 0.0
+    kappa_in[:] = kappa

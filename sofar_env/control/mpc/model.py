@@ -53,8 +53,9 @@ import hashlib
 
 import numpy as np
 
+from ..._jit import kernel, maximum, minimum
 from ...vehicle import VehicleParams, frenet_rhs, lateral_acceleration, rk4_step
-from ..barrier import BarrierParams, barrier, barrier_expr, casadi_ops
+from ..barrier import BarrierParams, barrier_expr, barrier_table, casadi_ops
 from .types import MPCConfig
 
 __all__ = ["DUMMY_OPPONENT", "OPPONENT_ROWS", "definition_name", "stage_function", "linearisation_function", "tracking_weights",
@@ -187,15 +188,29 @@ def predict_opponents(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
     rows (M, 4) ``(s, n, v, n_dot)`` also move across the track, ``n + n_dot t``, and give the sine of
     their course angle ``clip(n_dot / max(v, 1 m/s), -1, 1)`` as the fourth value."""
     out = np.empty((len(t), len(rows), OPPONENT_ROWS))
-    out[:, :, 0] = rows[:, 0] + rows[:, 2] * t[:, None]
-    if rows.shape[1] == 4:
-        out[:, :, 1] = rows[:, 1] + rows[:, 3] * t[:, None]
-        out[:, :, 3] = np.clip(rows[:, 3] / np.maximum(rows[:, 2], _COURSE_MIN_SPEED), -1.0, 1.0)
-    else:
-        out[:, :, 1] = rows[:, 1]
-        out[:, :, 3] = 0.0
-    out[:, :, 2] = rows[:, 2]
+    predict_into(rows, t, out, np.asarray(DUMMY_OPPONENT))
     return out
+
+
+@kernel
+def predict_into(rows, t, out, dummy):
+    """:func:`predict_opponents` of the (M, 3 or 4) ``rows`` written into ``out[:, :M]`` ((K, S, 4), S >= M),
+    ``dummy`` (4,) into the slots M..S-1; one compiled call (:mod:`sofar_env._jit`) of the same
+    operations as the numpy form ``s + v t``, ``n + n_dot t``, ``clip(n_dot / maximum(v, 1), -1, 1)``."""
+    lateral = rows.shape[1] == 4
+    for i in range(rows.shape[0]):
+        s, n, v = rows[i, 0], rows[i, 1], rows[i, 2]
+        n_dot = rows[i, 3] if lateral else 0.0
+        course = minimum(maximum(n_dot / maximum(v, _COURSE_MIN_SPEED), -1.0), 1.0) if lateral else 0.0
+        for k in range(out.shape[0]):
+            out[k, i, 0] = s + v * t[k]
+            out[k, i, 1] = n + n_dot * t[k] if lateral else n
+            out[k, i, 2] = v
+            out[k, i, 3] = course
+    for i in range(rows.shape[0], out.shape[1]):
+        for k in range(out.shape[0]):
+            for j in range(OPPONENT_ROWS):
+                out[k, i, j] = dummy[j]
 
 
 def select_opponents(opp: np.ndarray, xg: np.ndarray, t: np.ndarray, cfg: MPCConfig) -> np.ndarray:
@@ -207,7 +222,7 @@ def select_opponents(opp: np.ndarray, xg: np.ndarray, t: np.ndarray, cfg: MPCCon
     mask = (opp[:, 0] >= -cfg.opponent_range_behind) & (opp[:, 0] <= cfg.opponent_range_ahead)
     cand = opp[mask]
     if len(cand) > cfg.max_opponents:
-        hmin = barrier(xg[:, None, :], predict_opponents(cand, t), cfg.barrier).min(axis=0)
+        hmin = barrier_table(xg, predict_opponents(cand, t), cfg.barrier)[1]
         cand = cand[np.argsort(hmin, kind="stable")[: cfg.max_opponents]]
     return cand
 

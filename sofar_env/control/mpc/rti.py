@@ -66,13 +66,13 @@ from dataclasses import replace
 import numpy as np
 
 from ...vehicle import AV21, VehicleParams
-from ..barrier import barrier
+from ..barrier import barrier_table
 from ..codegen import CodegenInfo
-from .assembly import STATUS_INCONSISTENT, STATUS_NONFINITE, assemble, violated_rows
+from .assembly import STATUS_INCONSISTENT, STATUS_NONFINITE, all_finite, assemble, track_rows, violated_rows
 from .backends import dcbf_margin, solve_qp
 from .layout import N_FIXED, QPStructure
 from .linearisation import StageLinearisation
-from .model import relevant_slots, select_opponents, track_limits, variable_box
+from .model import relevant_slots, select_opponents, variable_box
 from .reference import IpoptReference
 from .types import (STATUS_FALLBACK_BRAKE, STATUS_FALLBACK_SHIFT, STATUS_SOLVED, MPCConfig, MPCResult,
                     MPCStageData, validate_arguments)
@@ -120,8 +120,12 @@ class MPCDCBF:
         """How the linearisation is evaluated (compiled C or CasADi), and whether it was built now."""
         self._qp: dict[tuple, QPStructure] = {}
         self._box = variable_box(vehicle)  # hard bounds on (u_k, x_{k+1})
+        self._u_lo = self._box[0][:2].tolist()  # the hard input bounds, as floats (_clip_input)
+        self._u_hi = self._box[1][:2].tolist()
         self._box_lo = self._box_hi = None  # the box on (du_k, dx_{k+1}) at the current iterate
-        self._trk_lo = self._trk_hi = None  # bounds on dn_{k+1} of the track rows (without slack)
+        self._trk_lo = np.empty(self._n)  # bounds on dn_{k+1} of the track rows (without slack)
+        self._trk_hi = np.empty(self._n)
+        self._rows_near = (True, True)  # the lateral-acceleration and track rows are needed (_track_bounds)
         self._act = np.zeros(0, dtype=np.intp)  # slots with QP rows in the current solve
         self._shift = PlanShift(config, vehicle)
         self._reference: IpoptReference | None = None  # built by the first solve_converged()
@@ -167,8 +171,11 @@ class MPCDCBF:
         return xbar, ubar
 
     def _clip_input(self, u: np.ndarray) -> np.ndarray:
-        """(a, delta_dot) clipped to the hard input bounds."""
-        return np.clip(u, self._box[0][:2], self._box[1][:2])
+        """(a, delta_dot) clipped to the hard input bounds: ``np.clip`` on floats (min(max(.)) propagates
+        a nan as np.clip does; the bounds are not 0, so no signed-zero tie)."""
+        a, d = u.tolist()
+        lo, hi = self._u_lo, self._u_hi
+        return np.array([min(max(a, lo[0]), hi[0]), min(max(d, lo[1]), hi[1])])
 
     # ---------------------------------------------------------------- solve
 
@@ -206,7 +213,7 @@ class MPCDCBF:
         dt0 = float(self._dts[0])
         if abs(x0[4]) > p.steer_max + dt0 * p.steer_rate_max or x0[3] < -dt0 * p.a_max:
             # the hard bounds on delta_1 (or v_1 >= 0) cannot be met: the QP would be infeasible
-            bmin = float(barrier(x0[None, :], opp[:, :3], cfg.barrier).min()) if len(opp) else math.inf
+            bmin = barrier_table(x0[None, :], opp[None, :, :3], cfg.barrier)[2] if len(opp) else math.inf
             return self._fallback(x0, "state outside the reach of the hard bounds", t_start, 0, 0, bmin, 0)
         cold = self._xg is None
         xbar, ubar = self._guess(x0, opp)
@@ -268,8 +275,8 @@ class MPCDCBF:
             break
 
         if len(opp) > n_cand:  # opponents outside the window: evaluate h numerically
-            barrier_min = min(barrier_min, float(barrier(x0[None, :], opp[:, :3], cfg.barrier).min()))
-        if z is None or not (np.isfinite(xbar).all() and np.isfinite(ubar).all()):
+            barrier_min = min(barrier_min, barrier_table(x0[None, :], opp[None, :, :3], cfg.barrier)[2])
+        if z is None or not (all_finite(xbar) and all_finite(ubar)):
             return self._fallback(x0, message or "non-finite iterate", t_start, qp_iters, sqp_iters,
                                   barrier_min, m)
 
@@ -338,15 +345,15 @@ class MPCDCBF:
         if self.config.qp_solver != "piqp":
             # OSQP's solutions (eps 1e-4) miss the 1e-6 check often: re-solves cost more than they save
             return [True, True, True]
-        lat = np.abs(self._lin.alat[1:]).max() > self.vehicle.lat_acc_max - _LAT_ROWS_MARGIN
-        trk = self._trk_hi.min() < _TRK_ROWS_MARGIN or self._trk_lo.max() > -_TRK_ROWS_MARGIN
-        return [bool(lat), bool(trk), False]
+        return [*self._rows_near, False]
 
     def _track_bounds(self, xbar: np.ndarray, arrays: np.ndarray) -> None:
-        """Bounds on dn_{k+1} of the track rows without slack, at this linearisation."""
-        lo, hi = track_limits(self.config, arrays)
-        self._trk_lo = lo - xbar[1:, 1]
-        self._trk_hi = hi - xbar[1:, 1]
+        """Bounds on dn_{k+1} of the track rows without slack, at this linearisation (the
+        :func:`~.model.track_limits` minus ``n``), and whether the lateral-acceleration and the track rows
+        are near (:meth:`_rows_needed`); one compiled call (:func:`.assembly.track_rows`)."""
+        lat, trk = track_rows(arrays, self.config.track_margin, xbar, self._lin.alat,
+                              self.vehicle.lat_acc_max - _LAT_ROWS_MARGIN, _TRK_ROWS_MARGIN, self._trk_lo, self._trk_hi)
+        self._rows_near = (lat, trk)
 
     def _rows_violated(self, qs: QPStructure, box_dist: np.ndarray | None,
                        zz: np.ndarray) -> tuple[bool, bool, np.ndarray | None]:
@@ -402,7 +409,7 @@ class MPCDCBF:
         m = len(sel)
         if self._reference is None:
             self._reference = IpoptReference(cfg, self.vehicle, self._lin.stage)
-        barrier_min = float(barrier(x0[None, :], opp[:, :3], cfg.barrier).min()) if len(opp) else math.inf
+        barrier_min = barrier_table(x0[None, :], opp[None, :, :3], cfg.barrier)[2] if len(opp) else math.inf
         sol = self._reference.solve(x0, arrays, sel, gamma, xbar, ubar)
         if not sol.success:
             return self._fallback(x0, f"ipopt: {sol.message}", t_start, sol.iterations, 1, barrier_min, m)

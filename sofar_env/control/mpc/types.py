@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..barrier import BarrierParams
+from .assembly import all_finite
 
 __all__ = ["MPCConfig", "MPCStageData", "MPCResult", "STATUS_SOLVED", "STATUS_FALLBACK_SHIFT",
            "STATUS_FALLBACK_BRAKE", "validate_arguments"]
@@ -194,7 +195,7 @@ def validate_arguments(x0, stage, opponents, gamma, horizon: int):
     if not (math.isfinite(gamma) and 0.0 <= gamma <= 1.0):
         raise ValueError(f"gamma must be finite and in [0, 1], got {gamma!r}")
     x0 = np.array(x0, dtype=float).reshape(-1)
-    if x0.shape != (5,) or not np.isfinite(x0).all():
+    if x0.shape != (5,) or not all_finite(x0):
         raise ValueError(f"x0 must be 5 finite values (s, n, e, v, delta), got {x0!r}")
     x0[0] = 0.0
     if not isinstance(stage, MPCStageData):
@@ -203,12 +204,12 @@ def validate_arguments(x0, stage, opponents, gamma, horizon: int):
         arrays = np.array([stage.kappa, stage.n_ref, stage.v_ref, stage.n_min, stage.n_max], dtype=float)
     except ValueError as exc:
         raise ValueError(f"stage arrays must all have {horizon + 1} values") from exc
-    if arrays.shape != (5, horizon + 1) or not np.isfinite(arrays).all():
+    if arrays.shape != (5, horizon + 1) or not all_finite(arrays):
         raise ValueError(f"stage arrays must be {horizon + 1} finite values each, got shape {arrays.shape}")
     opp = np.asarray(opponents, dtype=float)
     if opp.size == 0:
         opp = np.zeros((0, 3))
-    if opp.ndim != 2 or opp.shape[1] not in (3, 4) or not np.isfinite(opp).all():
+    if opp.ndim != 2 or opp.shape[1] not in (3, 4) or not all_finite(opp):
         raise ValueError(f"opponents must be an (M, 3) array of finite (s_rel, n, v) or an (M, 4) array of "
                          f"finite (s_rel, n, v, n_dot), got shape {opp.shape}")
     return x0, arrays, opp, gamma

@@ -9,8 +9,11 @@ speed guess that does not drive through an opponent ahead.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from ..._jit import kernel, maximum, minimum
 from ...vehicle import VehicleParams
 from ..barrier import BarrierParams
 from .types import MPCConfig
@@ -46,12 +49,22 @@ class PlanShift:
     def __call__(self, xs: np.ndarray, us: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Plan (xs (N+1, 5), us (N, 2)) shifted by control_dt, re-anchored at s = 0, delta and v in bounds."""
         xg = self.weights @ xs
-        ug = us[self.input_index]
-        p = self.vehicle
-        xg[:, 0] -= xg[0, 0]
-        xg[:, 4] = np.minimum(np.maximum(xg[:, 4], -p.steer_max), p.steer_max)
-        xg[:, 3] = np.maximum(xg[:, 3], 0.0)
-        return xg, ug
+        _anchor_and_bound(xg, self.vehicle.steer_max)
+        return xg, us[self.input_index]
+
+
+@kernel
+def _anchor_and_bound(xg, steer_max):
+    """``xg`` (N+1, 5) in place: s re-anchored at ``s_0 = 0``, delta clipped to +-``steer_max``, v to >= 0;
+    one compiled call of the numpy form ``xg[:, 0] -= xg[0, 0]``, ``minimum(maximum(delta, -steer_max),
+    steer_max)``, ``maximum(v, 0)`` (:mod:`sofar_env._jit`). ``np.maximum(-0.0, 0.0)`` is ``+0.0`` (the
+    second operand on a tie of zeros), so v is written out here rather than with ``_jit.maximum``."""
+    s0 = xg[0, 0]
+    for k in range(xg.shape[0]):
+        xg[k, 0] -= s0
+        xg[k, 4] = minimum(maximum(xg[k, 4], -steer_max), steer_max)
+        v = xg[k, 3]
+        xg[k, 3] = v if (v > 0.0 or math.isnan(v)) else 0.0
 
 
 def cold_guess(x0: np.ndarray, t: np.ndarray, vehicle: VehicleParams, bp: BarrierParams,

@@ -162,3 +162,43 @@ def test_violated_rows_equal_the_numpy_form(linearised, scale):
     np.testing.assert_array_equal(mask, worst > tol)
     assert violated_rows(zz, False, lin.dalat, lin.alat, lat_max, False, trk_lo, trk_hi, box_lo, box_hi, False,
                          tol, mask) == (False, False, False)
+
+
+def test_the_compiled_track_rows_are_the_numpy_form():
+    from sofar_env.control.mpc.assembly import track_rows
+
+    rng = np.random.default_rng(2)
+    cfg = MPCConfig()
+    n = cfg.horizon
+    for trial in range(300):
+        arrays = rng.normal(size=(5, n + 1)) * 2.0
+        arrays[3] -= 6.0
+        arrays[4] += 6.0
+        xbar = rng.normal(size=(n + 1, 5)) * 3.0
+        alat = rng.normal(size=n + 1) * 8.0
+        if trial % 5 == 0:
+            alat[rng.integers(0, n + 1)] = np.nan
+        if trial % 7 == 0:
+            xbar[rng.integers(0, n + 1), 1] = np.nan
+        lo, hi = track_limits(cfg, arrays)
+        want_lo, want_hi = lo - xbar[1:, 1], hi - xbar[1:, 1]
+        want_lat = bool(np.abs(alat[1:]).max() > AV21.lat_acc_max - 3.0)
+        want_trk = bool(want_hi.min() < 0.5 or want_lo.max() > -0.5)
+        got_lo, got_hi = np.empty(n), np.empty(n)
+        lat, trk = track_rows(arrays, cfg.track_margin, xbar, alat, AV21.lat_acc_max - 3.0, 0.5, got_lo, got_hi)
+        assert (lat, trk) == (want_lat, want_trk)
+        assert got_lo.tobytes() == want_lo.tobytes() and got_hi.tobytes() == want_hi.tobytes()
+
+
+@pytest.mark.parametrize("shape", [(5,), (5, 21), (4, 3), (0, 3), (2, 3, 4)])
+def test_all_finite_is_numpys(shape):
+    from sofar_env.control.mpc.assembly import all_finite
+
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=shape)
+    assert all_finite(a) and all_finite(a.T)
+    for bad in (np.nan, np.inf, -np.inf):
+        if a.size:
+            b = a.copy()
+            b.flat[rng.integers(0, a.size)] = bad
+            assert all_finite(b) == bool(np.isfinite(b).all()) is False

@@ -75,3 +75,14 @@ def test_the_compiled_barrier_sees_the_opponents_course(cache_dir):
     for k in (0, 5):
         np.testing.assert_allclose(lin.h[k], barrier(xbar[k][None, :], lin.o[k], cfg.barrier), rtol=1e-12)
     assert lin.h[0, 0] < lin.h[0, 1]
+
+
+def test_evaluate_copies_its_inputs(cache_dir):
+    cfg = MPCConfig(cache_dir=cache_dir)
+    lin = StageLinearisation(cfg, AV21, np.diff(cfg.time_grid()))
+    rng = np.random.default_rng(4)
+    xbar, ubar, kappa = rng.normal(size=(cfg.horizon + 1, 5)), rng.normal(size=(cfg.horizon, 2)), rng.normal(size=cfg.horizon + 1)
+    lin.u[-1] = 5.0
+    lin.evaluate(xbar, ubar, kappa)
+    assert lin.x.tobytes() == xbar.tobytes() and lin.kappa.tobytes() == kappa.tobytes()
+    assert lin.u[:-1].tobytes() == ubar.tobytes() and np.all(lin.u[-1] == 0.0)

@@ -129,3 +129,36 @@ def test_far_opponents_with_inactive_dcbf_get_no_rows():
     np.testing.assert_array_equal(relevant_slots(h, 0.3, cfg), [1, 2])
     np.testing.assert_array_equal(relevant_slots(h, 0.3, MPCConfig(opponent_h_keep=np.inf)), [0, 1, 2])
     assert relevant_slots(h[:, :0], 0.3, cfg).size == 0
+
+
+def test_the_compiled_prediction_is_the_numpy_form():
+    from sofar_env.control.mpc.model import DUMMY_OPPONENT, predict_into
+
+    def numpy_form(rows, t):
+        out = np.empty((len(t), len(rows), 4))
+        out[:, :, 0] = rows[:, 0] + rows[:, 2] * t[:, None]
+        if rows.shape[1] == 4:
+            out[:, :, 1] = rows[:, 1] + rows[:, 3] * t[:, None]
+            out[:, :, 3] = np.clip(rows[:, 3] / np.maximum(rows[:, 2], 1.0), -1.0, 1.0)
+        else:
+            out[:, :, 1] = rows[:, 1]
+            out[:, :, 3] = 0.0
+        out[:, :, 2] = rows[:, 2]
+        return out
+
+    rng = np.random.default_rng(11)
+    t = MPCConfig().time_grid()
+    for trial in range(200):
+        m = int(rng.integers(0, 5))
+        rows = np.column_stack([rng.uniform(-50, 150, m), rng.uniform(-5, 5, m), rng.uniform(-1, 70, m),
+                                rng.uniform(-20, 20, m)])
+        if trial % 3 == 0:
+            rows[:, 2] = rng.choice([0.0, -0.0, 1.0, 0.5], m)  # the speed floor and its ties
+        if trial % 2:
+            rows = rows[:, :3]
+        want = numpy_form(rows, t)
+        assert predict_opponents(rows, t).tobytes() == want.tobytes()
+        o = np.full((len(t), 4, 4), 7.0)
+        predict_into(rows, t, o, np.asarray(DUMMY_OPPONENT))
+        assert o[:, :m].tobytes() == want.tobytes()
+        assert np.all(o[:, m:] == DUMMY_OPPONENT)

@@ -214,3 +214,12 @@ def test_heading_extent_reaches_the_compiled_barrier(cache_dir):
         values[extent] = res.barrier_min
         assert res.barrier_min == pytest.approx(float(barrier(x0, opp[0], cfg.barrier)), abs=1e-9)
     assert values[0.0] > 0.0 > values[2.45]  # clear for aligned cars, inside the widened ellipse
+
+
+def test_the_input_clip_is_numpys(cache_dir):
+    mpc = MPCDCBF(MPCConfig(cache_dir=cache_dir))
+    lo, hi = mpc._box[0][:2], mpc._box[1][:2]
+    rng = np.random.default_rng(8)
+    for u in [*rng.normal(size=(200, 2)) * [8.0, 0.5], lo, hi, [-0.0, 0.0], [np.nan, 0.1], [np.inf, -np.inf]]:
+        u = np.asarray(u, dtype=float)
+        assert mpc._clip_input(u).tobytes() == np.clip(u, lo, hi).tobytes()

@@ -53,3 +53,24 @@ def test_cold_guess_constant_speed_and_stays_behind_an_opponent_in_lane():
     gap = 20.0 + 30.0 * t - xg[:, 0]
     assert gap.min() >= bp.a0 - 1e-9
     assert np.all(np.diff(xg[:, 0]) >= 0.0) and np.all(ug[:, 0] >= AV21.a_min)
+
+
+def test_the_compiled_anchor_and_bounds_are_the_numpy_form():
+    from sofar_env.control.mpc.warmstart import _anchor_and_bound
+
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        xg = rng.normal(size=(21, 5)) * [50.0, 3.0, 0.2, 30.0, 0.4]
+        if trial % 4 == 0:  # zeros of both signs, values on the bounds, a nan
+            xg[::3, 3] = -0.0
+            xg[1::3, 3] = 0.0
+            xg[::2, 4] = AV21.steer_max
+            xg[1::4, 4] = -AV21.steer_max
+            xg[5, 3] = np.nan
+            xg[6, 4] = np.nan
+        want = xg.copy()
+        want[:, 0] -= want[0, 0]
+        want[:, 4] = np.minimum(np.maximum(want[:, 4], -AV21.steer_max), AV21.steer_max)
+        want[:, 3] = np.maximum(want[:, 3], 0.0)
+        _anchor_and_bound(xg, AV21.steer_max)
+        assert xg.tobytes() == want.tobytes()
