@@ -281,3 +281,87 @@ def test_the_compiled_edge_envelope_is_the_numpy_form():
     cases += [(track.length - 1.0, 60.0, 1.5, 3.0), (0.0, 0.0, 1.5, 0.0), (10.0, 30.0, 0.0, 2.0)]
     for case in cases:
         assert band.envelope(*case) == numpy_form(*case)
+
+
+def test_the_kernels_modulo_is_pythons():
+    """wrap_mod (the stack kernels' x % L without fmod where it is exact) against Python's float modulo."""
+    from sofar_env.stack._lookup import wrap_mod
+
+    rng = np.random.default_rng(41)
+    for L in (3588.419916, 1.0, 5793.1):
+        xs = np.concatenate([rng.uniform(-3 * L, 3 * L, 3000), rng.uniform(0.0, 2.0 * L, 3000),
+                             [0.0, -0.0, L, -L, 2 * L, np.nextafter(2 * L, 0.0), np.nextafter(L, 0.0),
+                              np.nextafter(L, 3 * L), 5e-324, -5e-324, 1e300, -1e300, np.inf, -np.inf]])
+        for x in xs.tolist():
+            got, want = wrap_mod(x, L), x % L
+            if math.isnan(want):  # inf % L
+                assert math.isnan(got)
+            else:
+                assert got == want and math.copysign(1.0, got) == math.copysign(1.0, want)
+        assert math.isnan(wrap_mod(float("nan"), L))
+
+
+def test_the_footprint_edges_keep_numpys_bits_at_knots_seams_and_nan():
+    """The edges' inlined look-up (uniform-spacing guess, slope table) at the knots themselves, next to
+    them, across the seam and beyond two laps, and at nan, against the track's array interpolation."""
+    from sofar_env.stack.edges import TrackEdges
+    from sofar_env.tracks import Track
+
+    for name in ("LagunaSeca", "Monza"):
+        track = Track.load(name)
+        edges = TrackEdges(track, AV21)
+        knots = track.table("wl")[0]
+        base = np.concatenate([knots[::7], np.nextafter(knots[::11], np.inf), np.nextafter(knots[1::13], -np.inf)])
+        s_abs = np.concatenate([base - off for off in edges._offsets]
+                               + [np.array([-3.0 * track.length, 2.5 * track.length, 2 * track.length, -1e-9])])
+        pts = s_abs[:, None] + edges._offsets[None, :]
+        wr = np.asarray(track.width_right(pts.ravel()), float).reshape(pts.shape).min(axis=1)
+        wl = np.asarray(track.width_left(pts.ravel()), float).reshape(pts.shape).min(axis=1)
+        n_min, n_max = edges(s_abs)
+        np.testing.assert_array_equal(n_min, -wr)
+        np.testing.assert_array_equal(n_max, wl)
+        n_min, n_max = edges(np.array([np.nan, 10.0]))
+        assert np.isnan(n_min[0]) and np.isnan(n_max[0]) and n_max[1] == edges(np.array([10.0]))[1][0]
+
+
+def test_the_pace_prediction_keeps_numpys_bits_for_any_time_order():
+    """The inlined travel-time look-up (the previous interval moved forward) for one time, decreasing and
+    repeated times, a zero pace, and past the table's end, against the numpy form."""
+    from sofar_env._interp import interp
+    from sofar_env.stack.prediction import OpponentPredictor
+    from sofar_env.tracks import Track
+
+    track = Track.load("LagunaSeca")
+    pred = OpponentPredictor(track)
+    rng = np.random.default_rng(43)
+    rows = np.column_stack([rng.uniform(-60.0, 200.0, 5), rng.uniform(-5, 5, 5), rng.uniform(0.0, 90.0, 5)])
+    rows[0, 2] = 0.0
+    for times in (np.array([1.3]), np.array([3.0, 1.0, 1.0, 2.0, 0.0]), 0.15 * np.arange(76),
+                  np.array([0.0, 1e4, 0.5]), pred._t[100:140] - 3.0):
+        for ego_s in (5.0, track.length - 30.0):
+            s_abs = np.asarray(track.wrap(ego_s + rows[:, 0]), float)
+            rho = np.maximum(rows[:, 2], 0.0) / np.maximum(np.asarray(track.speed(s_abs), float), 0.1)
+            t0 = interp(s_abs, pred._s, pred._t)
+            s_pred = interp(t0[:, None] + rho[:, None] * times[None, :], pred._t, pred._s)
+            np.testing.assert_array_equal(pred(ego_s, rows, times), rows[:, :1] + (s_pred - s_abs[:, None]))
+
+
+def test_ego_node_positions_keep_numpys_bits_across_the_seam(laguna):
+    """The inlined speed-profile look-up of the ego's nodes across the lap seam and from a standstill at a
+    knot, against the recurrence on the track's array interpolation."""
+    from sofar_env.stack.prediction import ego_node_positions
+    from sofar_env.vehicle import AV21
+
+    node_t = np.arange(76) * 0.15
+    knots = laguna.table("v")[0]
+    for ego_s, ego_v in ((laguna.length - 40.0, 60.0), (float(knots[100]), 0.0), (-25.0, 30.0),
+                         (2.0 * laguna.length - 1.0, 80.0)):
+        got = ego_node_positions(laguna, ego_s, ego_v, node_t, 0.15, 1.0, AV21)
+        s = ego_v * node_t
+        for _ in range(2):
+            v = [ego_v]
+            for vr in np.asarray(laguna.speed(ego_s + s), float)[:-1].tolist():
+                v.append(min(max(vr, v[-1] + AV21.a_min * 0.15), v[-1] + AV21.a_max * 0.15))
+            v = np.array(v)
+            s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * 0.15)])
+        np.testing.assert_array_equal(got, s)
