@@ -365,3 +365,125 @@ def test_ego_node_positions_keep_numpys_bits_across_the_seam(laguna):
             v = np.array(v)
             s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * 0.15)])
         np.testing.assert_array_equal(got, s)
+
+
+def test_the_compiled_opponent_window_is_the_numpy_form(laguna):
+    """relative_opponents (one compiled call) against the track's array gap, the window mask and argsort,
+    bit for bit: across the seam, at the window's ends, nan rows, with and without the lateral-rate column,
+    and ties (equal distances, which keep numpy's order)."""
+    from sofar_env.stack.prediction import relative_opponents
+
+    def numpy_form(ego_s, opp, behind, ahead):
+        opp = np.asarray(opp, float)
+        cols = opp.shape[-1] if opp.ndim == 2 and opp.shape[-1] == 4 else 3
+        opp = opp.reshape(-1, cols)
+        if opp.shape[0] == 0:
+            return np.zeros((0, 3))
+        gap = np.asarray(laguna.gap(opp[:, 0], ego_s), float).reshape(-1)
+        keep = (gap >= -behind) & (gap <= ahead)
+        rel = opp[keep]
+        rel[:, 0] = gap[keep]
+        return rel[np.argsort(np.abs(rel[:, 0]))]
+
+    rng = np.random.default_rng(47)
+    L = laguna.length
+    for trial in range(400):
+        M = int(rng.integers(0, 9))
+        ego_s = float(rng.choice([rng.uniform(0, L), 1.0, L - 1.0, 0.0]))
+        opp = np.column_stack([ego_s + rng.uniform(-80.0, 350.0, M), rng.uniform(-5, 5, M), rng.uniform(0, 90, M),
+                               rng.uniform(-2, 2, M)])[:, :3 if trial % 2 else 4]
+        if M >= 3 and trial % 5 == 0:
+            opp[1, 0] = opp[0, 0]  # same place: a tie
+            opp[2, 0] = 2.0 * ego_s - opp[0, 0]  # as far behind as the other is ahead
+        if M >= 2 and trial % 7 == 0:
+            opp[-1, 0] = np.nan
+        if M >= 2 and trial % 11 == 0:
+            opp[0, 0], opp[1, 0] = ego_s - 50.0, ego_s + 300.0  # the window's ends
+        got = relative_opponents(laguna, ego_s, opp, 50.0, 300.0)
+        want = numpy_form(ego_s, opp, 50.0, 300.0)
+        assert got.shape == want.shape
+        np.testing.assert_array_equal(got, want)
+    assert relative_opponents(laguna, 0.0, np.zeros((0, 4)), 50.0, 300.0).shape == (0, 3)
+    assert relative_opponents(laguna, 0.0, [10.0, 1.0, 30.0], 50.0, 300.0).shape == (1, 3)
+
+
+def test_the_planners_compiled_glue_is_the_numpy_form():
+    """The passing-side planner's corridor and finiteness test, per-opponent slack maximum and pair slacks
+    with the switch count (one compiled call each) against the numpy forms they replaced, bit for bit:
+    crossing edges, nan and huge inputs, ties of the slack maximum, unknown previous sides."""
+    from sofar_env.planning.miqp import _corridor, _max_per_opponent
+    from sofar_env.planning.problem import SLACK_TOL, _slack_and_switch
+
+    rng = np.random.default_rng(53)
+    for trial in range(300):
+        N, M = 76, int(rng.integers(0, 5))
+        n_min, n_max = rng.uniform(-8, 1, N), rng.uniform(-1, 8, N)
+        s_nodes, n_ref = np.cumsum(rng.uniform(0, 12, N)), rng.normal(size=N)
+        opp, opp_s = rng.normal(size=(M, 3)) * 50, rng.normal(size=(M, N)) * 100
+        ego_n, progress, m = float(rng.normal()), float(rng.uniform(0, 20)), 0.6
+        bad = [n_min, n_max, s_nodes, n_ref] + ([opp, opp_s] if M else [])
+        if trial % 4 == 1:
+            bad[trial % len(bad)].flat[int(rng.integers(bad[trial % len(bad)].size))] = [np.nan, np.inf, 1e301][trial % 3]
+        if trial % 9 == 0:
+            progress = [np.nan, -np.inf, 2e300][trial % 3]
+        lo, hi, bounded = _corridor(n_min, n_max, m, s_nodes, n_ref, opp, opp_s, ego_n, progress)
+        lo_w, hi_w = n_min + m, n_max - m
+        narrow = lo_w > hi_w
+        mid = 0.5 * (n_min + n_max)
+        lo_w, hi_w = np.where(narrow, mid, lo_w), np.where(narrow, mid, hi_w)
+        np.testing.assert_array_equal(lo, lo_w)
+        np.testing.assert_array_equal(hi, hi_w)
+        finite = math.isfinite(s_nodes.sum() + n_ref.sum() + lo_w.sum() + hi_w.sum() + opp.sum() + opp_s.sum()
+                               + ego_n + progress)
+        assert (bounded or finite) == finite
+        assert not bounded or finite
+
+        P, C, R = int(rng.integers(0, 12)), int(rng.integers(1, 4)), max(M, 1)
+        rows = rng.integers(0, R, P)
+        xi = np.where(rng.uniform(size=P) < 0.3, 0.0, rng.uniform(0, 2, P))
+        if P > 2:
+            xi[1] = xi[0]
+            rows[1] = rows[0]
+        want = np.zeros(R)
+        np.maximum.at(want, rows, xi)
+        np.testing.assert_array_equal(_max_per_opponent(R, rows, xi), want)
+
+        b = rng.integers(0, 2, C).astype(float)
+        d = rng.normal(size=N) * 3
+        pair_c, pair_k = rng.integers(0, C, P), rng.integers(0, N, P)
+        pair_n, pair_w = rng.normal(size=P) * 3, rng.uniform(0.5, 3, P)
+        rel_cluster, b_prev = rng.integers(0, C, R), rng.integers(-1, 2, R)
+        got_xi, got_switch = _slack_and_switch(b, d, pair_c, pair_k, pair_n, pair_w, rel_cluster, b_prev)
+        left = b[pair_c] > 0.5
+        dk = d[pair_k]
+        want_xi = np.where(left, pair_n + pair_w - dk, dk - (pair_n - pair_w))
+        want_xi = np.where(want_xi > SLACK_TOL, want_xi, 0.0)
+        known = b_prev >= 0
+        np.testing.assert_array_equal(got_xi, want_xi)
+        assert got_switch == float(((b[rel_cluster][known] - b_prev[known]) ** 2).sum())
+
+
+def test_the_compiled_stay_behind_test_is_the_numpy_form():
+    """PassOrFollow.can_stay_behind (one compiled call) against its numpy expressions, with and without
+    follow_alongside: standing, reversing and nan ego speeds, nan predictions, the a0 boundary."""
+    from sofar_env.stack.follow import _stay_behind
+    from sofar_env.stack.prediction import braking_positions
+
+    rng = np.random.default_rng(59)
+    node_t = np.arange(76) * 0.15
+    a0, decel = 7.0, 9.0
+    for trial in range(400):
+        M = int(rng.integers(0, 5))
+        ego_v = float([rng.uniform(0, 90), 0.0, -3.0, np.nan, -0.0][trial % 5]) if trial % 3 == 0 else float(
+            rng.uniform(0, 90))
+        gap = rng.uniform(-10, 60, M)
+        opp_s = gap[:, None] + rng.uniform(0, 60, M)[:, None] * node_t[None, :]
+        if M and trial % 7 == 0:
+            opp_s[0, int(rng.integers(76))] = np.nan
+        if M > 1 and trial % 5 == 0:
+            opp_s[1] = braking_positions(node_t, ego_v, decel) + a0  # the room exactly a0 throughout
+        room = opp_s - braking_positions(node_t, ego_v, decel)[None, :]
+        want_plain = room.min(axis=1) >= a0
+        want_along = (room.min(axis=1) >= np.minimum(gap, a0) - 1e-6) & (room[:, -1] >= a0)
+        np.testing.assert_array_equal(_stay_behind(node_t, ego_v, decel, gap, opp_s, a0, False), want_plain)
+        np.testing.assert_array_equal(_stay_behind(node_t, ego_v, decel, gap, opp_s, a0, True), want_along)

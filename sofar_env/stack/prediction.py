@@ -34,17 +34,56 @@ def relative_opponents(track, ego_s: float, opponents: np.ndarray, look_behind: 
                        look_ahead: float) -> np.ndarray:
     """Rows (gap, n, v[, n_dot]) of the opponents from ``look_behind`` [m] behind to ``look_ahead`` [m]
     ahead of the ego at arc length ``ego_s``, nearest first; ``opponents`` are rows (s, n, v[, n_dot])
-    (the lateral rate column, if given, is kept)."""
+    (the lateral rate column, if given, is kept). The gap is :meth:`~sofar_env.tracks.Track.gap`'s.
+
+    One compiled call (:func:`_window_rows`); two opponents at the same distance (where the order of
+    ``np.argsort`` is its own) take the numpy form."""
     opp = np.asarray(opponents, float)
     cols = opp.shape[-1] if opp.ndim == 2 and opp.shape[-1] == 4 else 3
     opp = opp.reshape(-1, cols)
     if opp.shape[0] == 0:
         return np.zeros((0, 3))
+    rel, tie = _window_rows(opp, float(ego_s), float(track.length), float(look_behind), float(look_ahead))
+    if not tie:
+        return rel
     gap = np.asarray(track.gap(opp[:, 0], ego_s), float).reshape(-1)
     keep = (gap >= -look_behind) & (gap <= look_ahead)
     rel = opp[keep]  # a copy (boolean indexing)
     rel[:, 0] = gap[keep]
     return rel[np.argsort(np.abs(rel[:, 0]))]
+
+
+@kernel
+def _window_rows(opp, ego_s, length, look_behind, look_ahead):
+    """:func:`relative_opponents`: the rows of ``opp`` whose gap ``wrap(s - ego_s + L/2) - L/2`` (the
+    track's, :meth:`~sofar_env.tracks.Track.gap`) is in ``[-look_behind, look_ahead]``, with the gap in
+    column 0, sorted by its magnitude (insertion sort); and whether two of them tie (their order is then
+    left to the caller)."""
+    M, cols = opp.shape
+    half = 0.5 * length
+    gaps = np.empty(M)
+    keys = np.empty(M)
+    rows = np.empty(M, dtype=np.int64)
+    n = 0
+    tie = False
+    for i in range(M):
+        r = (opp[i, 0] - ego_s + half) % length
+        g = (0.0 if r >= length else r) - half
+        if g >= -look_behind and g <= look_ahead:
+            key = abs(g)
+            p = n
+            while p > 0 and keys[p - 1] > key:
+                keys[p], gaps[p], rows[p] = keys[p - 1], gaps[p - 1], rows[p - 1]
+                p -= 1
+            tie = tie or (p > 0 and keys[p - 1] == key)
+            keys[p], gaps[p], rows[p] = key, g, i
+            n += 1
+    out = np.empty((n, cols))
+    for p in range(n):
+        for c in range(cols):
+            out[p, c] = opp[rows[p], c]
+        out[p, 0] = gaps[p]
+    return out, tie
 
 
 def lateral_motion(track, ego_s: float, opp_rel: np.ndarray, horizon: float, deadband: float,
