@@ -281,3 +281,209 @@ def test_the_compiled_edge_envelope_is_the_numpy_form():
     cases += [(track.length - 1.0, 60.0, 1.5, 3.0), (0.0, 0.0, 1.5, 0.0), (10.0, 30.0, 0.0, 2.0)]
     for case in cases:
         assert band.envelope(*case) == numpy_form(*case)
+
+
+def test_the_kernels_modulo_is_pythons():
+    """wrap_mod (the stack kernels' x % L without fmod where it is exact) against Python's float modulo."""
+    from sofar_env.stack._lookup import wrap_mod
+
+    rng = np.random.default_rng(41)
+    for L in (3588.419916, 1.0, 5793.1):
+        xs = np.concatenate([rng.uniform(-3 * L, 3 * L, 3000), rng.uniform(0.0, 2.0 * L, 3000),
+                             [0.0, -0.0, L, -L, 2 * L, np.nextafter(2 * L, 0.0), np.nextafter(L, 0.0),
+                              np.nextafter(L, 3 * L), 5e-324, -5e-324, 1e300, -1e300, np.inf, -np.inf]])
+        for x in xs.tolist():
+            got, want = wrap_mod(x, L), x % L
+            if math.isnan(want):  # inf % L
+                assert math.isnan(got)
+            else:
+                assert got == want and math.copysign(1.0, got) == math.copysign(1.0, want)
+        assert math.isnan(wrap_mod(float("nan"), L))
+
+
+def test_the_footprint_edges_keep_numpys_bits_at_knots_seams_and_nan():
+    """The edges' inlined look-up (uniform-spacing guess, slope table) at the knots themselves, next to
+    them, across the seam and beyond two laps, and at nan, against the track's array interpolation."""
+    from sofar_env.stack.edges import TrackEdges
+    from sofar_env.tracks import Track
+
+    for name in ("LagunaSeca", "Monza"):
+        track = Track.load(name)
+        edges = TrackEdges(track, AV21)
+        knots = track.table("wl")[0]
+        base = np.concatenate([knots[::7], np.nextafter(knots[::11], np.inf), np.nextafter(knots[1::13], -np.inf)])
+        s_abs = np.concatenate([base - off for off in edges._offsets]
+                               + [np.array([-3.0 * track.length, 2.5 * track.length, 2 * track.length, -1e-9])])
+        pts = s_abs[:, None] + edges._offsets[None, :]
+        wr = np.asarray(track.width_right(pts.ravel()), float).reshape(pts.shape).min(axis=1)
+        wl = np.asarray(track.width_left(pts.ravel()), float).reshape(pts.shape).min(axis=1)
+        n_min, n_max = edges(s_abs)
+        np.testing.assert_array_equal(n_min, -wr)
+        np.testing.assert_array_equal(n_max, wl)
+        n_min, n_max = edges(np.array([np.nan, 10.0]))
+        assert np.isnan(n_min[0]) and np.isnan(n_max[0]) and n_max[1] == edges(np.array([10.0]))[1][0]
+
+
+def test_the_pace_prediction_keeps_numpys_bits_for_any_time_order():
+    """The inlined travel-time look-up (the previous interval moved forward) for one time, decreasing and
+    repeated times, a zero pace, and past the table's end, against the numpy form."""
+    from sofar_env._interp import interp
+    from sofar_env.stack.prediction import OpponentPredictor
+    from sofar_env.tracks import Track
+
+    track = Track.load("LagunaSeca")
+    pred = OpponentPredictor(track)
+    rng = np.random.default_rng(43)
+    rows = np.column_stack([rng.uniform(-60.0, 200.0, 5), rng.uniform(-5, 5, 5), rng.uniform(0.0, 90.0, 5)])
+    rows[0, 2] = 0.0
+    for times in (np.array([1.3]), np.array([3.0, 1.0, 1.0, 2.0, 0.0]), 0.15 * np.arange(76),
+                  np.array([0.0, 1e4, 0.5]), pred._t[100:140] - 3.0):
+        for ego_s in (5.0, track.length - 30.0):
+            s_abs = np.asarray(track.wrap(ego_s + rows[:, 0]), float)
+            rho = np.maximum(rows[:, 2], 0.0) / np.maximum(np.asarray(track.speed(s_abs), float), 0.1)
+            t0 = interp(s_abs, pred._s, pred._t)
+            s_pred = interp(t0[:, None] + rho[:, None] * times[None, :], pred._t, pred._s)
+            np.testing.assert_array_equal(pred(ego_s, rows, times), rows[:, :1] + (s_pred - s_abs[:, None]))
+
+
+def test_ego_node_positions_keep_numpys_bits_across_the_seam(laguna):
+    """The inlined speed-profile look-up of the ego's nodes across the lap seam and from a standstill at a
+    knot, against the recurrence on the track's array interpolation."""
+    from sofar_env.stack.prediction import ego_node_positions
+    from sofar_env.vehicle import AV21
+
+    node_t = np.arange(76) * 0.15
+    knots = laguna.table("v")[0]
+    for ego_s, ego_v in ((laguna.length - 40.0, 60.0), (float(knots[100]), 0.0), (-25.0, 30.0),
+                         (2.0 * laguna.length - 1.0, 80.0)):
+        got = ego_node_positions(laguna, ego_s, ego_v, node_t, 0.15, 1.0, AV21)
+        s = ego_v * node_t
+        for _ in range(2):
+            v = [ego_v]
+            for vr in np.asarray(laguna.speed(ego_s + s), float)[:-1].tolist():
+                v.append(min(max(vr, v[-1] + AV21.a_min * 0.15), v[-1] + AV21.a_max * 0.15))
+            v = np.array(v)
+            s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * 0.15)])
+        np.testing.assert_array_equal(got, s)
+
+
+def test_the_compiled_opponent_window_is_the_numpy_form(laguna):
+    """relative_opponents (one compiled call) against the track's array gap, the window mask and argsort,
+    bit for bit: across the seam, at the window's ends, nan rows, with and without the lateral-rate column,
+    and ties (equal distances, which keep numpy's order)."""
+    from sofar_env.stack.prediction import relative_opponents
+
+    def numpy_form(ego_s, opp, behind, ahead):
+        opp = np.asarray(opp, float)
+        cols = opp.shape[-1] if opp.ndim == 2 and opp.shape[-1] == 4 else 3
+        opp = opp.reshape(-1, cols)
+        if opp.shape[0] == 0:
+            return np.zeros((0, 3))
+        gap = np.asarray(laguna.gap(opp[:, 0], ego_s), float).reshape(-1)
+        keep = (gap >= -behind) & (gap <= ahead)
+        rel = opp[keep]
+        rel[:, 0] = gap[keep]
+        return rel[np.argsort(np.abs(rel[:, 0]))]
+
+    rng = np.random.default_rng(47)
+    L = laguna.length
+    for trial in range(400):
+        M = int(rng.integers(0, 9))
+        ego_s = float(rng.choice([rng.uniform(0, L), 1.0, L - 1.0, 0.0]))
+        opp = np.column_stack([ego_s + rng.uniform(-80.0, 350.0, M), rng.uniform(-5, 5, M), rng.uniform(0, 90, M),
+                               rng.uniform(-2, 2, M)])[:, :3 if trial % 2 else 4]
+        if M >= 3 and trial % 5 == 0:
+            opp[1, 0] = opp[0, 0]  # same place: a tie
+            opp[2, 0] = 2.0 * ego_s - opp[0, 0]  # as far behind as the other is ahead
+        if M >= 2 and trial % 7 == 0:
+            opp[-1, 0] = np.nan
+        if M >= 2 and trial % 11 == 0:
+            opp[0, 0], opp[1, 0] = ego_s - 50.0, ego_s + 300.0  # the window's ends
+        got = relative_opponents(laguna, ego_s, opp, 50.0, 300.0)
+        want = numpy_form(ego_s, opp, 50.0, 300.0)
+        assert got.shape == want.shape
+        np.testing.assert_array_equal(got, want)
+    assert relative_opponents(laguna, 0.0, np.zeros((0, 4)), 50.0, 300.0).shape == (0, 3)
+    assert relative_opponents(laguna, 0.0, [10.0, 1.0, 30.0], 50.0, 300.0).shape == (1, 3)
+
+
+def test_the_planners_compiled_glue_is_the_numpy_form():
+    """The passing-side planner's corridor and finiteness test, per-opponent slack maximum and pair slacks
+    with the switch count (one compiled call each) against the numpy forms they replaced, bit for bit:
+    crossing edges, nan and huge inputs, ties of the slack maximum, unknown previous sides."""
+    from sofar_env.planning.miqp import _corridor, _max_per_opponent
+    from sofar_env.planning.problem import SLACK_TOL, _slack_and_switch
+
+    rng = np.random.default_rng(53)
+    for trial in range(300):
+        N, M = 76, int(rng.integers(0, 5))
+        n_min, n_max = rng.uniform(-8, 1, N), rng.uniform(-1, 8, N)
+        s_nodes, n_ref = np.cumsum(rng.uniform(0, 12, N)), rng.normal(size=N)
+        opp, opp_s = rng.normal(size=(M, 3)) * 50, rng.normal(size=(M, N)) * 100
+        ego_n, progress, m = float(rng.normal()), float(rng.uniform(0, 20)), 0.6
+        bad = [n_min, n_max, s_nodes, n_ref] + ([opp, opp_s] if M else [])
+        if trial % 4 == 1:
+            bad[trial % len(bad)].flat[int(rng.integers(bad[trial % len(bad)].size))] = [np.nan, np.inf, 1e301][trial % 3]
+        if trial % 9 == 0:
+            progress = [np.nan, -np.inf, 2e300][trial % 3]
+        lo, hi, bounded = _corridor(n_min, n_max, m, s_nodes, n_ref, opp, opp_s, ego_n, progress)
+        lo_w, hi_w = n_min + m, n_max - m
+        narrow = lo_w > hi_w
+        mid = 0.5 * (n_min + n_max)
+        lo_w, hi_w = np.where(narrow, mid, lo_w), np.where(narrow, mid, hi_w)
+        np.testing.assert_array_equal(lo, lo_w)
+        np.testing.assert_array_equal(hi, hi_w)
+        finite = math.isfinite(s_nodes.sum() + n_ref.sum() + lo_w.sum() + hi_w.sum() + opp.sum() + opp_s.sum()
+                               + ego_n + progress)
+        assert (bounded or finite) == finite
+        assert not bounded or finite
+
+        P, C, R = int(rng.integers(0, 12)), int(rng.integers(1, 4)), max(M, 1)
+        rows = rng.integers(0, R, P)
+        xi = np.where(rng.uniform(size=P) < 0.3, 0.0, rng.uniform(0, 2, P))
+        if P > 2:
+            xi[1] = xi[0]
+            rows[1] = rows[0]
+        want = np.zeros(R)
+        np.maximum.at(want, rows, xi)
+        np.testing.assert_array_equal(_max_per_opponent(R, rows, xi), want)
+
+        b = rng.integers(0, 2, C).astype(float)
+        d = rng.normal(size=N) * 3
+        pair_c, pair_k = rng.integers(0, C, P), rng.integers(0, N, P)
+        pair_n, pair_w = rng.normal(size=P) * 3, rng.uniform(0.5, 3, P)
+        rel_cluster, b_prev = rng.integers(0, C, R), rng.integers(-1, 2, R)
+        got_xi, got_switch = _slack_and_switch(b, d, pair_c, pair_k, pair_n, pair_w, rel_cluster, b_prev)
+        left = b[pair_c] > 0.5
+        dk = d[pair_k]
+        want_xi = np.where(left, pair_n + pair_w - dk, dk - (pair_n - pair_w))
+        want_xi = np.where(want_xi > SLACK_TOL, want_xi, 0.0)
+        known = b_prev >= 0
+        np.testing.assert_array_equal(got_xi, want_xi)
+        assert got_switch == float(((b[rel_cluster][known] - b_prev[known]) ** 2).sum())
+
+
+def test_the_compiled_stay_behind_test_is_the_numpy_form():
+    """PassOrFollow.can_stay_behind (one compiled call) against its numpy expressions, with and without
+    follow_alongside: standing, reversing and nan ego speeds, nan predictions, the a0 boundary."""
+    from sofar_env.stack.follow import _stay_behind
+    from sofar_env.stack.prediction import braking_positions
+
+    rng = np.random.default_rng(59)
+    node_t = np.arange(76) * 0.15
+    a0, decel = 7.0, 9.0
+    for trial in range(400):
+        M = int(rng.integers(0, 5))
+        ego_v = float([rng.uniform(0, 90), 0.0, -3.0, np.nan, -0.0][trial % 5]) if trial % 3 == 0 else float(
+            rng.uniform(0, 90))
+        gap = rng.uniform(-10, 60, M)
+        opp_s = gap[:, None] + rng.uniform(0, 60, M)[:, None] * node_t[None, :]
+        if M and trial % 7 == 0:
+            opp_s[0, int(rng.integers(76))] = np.nan
+        if M > 1 and trial % 5 == 0:
+            opp_s[1] = braking_positions(node_t, ego_v, decel) + a0  # the room exactly a0 throughout
+        room = opp_s - braking_positions(node_t, ego_v, decel)[None, :]
+        want_plain = room.min(axis=1) >= a0
+        want_along = (room.min(axis=1) >= np.minimum(gap, a0) - 1e-6) & (room[:, -1] >= a0)
+        np.testing.assert_array_equal(_stay_behind(node_t, ego_v, decel, gap, opp_s, a0, False), want_plain)
+        np.testing.assert_array_equal(_stay_behind(node_t, ego_v, decel, gap, opp_s, a0, True), want_along)

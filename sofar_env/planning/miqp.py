@@ -64,11 +64,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._interp import interp as _interp_kernel
+from .._jit import kernel, maximum
 from .clearance import ClearanceWindow, side_clusters
 from .config import MIQPConfig
 from .hysteresis import match_previous_sides, prior_sides
 from .problem import SideProblem, cost_factors, evaluate, plan_cost
 from .solvers import solve_branch_and_bound, solve_enumeration
+
+try:  # the ufunc behind ndarray.clip, without its Python wrapper (same results)
+    from numpy._core.umath import clip as _clip
+except ImportError:  # pragma: no cover - other numpy layouts
+    _clip = np.clip
 
 __all__ = ["MIQPConfig", "PlanResult", "PassingSidePlanner"]
 
@@ -197,11 +203,11 @@ class PassingSidePlanner:
             if opp_s.shape != (M, N):
                 raise ValueError(f"opponent_s must have shape ({M}, {N}), got {opp_s.shape}")
 
-        lo, hi = self._corridor(n_min, n_max)
-        # A sum is finite iff every term is (the magnitudes here cannot overflow).
-        total = (s_nodes.sum() + n_ref.sum() + lo.sum() + hi.sum() + opp.sum() + opp_s.sum()
-                 + float(ego_n) + float(progress))
-        if not math.isfinite(total):
+        lo, hi, bounded = _corridor(n_min, n_max, float(self.config.track_margin), s_nodes, n_ref, opp, opp_s,
+                                    float(ego_n), float(progress))
+        # Every input finite: its sum is (the sum of the old test, taken where a magnitude is too large to tell).
+        if not (bounded or math.isfinite(s_nodes.sum() + n_ref.sum() + lo.sum() + hi.sum() + opp.sum() + opp_s.sum()
+                                         + float(ego_n) + float(progress))):
             return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None,
                                   "non-finite input")
 
@@ -239,35 +245,23 @@ class PassingSidePlanner:
             return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, prior,
                                   "solver failed")
         d, b = sol
-        d = d.clip(prob.lo, prob.hi)  # remove solver tolerance outside the hard bounds
+        d = _clip(d, prob.lo, prob.hi)  # remove solver tolerance outside the hard bounds (d.clip)
         obj, xi = evaluate(cfg, prob, d, b)
         if not math.isfinite(obj):
             return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, prior,
                                   "non-finite objective")
         sides = np.zeros(M, dtype=int)
         sides[relevant] = np.where(b[prob.rel_cluster] > 0.5, 1, -1)
-        opp_slack = np.zeros(M)
-        np.maximum.at(opp_slack, relevant[prob.pair_r], xi)
+        opp_slack = _max_per_opponent(M, relevant[prob.pair_r], xi)
         self._remember(s_nodes, d, opp, sides)
         return PlanResult(d=d, s=s_nodes.copy(), sides=sides, objective=obj,
                           status="optimal", success=True,
                           solve_time=time.perf_counter() - t0, n_binaries=prob.n_clusters,
-                          max_slack=float(xi.max(initial=0.0)), slack_sum=float(xi.sum()),
+                          max_slack=float(np.maximum.reduce(xi, initial=0.0)),
+                          slack_sum=float(np.add.reduce(xi)),
                           opponent_slack=opp_slack)
 
     # ------------------------------------------------------------ components
-    def _corridor(self, n_min: np.ndarray, n_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds on d: the edges moved in by ``track_margin``, the centre where too narrow."""
-        m = self.config.track_margin
-        lo = n_min + m
-        hi = n_max - m
-        narrow = lo > hi
-        if narrow.any():
-            mid = 0.5 * (n_min + n_max)
-            lo = np.where(narrow, mid, lo)
-            hi = np.where(narrow, mid, hi)
-        return lo, hi
-
     def _previous_plan_at(self, s_nodes: np.ndarray, progress: float) -> np.ndarray | None:
         """The previous plan at the new nodes (shifted by ``progress``), None without one."""
         if self._prev_d is None:
@@ -363,3 +357,40 @@ class PassingSidePlanner:
         return PlanResult(d=d, s=s_out.copy(), sides=sides, objective=float("nan"),
                           status="fallback", success=False,
                           solve_time=time.perf_counter() - t0, n_binaries=0)
+
+
+@kernel
+def _corridor(n_min, n_max, margin, s_nodes, n_ref, opp, opp_s, ego_n, progress):
+    """Bounds on d, the edges ``n_min``, ``n_max`` [m] moved in by ``margin`` (``track_margin``), their centre
+    ``0.5 (n_min + n_max)`` where they cross; and whether every input of the plan (these, ``s_nodes``,
+    ``n_ref``, the opponents, ``ego_n``, ``progress``) is finite with a magnitude below 1e300, so that
+    their sum is finite (else the caller takes the sum). One compiled call (:mod:`sofar_env._jit`)."""
+    N = n_min.shape[0]
+    lo = np.empty(N)
+    hi = np.empty(N)
+    big = 1e300
+    bounded = abs(ego_n) <= big and abs(progress) <= big
+    for k in range(N):
+        a = n_min[k] + margin
+        b = n_max[k] - margin
+        if a > b:
+            a = b = 0.5 * (n_min[k] + n_max[k])
+        lo[k], hi[k] = a, b
+        bounded = (bounded and abs(a) <= big and abs(b) <= big and abs(s_nodes[k]) <= big
+                   and abs(n_ref[k]) <= big)
+    for i in range(opp.shape[0]):
+        for c in range(opp.shape[1]):
+            bounded = bounded and abs(opp[i, c]) <= big
+        for c in range(opp_s.shape[1]):
+            bounded = bounded and abs(opp_s[i, c]) <= big
+    return lo, hi, bounded
+
+
+@kernel
+def _max_per_opponent(M, rows, xi):
+    """(M,) the largest ``xi`` [m] of each row index in ``rows`` (0 for rows without one):
+    ``np.maximum.at(np.zeros(M), rows, xi)``."""
+    out = np.zeros(M)
+    for p in range(rows.shape[0]):
+        out[rows[p]] = maximum(out[rows[p]], xi[p])
+    return out

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._jit import kernel
 from .config import MIQPConfig
 
 __all__ = ["SideProblem", "cost_factors", "plan_cost", "evaluate", "SLACK_TOL"]
@@ -71,19 +72,35 @@ def cost_factors(config: MIQPConfig) -> dict[bool, tuple[np.ndarray, np.ndarray]
 def plan_cost(config: MIQPConfig, d, n_ref, d_prev, switch_cost, slack_cost) -> float:
     """The cost of the lateral plan ``d`` plus the given switch and slack costs [-]."""
     dd = d[1:] - d[:-1]  # np.diff(d)
-    val = config.w_dev * float(((d - n_ref) ** 2).sum()) + config.w_smooth * float(dd @ dd)
+    val = config.w_dev * float(np.add.reduce((d - n_ref) ** 2)) + config.w_smooth * float(dd @ dd)  # (...).sum()
     if d_prev is not None:
-        val += config.w_prev * float(((d - d_prev) ** 2).sum())
+        val += config.w_prev * float(np.add.reduce((d - d_prev) ** 2))
     return val + switch_cost + slack_cost
 
 
 def evaluate(config: MIQPConfig, prob: SideProblem, d: np.ndarray, b: np.ndarray) -> tuple[float, np.ndarray]:
     """Exact cost of ``(d, b)`` with the minimal slack, and that slack per pair."""
-    left = b[prob.pair_c] > 0.5
-    dk = d[prob.pair_k]
-    xi = np.where(left, prob.pair_n + prob.pair_w - dk, dk - (prob.pair_n - prob.pair_w))
-    xi = np.where(xi > SLACK_TOL, xi, 0.0)
-    known = prob.b_prev >= 0
-    bi = b[prob.rel_cluster][known]
-    switch = config.w_switch * float(((bi - prob.b_prev[known]) ** 2).sum())
-    return plan_cost(config, d, prob.n_ref, prob.d_prev, switch, config.w_slack * float(xi.sum())), xi
+    xi, switch = _slack_and_switch(b, d, prob.pair_c, prob.pair_k, prob.pair_n, prob.pair_w, prob.rel_cluster,
+                                   prob.b_prev)
+    return plan_cost(config, d, prob.n_ref, prob.d_prev, config.w_switch * switch,
+                     config.w_slack * float(np.add.reduce(xi))), xi
+
+
+@kernel
+def _slack_and_switch(b, d, pair_c, pair_k, pair_n, pair_w, rel_cluster, b_prev):
+    """(P,) the minimal slack of each active pair at ``(d, b)`` [m]: ``n + w - d_k`` passing left
+    (``b_c > 0.5``), ``d_k - (n - w)`` passing right, 0 up to :data:`SLACK_TOL`; and the number of side
+    switches ``sum (b - b_prev)^2`` over the relevant opponents with a previous side (``b_prev >= 0``), a
+    sum of whole numbers, exact in any order. One compiled call (:mod:`sofar_env._jit`)."""
+    P = pair_k.shape[0]
+    xi = np.empty(P)
+    for p in range(P):
+        dk = d[pair_k[p]]
+        x = pair_n[p] + pair_w[p] - dk if b[pair_c[p]] > 0.5 else dk - (pair_n[p] - pair_w[p])
+        xi[p] = x if x > SLACK_TOL else 0.0
+    switch = 0.0
+    for r in range(b_prev.shape[0]):
+        if b_prev[r] >= 0:
+            diff = b[rel_cluster[r]] - b_prev[r]
+            switch += diff ** 2
+    return xi, switch

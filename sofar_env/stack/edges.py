@@ -23,6 +23,7 @@ import numpy as np
 from .._interp import interp, interp_located, locate
 from .._jit import kernel, minimum
 from ..vehicle import VehicleParams
+from ._lookup import slopes, wrap_mod
 
 __all__ = ["TrackEdges"]
 
@@ -38,6 +39,9 @@ class TrackEdges:
         self._offsets = np.linspace(-vehicle.cg_to_rear, vehicle.cg_to_front, 5)
         self._knots, self._wl = track.table("wl")
         self._wr = track.table("wr")[1]
+        self._slope_l = slopes(self._knots, self._wl)  # the interpolation's slopes, computed once
+        self._slope_r = slopes(self._knots, self._wr)
+        self._inv_spacing = (len(self._knots) - 1) / float(self._knots[-1] - self._knots[0])  # knots ~ j h
         self._length = float(track.length)
 
     def __call__(self, s_abs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -47,7 +51,8 @@ class TrackEdges:
         if not self.footprint_aware:
             return (-np.asarray(self.track.width_right(s_abs), float),
                     np.asarray(self.track.width_left(s_abs), float))
-        return _narrowest_edges(s_abs.reshape(-1), self._offsets, self._knots, self._wl, self._wr, self._length)
+        return _narrowest_edges(s_abs.reshape(-1), self._offsets, self._knots, self._wl, self._wr, self._slope_l,
+                                self._slope_r, self._inv_spacing, self._length)
 
     def for_mpc(self, s_abs: np.ndarray, x_prev: np.ndarray | None, t: np.ndarray,
                 shift: float, edge_relative: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -86,20 +91,32 @@ class TrackEdges:
 
 
 @kernel
-def _narrowest_edges(s_abs, offsets, knots, wl, wr, length):
+def _narrowest_edges(s_abs, offsets, knots, wl, wr, slope_l, slope_r, inv_spacing, length):
     """(-min wr, min wl) over the points ``s_abs[k] + offsets`` of each ``s_abs[k]``, the widths interpolated
-    as the track interpolates them (:meth:`~sofar_env.tracks.Track.table`; both columns share the knots)."""
+    as the track interpolates them (:meth:`~sofar_env.tracks.Track.table`; both columns share the knots,
+    nearly evenly spaced at ``1 / inv_spacing``; ``slope_l``, ``slope_r``: their slopes). The look-up is
+    written out as :mod:`~sofar_env.stack._lookup` describes (numpy's bits, fewer cycles)."""
     n = s_abs.shape[0]
+    m = knots.shape[0]
     n_min = np.empty(n)
     n_max = np.empty(n)
-    j = -1
     for k in range(n):
         lo = hi = np.inf
         for i in range(offsets.shape[0]):
-            s = (s_abs[k] + offsets[i]) % length
-            j = locate(s, knots, j)
-            lo = minimum(lo, interp_located(j, s, knots, wr))
-            hi = minimum(hi, interp_located(j, s, knots, wl))
+            s = wrap_mod(s_abs[k] + offsets[i], length)
+            j = int(s * inv_spacing) if 0.0 <= s < length else -1
+            if not (0 <= j < m - 1 and knots[j] <= s < knots[j + 1]):
+                j = locate(s, knots, j)
+            a = b = np.nan
+            if 0 <= j < m - 1 and knots[j] != s:
+                d = s - knots[j]
+                a = slope_r[j] * d + wr[j]
+                b = slope_l[j] * d + wl[j]
+            if math.isnan(a) or math.isnan(b):  # ends, knots, nan (interp_located's special cases)
+                a = interp_located(j, s, knots, wr)
+                b = interp_located(j, s, knots, wl)
+            lo = minimum(lo, a)
+            hi = minimum(hi, b)
         n_min[k] = -lo
         n_max[k] = hi
     return n_min, n_max

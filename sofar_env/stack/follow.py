@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._gradient import GridGradient
+from .._jit import kernel, minimum
 from ..planning.clearance import ellipse_violation
 from ..planning.miqp import PassingSidePlanner, PlanResult
 from .config import StackConfig
@@ -87,7 +88,7 @@ class PassOrFollow:
         self.predict = predict
         self.edges = edges
         self._node_t = np.arange(config.miqp.nodes) * config.miqp.node_dt
-        self._time_gradient: tuple[np.ndarray, GridGradient] | None = None  # d/dt on the grid of speed_cap
+        self._time_gradient: tuple[bytes, GridGradient] | None = None  # d/dt on the grid of speed_cap
         self._parked_planner = (PassingSidePlanner(dataclasses.replace(
             config.miqp, safe_lat=config.parked_clearance, safe_lon=config.parked_window,
             window_shape="ellipse"))
@@ -228,11 +229,9 @@ class PassOrFollow:
         the horizon, so a car the ego is already alongside is followable when braking drops
         the ego behind it. Without it the gap must stay at least ``a0`` throughout.
         """
-        a0 = self.config.mpc.barrier.a0
-        room = opp_s - braking_positions(self._node_t, ego_v, self.config.follow_reach_decel)[None, :]
-        if not self.config.follow_alongside:
-            return room.min(axis=1) >= a0
-        return (room.min(axis=1) >= np.minimum(gap, a0) - 1e-6) & (room[:, -1] >= a0)
+        return _stay_behind(self._node_t, float(ego_v), float(self.config.follow_reach_decel),
+                            np.asarray(gap, float), np.asarray(opp_s, float), float(self.config.mpc.barrier.a0),
+                            bool(self.config.follow_alongside))
 
     def speed_cap(self, ego_s: float, s_rel: np.ndarray, t: np.ndarray, step: int) -> np.ndarray | None:
         """Cap [m/s] on the MPC speed reference at the times ``t`` [s] of control step ``step``
@@ -251,11 +250,13 @@ class PassOrFollow:
         return np.sqrt(np.maximum(v_cap2.min(axis=1), 0.0))
 
     def _gradient(self, t: np.ndarray, f: np.ndarray) -> np.ndarray:
-        """``np.gradient(f, t, axis=1)`` (bit-identical), its coefficients kept for the last grid ``t``."""
+        """``np.gradient(f, t, axis=1)`` (bit-identical), its coefficients kept for the last grid ``t``
+        (recognised by its bytes: cheaper than ``np.array_equal``, and an equal grid is the same grid)."""
+        t = np.asarray(t, dtype=float)
+        key = t.tobytes()
         cached = self._time_gradient
-        if cached is None or not np.array_equal(cached[0], t):
-            t = np.array(t, dtype=float)
-            cached = self._time_gradient = (t, GridGradient(t))
+        if cached is None or cached[0] != key:
+            cached = self._time_gradient = (key, GridGradient(t.copy()))
         return cached[1](f)
 
     def _follow_plan(self, ego_s: float, ego_n: float, ego_v: float, s_nodes: np.ndarray, n_ref: np.ndarray,
@@ -303,3 +304,29 @@ class PassOrFollow:
         mask = np.zeros(len(opp_rel), dtype=bool)
         mask[nearest] = True
         return mask
+
+
+@kernel
+def _stay_behind(node_t, ego_v, decel, gap, opp_s, a0, alongside):
+    """:meth:`PassOrFollow.can_stay_behind`: per opponent, the room ``opp_s - s_brake`` [m] to the ego braking
+    at ``decel`` (:func:`~sofar_env.stack.prediction.braking_positions`, its formula) at every node; with
+    ``alongside`` its minimum at least ``min(gap, a0) - 1e-6`` and its last value at least ``a0``, else its
+    minimum at least ``a0``. One compiled call (:mod:`sofar_env._jit`): the minimum of the room is exact in any
+    order, and a nan room never passes, as in the numpy form."""
+    M, N = opp_s.shape
+    v0 = 0.0 if ego_v < 0.0 else ego_v  # noqa: FURB136 (Python's max(ego_v, 0.0): nan and -0.0 kept)
+    t_stop = v0 / decel
+    s_brake = np.empty(N)
+    for k in range(N):
+        tt = minimum(node_t[k], t_stop)
+        s_brake[k] = v0 * tt - 0.5 * decel * tt * tt
+    out = np.empty(M, dtype=np.bool_)
+    for i in range(M):
+        low = np.inf
+        for k in range(N):
+            low = minimum(low, opp_s[i, k] - s_brake[k])
+        if alongside:
+            out[i] = low >= minimum(gap[i], a0) - 1e-6 and opp_s[i, N - 1] - s_brake[N - 1] >= a0
+        else:
+            out[i] = low >= a0
+    return out

@@ -17,11 +17,14 @@ All arc lengths returned are relative to the ego at the time of the call [m].
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._interp import interp, interp_at, interp_located, locate, wrap_at
 from .._jit import kernel
 from ..vehicle import VehicleParams
+from ._lookup import wrap_mod
 
 __all__ = ["relative_opponents", "lateral_motion", "TravelTime", "OpponentPredictor", "ego_node_positions",
            "braking_positions"]
@@ -31,17 +34,56 @@ def relative_opponents(track, ego_s: float, opponents: np.ndarray, look_behind: 
                        look_ahead: float) -> np.ndarray:
     """Rows (gap, n, v[, n_dot]) of the opponents from ``look_behind`` [m] behind to ``look_ahead`` [m]
     ahead of the ego at arc length ``ego_s``, nearest first; ``opponents`` are rows (s, n, v[, n_dot])
-    (the lateral rate column, if given, is kept)."""
+    (the lateral rate column, if given, is kept). The gap is :meth:`~sofar_env.tracks.Track.gap`'s.
+
+    One compiled call (:func:`_window_rows`); two opponents at the same distance (where the order of
+    ``np.argsort`` is its own) take the numpy form."""
     opp = np.asarray(opponents, float)
     cols = opp.shape[-1] if opp.ndim == 2 and opp.shape[-1] == 4 else 3
     opp = opp.reshape(-1, cols)
     if opp.shape[0] == 0:
         return np.zeros((0, 3))
+    rel, tie = _window_rows(opp, float(ego_s), float(track.length), float(look_behind), float(look_ahead))
+    if not tie:
+        return rel
     gap = np.asarray(track.gap(opp[:, 0], ego_s), float).reshape(-1)
     keep = (gap >= -look_behind) & (gap <= look_ahead)
     rel = opp[keep]  # a copy (boolean indexing)
     rel[:, 0] = gap[keep]
     return rel[np.argsort(np.abs(rel[:, 0]))]
+
+
+@kernel
+def _window_rows(opp, ego_s, length, look_behind, look_ahead):
+    """:func:`relative_opponents`: the rows of ``opp`` whose gap ``wrap(s - ego_s + L/2) - L/2`` (the
+    track's, :meth:`~sofar_env.tracks.Track.gap`) is in ``[-look_behind, look_ahead]``, with the gap in
+    column 0, sorted by its magnitude (insertion sort); and whether two of them tie (their order is then
+    left to the caller)."""
+    M, cols = opp.shape
+    half = 0.5 * length
+    gaps = np.empty(M)
+    keys = np.empty(M)
+    rows = np.empty(M, dtype=np.int64)
+    n = 0
+    tie = False
+    for i in range(M):
+        r = (opp[i, 0] - ego_s + half) % length
+        g = (0.0 if r >= length else r) - half
+        if g >= -look_behind and g <= look_ahead:
+            key = abs(g)
+            p = n
+            while p > 0 and keys[p - 1] > key:
+                keys[p], gaps[p], rows[p] = keys[p - 1], gaps[p - 1], rows[p - 1]
+                p -= 1
+            tie = tie or (p > 0 and keys[p - 1] == key)
+            keys[p], gaps[p], rows[p] = key, g, i
+            n += 1
+    out = np.empty((n, cols))
+    for p in range(n):
+        for c in range(cols):
+            out[p, c] = opp[rows[p], c]
+        out[p, 0] = gaps[p]
+    return out, tie
 
 
 def lateral_motion(track, ego_s: float, opp_rel: np.ndarray, horizon: float, deadband: float,
@@ -115,8 +157,10 @@ class OpponentPredictor:
 def _pace_prediction(ego_s, opp_rel, times, knots, v_closed, s_table, t_table, length):
     """:meth:`OpponentPredictor.__call__` with ``pace_ratio``: per opponent at ``s = wrap(ego_s + gap)``, the
     pace ratio ``rho = max(v, 0) / max(v_profile(s), 0.1)``, its travel time ``T(s)``, and at each time the
-    arc length ``T^-1(T(s) + rho t)``, returned relative to the ego (``gap + s_pred - s``)."""
+    arc length ``T^-1(T(s) + rho t)``, returned relative to the ego (``gap + s_pred - s``). The look-up of
+    ``T^-1`` is written out as :mod:`~sofar_env.stack._lookup` describes (numpy's bits, fewer cycles)."""
     M, K = opp_rel.shape[0], times.shape[0]
+    n = t_table.shape[0]
     out = np.empty((M, K))
     for i in range(M):
         gap = opp_rel[i, 0]
@@ -128,8 +172,17 @@ def _pace_prediction(ego_s, opp_rel, times, knots, v_closed, s_table, t_table, l
         j = -1
         for k in range(K):
             t = t0 + rho * times[k]
-            j = locate(t, t_table, j)
-            out[i, k] = gap + (interp_located(j, t, t_table, s_table) - s_abs)
+            if j >= 0:  # the previous time's interval, moved forward past the knots <= t
+                while j < n - 2 and t_table[j + 1] <= t:
+                    j += 1
+            if not (0 <= j < n - 1 and t_table[j] <= t < t_table[j + 1]):
+                j = locate(t, t_table, j)
+            y = np.nan
+            if 0 <= j < n - 1 and t_table[j] != t:
+                y = (s_table[j + 1] - s_table[j]) / (t_table[j + 1] - t_table[j]) * (t - t_table[j]) + s_table[j]
+            if math.isnan(y):  # ends, knots, nan (interp_located's special cases)
+                y = interp_located(j, t, t_table, s_table)
+            out[i, k] = gap + (y - s_abs)
     return out
 
 
@@ -147,18 +200,28 @@ def ego_node_positions(track, ego_s: float, ego_v: float, node_t: np.ndarray, no
 def _ego_nodes(ego_s, v0, node_t, dt, speed_factor, dv_min, dv_max, knots, v_closed, length):
     """:func:`ego_node_positions`: from the constant-speed guess ``v0 t``, two fixed-point passes of
     ``v_{k+1} = min(max(v_ref_k, v_k + dv_min), v_k + dv_max)`` (as Python's ``min``/``max`` pick) with the
-    speed reference at the guessed positions, integrated by the trapezoidal rule (``s_0 = 0``)."""
+    speed reference at the guessed positions, integrated by the trapezoidal rule (``s_0 = 0``). The look-up
+    of the speed profile (knots nearly evenly spaced) is written out as :mod:`~sofar_env.stack._lookup`
+    describes (numpy's bits, fewer cycles)."""
     N = node_t.shape[0]
+    m = knots.shape[0]
+    inv_spacing = (m - 1) / (knots[m - 1] - knots[0])
     s = np.empty(N)
     for k in range(N):
         s[k] = v0 * node_t[k]
     v_ref = np.empty(N)
     for _ in range(2):
-        j = -1
         for k in range(N):
-            x = (ego_s + s[k]) % length
-            j = locate(x, knots, j)
-            v_ref[k] = speed_factor * interp_located(j, x, knots, v_closed)
+            x = wrap_mod(ego_s + s[k], length)
+            j = int(x * inv_spacing) if 0.0 <= x < length else -1
+            if not (0 <= j < m - 1 and knots[j] <= x < knots[j + 1]):
+                j = locate(x, knots, j)
+            y = np.nan
+            if 0 <= j < m - 1 and knots[j] != x:
+                y = (v_closed[j + 1] - v_closed[j]) / (knots[j + 1] - knots[j]) * (x - knots[j]) + v_closed[j]
+            if math.isnan(y):  # ends, knots, nan (interp_located's special cases)
+                y = interp_located(j, x, knots, v_closed)
+            v_ref[k] = speed_factor * y
         last = v0
         acc = 0.0
         s[0] = 0.0
