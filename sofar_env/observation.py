@@ -45,7 +45,14 @@ index   quantity               unit    range [lo, hi]  definition
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from ._interp import interp_located, locate
+from ._jit import kernel, maximum, minimum
+from .tracks import Track
+from .tracks.curve import floor_mod
 
 __all__ = ["OBS_NAMES", "OBS_LOW", "OBS_HIGH", "EXTENDED_NAMES", "EXTENDED_LOW", "EXTENDED_HIGH", "GAP_RANGE",
            "LOOKAHEAD_TIME", "OBSERVATIONS", "observation_size", "observe", "scale"]
@@ -73,7 +80,7 @@ EXTENDED_LOW = np.concatenate([OBS_LOW, [-3.0, -3.0, -0.5, -1.0]])
 """Physical lower ends of the extended observation's clip ranges."""
 EXTENDED_HIGH = np.concatenate([OBS_HIGH, [3.0, 3.0, 0.5, 9.0]])
 """Physical upper ends of the extended observation's clip ranges."""
-_EXT_LOW, _EXT_SPAN = EXTENDED_LOW[12:], EXTENDED_HIGH[12:] - EXTENDED_LOW[12:]
+_EXT_LOW, _EXT_HIGH, _EXT_SPAN = EXTENDED_LOW[12:], EXTENDED_HIGH[12:], EXTENDED_HIGH[12:] - EXTENDED_LOW[12:]
 
 
 def observation_size(layout: str) -> int:
@@ -86,6 +93,10 @@ _TAU = np.linspace(0.0, LOOKAHEAD_TIME, _CURV_SAMPLES)
 
 def scale(raw) -> np.ndarray:
     """Physical values (..., 12) -> observation in [-1, 1] (float32)."""
+    if type(raw) is np.ndarray and raw.shape == (12,) and raw.dtype == np.float64:  # one observation
+        out = np.empty(12, np.float32)
+        _scale_row(raw, OBS_LOW, OBS_HIGH, _SPAN, out)
+        return out
     out = np.maximum(np.asarray(raw, float), OBS_LOW)
     # 2 (clip(raw) - lo) / span - 1, in place
     np.minimum(out, OBS_HIGH, out=out)
@@ -98,7 +109,7 @@ def scale(raw) -> np.ndarray:
 
 def raw_observation(track, ego_frenet, opponents) -> np.ndarray:
     """The 12 physical values (float64) for an ego Frenet state (s, n, e, v, delta) and opponent rows (s, n, v)."""
-    s, n, _, v, delta = (float(x) for x in ego_frenet)
+    s, n, _, v, delta = map(float, ego_frenet)
     lo, hi = GAP_RANGE
     # a scalar loop over the (few) opponents: the track's scalar gap is the fast path
     seen = []
@@ -109,9 +120,18 @@ def raw_observation(track, ego_frenet, opponents) -> np.ndarray:
     seen.sort(key=lambda row: row[0])
     seen += [(hi, 0.0, 0.0)] * (2 - len(seen))
     (g1, n1, dv1), (g2, n2, dv2) = seen[:2]
-    ahead = s + max(v, _MIN_LOOKAHEAD_SPEED) * _TAU
-    kappa = float(np.asarray(track.curvature(ahead), float).sum()) / _CURV_SAMPLES
+    kappa = _mean_curvature(track, s, max(v, _MIN_LOOKAHEAD_SPEED))
     return np.array([n, v, delta, g1, g2, n1, n2, dv1, dv2, kappa, track.width_left(s), track.width_right(s)])
+
+
+def _mean_curvature(track, s: float, speed: float) -> float:
+    """Mean raceline curvature [1/m] over the look-ahead: ``track.curvature(s + speed * _TAU).sum() / 16``.
+    For a :class:`~sofar_env.tracks.Track` one compiled call (:func:`_curvature_sum`, the same bits); any
+    other object with the track's ``curvature`` (a test's closed-form circuit) through it."""
+    if isinstance(track, Track):
+        knots, table = track.table("kappa")
+        return _curvature_sum(s, speed, _TAU, track.length, knots, table) / _CURV_SAMPLES
+    return float(np.add.reduce(np.asarray(track.curvature(s + speed * _TAU), float))) / _CURV_SAMPLES
 
 
 def extra_observation(track, ego_frenet, opponents, barrier_params) -> np.ndarray:
@@ -146,7 +166,57 @@ def observe(race, car: int = 0, opponents: np.ndarray | None = None, layout: str
     if layout == "paper":
         return scale(raw_observation(race.track, race.frenet[car], opponents))
     opponents = np.asarray(opponents, float)
-    obs = scale(raw_observation(race.track, race.frenet[car], opponents[:, :3]))
+    out = np.empty(16, np.float32)
+    _scale_row(raw_observation(race.track, race.frenet[car], opponents[:, :3]), OBS_LOW, OBS_HIGH, _SPAN, out[:12])
     extra = extra_observation(race.track, race.frenet[car], opponents, barrier_params)
-    extra = 2.0 * (np.clip(extra, _EXT_LOW, EXTENDED_HIGH[12:]) - _EXT_LOW) / _EXT_SPAN - 1.0
-    return np.concatenate([obs, extra.astype(np.float32)])
+    _scale_clipped(extra, _EXT_LOW, _EXT_HIGH, _EXT_SPAN, out[12:])  # 2 (clip(extra) - lo) / span - 1
+    return out
+
+
+@kernel
+def _scale_row(raw, low, high, span, out):
+    """:func:`scale` of one observation (1-D float arrays) into the float32 ``out``, compiled (one call instead
+    of seven numpy calls): ``(clip(raw, low, high) - low) * 2 / span - 1`` in that order (np.maximum then
+    np.minimum: a nan stays nan), rounded to float32."""
+    for i in range(raw.shape[0]):
+        c = minimum(maximum(raw[i], low[i]), high[i])
+        out[i] = (c - low[i]) * 2.0 / span[i] - 1.0
+
+
+@kernel
+def _curvature_sum(s, speed, tau, length, knots, table):
+    """``np.add.reduce(np.interp(np.mod(s + speed * tau, length), knots, table))`` for 8 to 128 points ``tau``:
+    the interpolation of :func:`~sofar_env._interp.interp_located` and numpy's pairwise sum of that size (eight
+    running sums over blocks of eight, ``((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))``, then the rest
+    one by one), so numpy's bits."""
+    n = tau.shape[0]
+    vals = np.empty(n)
+    j = -1
+    for i in range(n):
+        p = floor_mod(s + speed * tau[i], length)
+        j = locate(p, knots, j)
+        vals[i] = interp_located(j, p, knots, table)
+    r = vals[:8].copy()
+    i = 8
+    while i < n - n % 8:
+        for k in range(8):
+            r[k] += vals[i + k]
+        i += 8
+    total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        total += vals[i]
+        i += 1
+    return total
+
+
+@kernel
+def _scale_clipped(raw, low, high, span, out):
+    """``2 (np.clip(raw, low, high) - low) / span - 1`` of 1-D float arrays into the float32 ``out``, compiled
+    (the extended observation's four values): np.clip's float rule (a nan stays nan; ``x > low ? x : low``,
+    then ``x < high ? x : high``) and the operations in that order, rounded to float32."""
+    for i in range(raw.shape[0]):
+        c = raw[i]
+        if not math.isnan(c):  # the ternaries are np.clip's rule (Python's max/min pick differently at ties)
+            c = c if c > low[i] else low[i]  # noqa: FURB136
+            c = c if c < high[i] else high[i]  # noqa: FURB136
+        out[i] = 2.0 * (c - low[i]) / span[i] - 1.0

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import minimum_filter1d
 
+from ._jit import kernel, minimum
 from .dynamics import DynamicPlant
 from .geometry import footprint_corner_list, footprint_corners, footprint_radius, rectangles_intersect
 from .opponents import Opponents
@@ -307,6 +308,8 @@ class Race:
     def obstacle_poses(self, car: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Reference-point positions and yaws (x, y, psi) of everything car ``car`` can collide with."""
         x, y, psi = self.opponents.poses()
+        if self.n_cars == 1:
+            return x, y, psi
         others = [j for j in range(self.n_cars) if j != car and self.active[j]]
         if others:
             st = self.states[others]
@@ -321,9 +324,8 @@ class Race:
     def nearest_distance(self, car: int = 0) -> float:
         """Distance between the reference points of car ``car`` and the nearest obstacle [m]; inf if none."""
         x, y, _ = self.obstacle_poses(car)
-        if x.size == 0:
-            return math.inf
-        return float(np.hypot(x - self.states[car, 0], y - self.states[car, 1]).min())
+        xk, yk = self.states[car, :2].tolist()
+        return _nearest(x, y, xk, yk)
 
     def laps(self, car: int = 0) -> float:
         """Completed laps of car ``car``: arc length driven / track length."""
@@ -352,8 +354,8 @@ class Race:
                 self.states[k] = self.plant.kinematic_view(self.plant_states[k])
         else:
             for k in active:
-                self.states[k] = self.plant.step(self.states[k], u[k])
-        if self.config.opponents.interactive:  # the controlled cars at the start of the step
+                self.states[k] = self.plant.step(self.states[k].tolist(), rows[k])
+        if self.opponents.episode is not None:  # interactive: the controlled cars at the start of the step
             self.opponents.advance(dt, self._ego_row(0) if self.n_cars == 1 else [self._ego_row(k) for k in active])
         else:
             self.opponents.advance(dt)
@@ -362,7 +364,7 @@ class Race:
         events = [CarEvents() for _ in range(self.n_cars)]
         track = self.track
         for k in active:
-            s_old = float(self.frenet[k, 0])
+            s_old = self.frenet[k, 0].item()
             x, y, psi, v, delta = self.states[k].tolist()
             s, n = track.to_frenet(x, y, s_hint=s_old)
             s, n = float(s), float(n)
@@ -418,11 +420,9 @@ class Race:
             return False
         # bounding-circle prefilter: only cars whose reference points are within 2 footprint radii can touch
         xk, yk = self.states[k, :2].tolist()
-        reach2 = self._contact_dist2
-        near = [(xo - xk) ** 2 + (yo - yk) ** 2 < reach2 for xo, yo in zip(x.tolist(), y.tolist())]
-        if not any(near):
+        near = np.empty(x.shape[0], bool)
+        if not _within(x, y, xk, yk, self._contact_dist2, near):
             return False
-        near = np.array(near)
         p = self.config.vehicle
         obstacles = footprint_corners(x[near], y[near], psi[near], p)
         ego = footprint_corners(self.states[k, 0], self.states[k, 1], self.states[k, 2], p)
@@ -463,3 +463,26 @@ def _unwrap(rel: np.ndarray, gaps: np.ndarray, length: float) -> None:
     """Advance the unwrapped gaps ``rel`` in place to the periodic ``gaps`` of this step (a step moves
     every gap by less than half a lap)."""
     rel += (gaps - rel + 0.5 * length) % length - 0.5 * length
+
+
+@kernel
+def _nearest(x, y, xk, yk):
+    """Smallest ``np.hypot(x - xk, y - yk)`` [m] over the points (x, y) (``np.min``'s reduction, a nan
+    propagates); inf if there are none. Compiled: one call instead of five numpy calls on a few points."""
+    best = np.inf
+    for i in range(x.shape[0]):
+        best = minimum(best, np.hypot(x[i] - xk, y[i] - yk))
+    return best
+
+
+@kernel
+def _within(x, y, xk, yk, reach2, near):
+    """Sets ``near`` where the squared distance of the point (x, y) to (xk, yk) is below ``reach2`` [m^2];
+    whether any is (the bounding-circle prefilter of the collision test, compiled). Its squares are products
+    (a Python ``** 2`` may differ by an ulp): the 1 mm of slack in ``reach2`` keeps the test exact."""
+    found = False
+    for i in range(x.shape[0]):
+        dx, dy = x[i] - xk, y[i] - yk
+        near[i] = dx * dx + dy * dy < reach2
+        found = found or near[i]
+    return found

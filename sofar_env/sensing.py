@@ -104,7 +104,7 @@ class _Track:
 
     __slots__ = ("noise", "delay", "n_hat", "n_dot_hat", "last_s")
 
-    def __init__(self, noise: np.ndarray, latency: int, s: float):
+    def __init__(self, noise: tuple[float, float, float], latency: int, s: float):
         self.noise = noise
         self.delay: deque = deque(maxlen=latency + 1)
         self.n_hat: float | None = None
@@ -158,36 +158,34 @@ class Sensor:
         return self._measure(rows[:, :3], ids)
 
     def _measure(self, rows: np.ndarray, ids: list[int]) -> np.ndarray:
-        cfg, L = self.config, self.length
-        sig = cfg.sigmas
+        # on Python floats (the per-component numpy operations on 3-vectors, in the same order: the same bits)
+        cfg, L, phi, dt = self.config, self.length, self.phi, self.dt
+        sig = (cfg.sigma_s, cfg.sigma_n, cfg.sigma_v)
         m = rows.shape[0]
-        fresh = self._rng.standard_normal((m, 3))  # one draw per row and component, in row order
-        gain = math.sqrt(max(1.0 - self.phi * self.phi, 0.0))
-        tracks, out = {}, np.zeros((m, 4))
-        for k, (key, row) in enumerate(zip(ids, rows)):
-            s_true = float(row[0])
+        fresh = self._rng.standard_normal((m, 3)).tolist()  # one draw per row and component, in row order
+        gain = math.sqrt(max(1.0 - phi * phi, 0.0))
+        tracks, out = {}, []
+        for key, row, f in zip(ids, rows.tolist(), fresh):
+            s_true = row[0]
             tr = self._tracks.get(key)
             if tr is None or abs((s_true - tr.last_s + 0.5 * L) % L - 0.5 * L) > cfg.jump_distance:
-                tr = _Track(sig * fresh[k], cfg.latency_steps, s_true)  # stationary start
+                tr = _Track(tuple(sj * fj for sj, fj in zip(sig, f)), cfg.latency_steps, s_true)  # stationary start
             else:
-                tr.noise = self.phi * tr.noise + gain * sig * fresh[k]
+                tr.noise = tuple(phi * nj + gain * sj * fj for nj, sj, fj in zip(tr.noise, sig, f))
             tr.last_s = s_true
-            z = row + tr.noise
-            z[0] %= L
-            if z[0] >= L:
-                z[0] = 0.0
-            tr.delay.append(z)
-            seen = tr.delay[0]  # latency_steps old once the delay line is full, else the first measurement
-            out[k, :3] = seen
-            out[k, 3] = rate = self._track_rate(tr, float(seen[1]))
-            age = (len(tr.delay) - 1) * self.dt
+            s_z = (row[0] + tr.noise[0]) % L
+            tr.delay.append((0.0 if s_z >= L else s_z, row[1] + tr.noise[1], row[2] + tr.noise[2]))
+            s_seen, n_seen, v_seen = tr.delay[0]  # latency_steps old once the delay line is full, else the first
+            rate = self._track_rate(tr, n_seen)
+            age = (len(tr.delay) - 1) * dt
             if cfg.latency_compensation and age > 0.0:
-                s_now = (seen[0] + seen[2] * age) % L
-                out[k, 0] = s_now if s_now < L else 0.0
-                out[k, 1] = seen[1] + rate * age
+                s_now = (s_seen + v_seen * age) % L
+                out.append((s_now if s_now < L else 0.0, n_seen + rate * age, v_seen, rate))
+            else:
+                out.append((s_seen, n_seen, v_seen, rate))
             tracks[key] = tr
         self._tracks = tracks
-        return out
+        return np.array(out, dtype=float).reshape(m, 4)
 
     def _track_rate(self, tr: _Track, n_meas: float) -> float:
         """One alpha-beta step on the (delayed) lateral measurement; returns the rate estimate [m/s]."""

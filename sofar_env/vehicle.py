@@ -223,7 +223,7 @@ class Plant:
         """
         p = self.params
         a, dd = self.clip_input(u)
-        px, py, psi, v, delta = (float(c) for c in x)
+        px, py, psi, v, delta = map(float, x)
         return np.array(_kinematic_rk4(px, py, psi, v, delta, a, dd, self.dt / self.substeps, self.substeps,
                                        p.lr / p.wheelbase, p.wheelbase, p.steer_max))
 

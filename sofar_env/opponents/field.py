@@ -37,6 +37,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._jit import kernel
+from ..tracks.curve import floor_mod, lerp_wrapped
 from ..vehicle import AV21, VehicleParams
 from .config import OpponentConfig
 from .defence import IDLE, Defence
@@ -93,6 +95,7 @@ class Opponents:
         self._squeezed: list[bool] = []
         self._band: EdgeBand | None = None
         self._pose_cache: tuple | None = None
+        self._speed_table = track.table("v")
 
     @property
     def count(self) -> int:
@@ -172,14 +175,10 @@ class Opponents:
             self._advance_interactive(dt, ego)
             self.time += dt
             return
-        track, rho = self.track, self.rho
-        # a scalar loop: for a handful of cars the track's scalar paths beat its array paths
-        s_new = []
-        for s in self.s.tolist():
-            v0 = rho * track.speed(s)
-            s_new.append(track.wrap(s + dt * rho * track.speed(s + 0.5 * dt * v0)))
-        self.s = np.array(s_new)
-        self.v = np.array([rho * track.speed(s) for s in s_new])
+        knots, table = self._speed_table
+        s, v = np.empty(self.count), np.empty(self.count)
+        _advance_on_profile(self.s, float(self.rho), float(dt), self.track.length, knots, table, s, v)
+        self.s, self.v = s, v
         self.time += dt
 
     def _advance_interactive(self, dt: float, ego) -> None:
@@ -220,13 +219,10 @@ class Opponents:
         """
         if self.count == 0:
             return np.zeros(0, int)
-        gap = np.asarray(self.track.gap(self.s, ego_s), float)
-        # unwrap: the change of the periodic gap is small between two steps
-        L = self.track.length
-        delta = (gap - self.rel + 0.5 * L) % L - 0.5 * L
-        self.rel = self.rel + delta
-        self.was_ahead |= self.rel > 0.0
-        passed = (self.was_ahead & (self.rel <= -self.config.overtake_threshold)).nonzero()[0]
+        rel, passed = np.empty(self.count), np.empty(self.count, np.int64)
+        k = _unwrap_gaps(self.s, float(ego_s), self.rel, self.was_ahead, self.track.length,
+                         float(self.config.overtake_threshold), rel, passed)
+        self.rel, passed = rel, passed[:k]
         for i in passed:
             self._respawn(int(i), ego_s)
         return passed
@@ -279,12 +275,9 @@ class Opponents:
         key = self.s.tobytes() + self.n.tobytes() + self.n_dot.tobytes() + self.v.tobytes()
         if self._pose_cache is not None and self._pose_cache[0] == key:
             return self._pose_cache[1]
-        pose = self.track.pose
-        # a scalar loop: the field is small and the track's scalar paths are ~30x faster than its array paths
-        rows = [pose(s, n) for s, n in zip(self.s.tolist(), self.n.tolist())]
-        x, y, psi = (np.array(col, dtype=float) for col in zip(*rows)) if rows else (np.zeros(0) for _ in range(3))
-        moving = self.n_dot != 0.0
-        if moving.any():
+        x, y, psi = self.track.poses(self.s, self.n)  # Track.pose of each car
+        if any(self.n_dot.tolist()):  # some n_dot != 0 (or nan)
+            moving = self.n_dot != 0.0
             kappa = np.asarray(self.track.curvature(self.s[moving]), float)
             along = np.maximum((1.0 - kappa * self.n[moving]) * self.v[moving], 1e-3)
             psi[moving] += np.arctan2(self.n_dot[moving], along)
@@ -292,3 +285,40 @@ class Opponents:
             a.setflags(write=False)
         self._pose_cache = (key, (x, y, psi))
         return x, y, psi
+
+
+# compiled loops of the field's per-step updates (one call instead of a dozen scalar track calls or
+# numpy calls on a few elements; the same operations in the same order: see sofar_env._jit)
+@kernel
+def _advance_on_profile(s, rho, dt, length, knots, table, s_new, v_new):
+    """Into ``s_new``, ``v_new``: the arc lengths and speeds of cars at ``s`` [m] driving ``rho`` times the speed
+    profile ``table`` for ``dt`` [s] by the midpoint rule, ``s + dt rho v(s + dt/2 rho v(s))`` wrapped into
+    [0, L), and ``rho v`` there, with the track's scalar interpolation (``Track.speed`` at a float)."""
+    for i in range(s.shape[0]):
+        v0 = rho * lerp_wrapped(s[i], length, knots, table)
+        r = floor_mod(s[i] + dt * rho * lerp_wrapped(s[i] + 0.5 * dt * v0, length, knots, table), length)
+        if r >= length:
+            r = 0.0
+        s_new[i] = r
+        v_new[i] = rho * lerp_wrapped(r, length, knots, table)
+
+
+@kernel
+def _unwrap_gaps(s, ego_s, rel, was_ahead, length, threshold, new, passed):
+    """Into ``new``: the unwrapped gaps to the ego after a step, each old gap ``rel`` [m] plus the change of the
+    periodic gap ``Track.gap(s, ego_s)``, itself wrapped into [-L/2, L/2). Sets ``was_ahead`` (in place)
+    where the new gap is > 0, and puts into ``passed`` the indices of the cars that were ahead and are now
+    ``threshold`` [m] or more behind; returns how many."""
+    half = 0.5 * length
+    k = 0
+    for i in range(s.shape[0]):
+        r = floor_mod(s[i] - ego_s + half, length)
+        if r >= length:
+            r = 0.0
+        new[i] = rel[i] + (floor_mod((r - half) - rel[i] + half, length) - half)
+        if new[i] > 0.0:
+            was_ahead[i] = True
+        if was_ahead[i] and new[i] <= -threshold:
+            passed[k] = i
+            k += 1
+    return k

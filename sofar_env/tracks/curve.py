@@ -2,17 +2,23 @@
 
 :class:`PeriodicCurve` is the closed planar curve both :class:`~sofar_env.tracks.Track`
 (positions, heading, normal and the Frenet projection) and the builder (heading and
-curvature of the stored raceline) evaluate, vectorised on arrays and on Python floats.
+curvature of the stored raceline) evaluate, vectorised on arrays and on Python floats;
+and the compiled loops of the track's periodic arc-length algebra and poses
+(:func:`floor_mod`, :func:`gap_in_place`, :func:`lerp_wrapped`, :func:`tangents_into`).
 """
 
 from __future__ import annotations
 
 import bisect
+import math
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-__all__ = ["PeriodicCurve"]
+from .._interp import locate
+from .._jit import kernel
+
+__all__ = ["PeriodicCurve", "floor_mod", "gap_in_place", "lerp_wrapped", "tangents_into"]
 
 
 class PeriodicCurve:
@@ -100,3 +106,70 @@ class PeriodicCurve:
         t, coef = self._segment(s)
         a, b, _, _, e, f, _, _ = coef
         return self._position_tangent(t, coef) + (6.0 * a * t + 2.0 * b, 6.0 * e * t + 2.0 * f)
+
+
+# compiled loops of the track's periodic arc-length algebra: one call instead of five or three numpy
+# calls (or a dozen scalar calls) on a few elements, the same operations in the same order, so the same
+# bits (see sofar_env._jit). They fill arrays given to them: a kernel returning a new array pays ~1 us
+# to box it.
+@kernel
+def floor_mod(x, length):
+    """``x % length`` for ``length > 0`` (Python's and numpy's floor modulo, to the bit), with shortcuts for
+    ``x`` within one period of [0, length), where ``fmod`` is exact: ``x``, ``x - length`` (exact) or ``x +
+    length`` (the one rounding the floor modulo also does)."""
+    if 0.0 < x < length:
+        return x
+    if length <= x < 2.0 * length:
+        return x - length
+    if -length < x < 0.0:
+        return x + length
+    return x % length
+
+
+@kernel
+def gap_in_place(d, half, length):
+    """``d <- wrap(d + half) - half`` for a 1-D float array ``d`` of differences ``s_a - s_b`` [m], in
+    place: the signed periodic gaps in [-half, half) of :meth:`Track.gap` (``half = length / 2``),
+    where wrap is ``np.mod`` into [0, length) with 0 where rounding gives ``length``."""
+    for i in range(d.shape[0]):
+        r = floor_mod(d[i] + half, length)
+        if r >= length:
+            r = 0.0
+        d[i] = r - half
+
+
+@kernel
+def lerp_wrapped(s, length, knots, table):
+    """``Track._interp_scalar`` inside a kernel: the closed ``table`` at the scalar ``s`` [m] wrapped into
+    [0, length) (0 where rounding gives ``length``), as ``f_i + w (f_{i+1} - f_i)`` with ``w = (s - k_i) /
+    (k_{i+1} - k_i)`` on the piece ``i`` holding ``s`` (not numpy's formula; the same bits as the Python
+    method)."""
+    s = floor_mod(s, length)
+    if s >= length:
+        s = 0.0
+    i = min(max(locate(s, knots, -1), 0), knots.shape[0] - 2)
+    k0 = knots[i]
+    w = (s - k0) / (knots[i + 1] - k0)
+    return table[i] + w * (table[i + 1] - table[i])
+
+
+@kernel
+def tangents_into(s, knots, coefs, last, length, out):
+    """Rows ``(x, y, x', y', atan2(y', x'))`` of ``out``: the spline with piece coefficients ``coefs`` (K, 8) at
+    each ``s[i]`` wrapped into [0, length) (0 where rounding gives ``length``), on the piece of the last knot
+    <= s (clipped to ``[0, last]``): :meth:`PeriodicCurve.tangent_scalar` and the heading of ``Track.pose``."""
+    for k in range(s.shape[0]):
+        p = s[k] % length
+        if p >= length:
+            p = 0.0
+        i = min(max(locate(p, knots, -1), 0), last)
+        t = p - knots[i]
+        a, b, c, d, e, f, g, h = coefs[i, 0], coefs[i, 1], coefs[i, 2], coefs[i, 3], coefs[i, 4], coefs[i, 5], \
+            coefs[i, 6], coefs[i, 7]
+        dx = (3.0 * a * t + 2.0 * b) * t + c
+        dy = (3.0 * e * t + 2.0 * f) * t + g
+        out[k, 0] = ((a * t + b) * t + c) * t + d
+        out[k, 1] = ((e * t + f) * t + g) * t + h
+        out[k, 2] = dx
+        out[k, 3] = dy
+        out[k, 4] = math.atan2(dy, dx)

@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 
 from .._interp import interp, locate
 from .._jit import kernel
-from .curve import PeriodicCurve
+from .curve import PeriodicCurve, gap_in_place, tangents_into
 from .format import (
     EDGE_COLUMNS,
     LEFT_EDGE_FILE,
@@ -213,8 +213,9 @@ class Track:
         a, b = _as_scalar(s_a), _as_scalar(s_b)
         if a is not None and b is not None:
             return self._gap_scalar(a, b)
-        half = 0.5 * self.length
-        return self._curve.wrap(np.subtract(s_a, s_b, dtype=float) + half) - half
+        d = np.subtract(s_a, s_b, dtype=float)  # a new array (one operand is not a scalar)
+        gap_in_place(d.reshape(-1), 0.5 * self.length, self.length)  # wrap(d + L/2) - L/2
+        return d
 
     def _gap_scalar(self, a: float, b: float) -> float:
         """:meth:`gap` of two Python floats."""
@@ -263,30 +264,34 @@ class Track:
         w = (s - k0) / (kl[i + 1] - k0)
         return closed_list[i] + w * (closed_list[i + 1] - closed_list[i])
 
-    # The four accessors below call _interp_scalar directly for a Python float (the per-step
-    # callers' case: about 30 calls per env step), without the dispatch of _interp.
+    # The four accessors below call _interp_scalar directly for a Python float or numpy float64
+    # (the per-step callers' case: about 30 calls per env step), without the dispatch of _interp.
     def curvature(self, s):
         """Signed curvature of the raceline [1/m] (> 0 in left turns)."""
-        if type(s) is float:
-            return self._interp_scalar(self._tables["kappa"][1], s)
+        kind = type(s)
+        if kind is float or kind is np.float64:
+            return self._interp_scalar(self._tables["kappa"][1], float(s))
         return self._interp("kappa", s)
 
     def width_left(self, s):
         """Distance from the raceline to the left edge along the normal [m]."""
-        if type(s) is float:
-            return self._interp_scalar(self._tables["wl"][1], s)
+        kind = type(s)
+        if kind is float or kind is np.float64:
+            return self._interp_scalar(self._tables["wl"][1], float(s))
         return self._interp("wl", s)
 
     def width_right(self, s):
         """Distance from the raceline to the right edge along the normal [m]."""
-        if type(s) is float:
-            return self._interp_scalar(self._tables["wr"][1], s)
+        kind = type(s)
+        if kind is float or kind is np.float64:
+            return self._interp_scalar(self._tables["wr"][1], float(s))
         return self._interp("wr", s)
 
     def speed(self, s):
         """Speed profile [m/s]."""
-        if type(s) is float:
-            return self._interp_scalar(self._tables["v"][1], s)
+        kind = type(s)
+        if kind is float or kind is np.float64:
+            return self._interp_scalar(self._tables["v"][1], float(s))
         return self._interp("v", s)
 
     # ------------------------------------------------------- spline geometry
@@ -329,6 +334,19 @@ class Track:
         n = float(n)
         r = math.hypot(dx, dy)
         return x - n * dy / r, y + n * dx / r, math.atan2(dy, dx)
+
+    def poses(self, s: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`pose` at each point (s[i], n[i]) of two 1-D float arrays: arrays (x, y, heading), the same
+        values. The spline pieces and headings come from one compiled call (:func:`.curve.tangents_into`); the
+        normal's length stays ``math.hypot`` (numpy's and numba's hypot differ from it in the last bit)."""
+        tan = np.empty((len(s), 5))
+        tangents_into(s, self._knots, self._coefs, self._curve._last, self.length, tan)
+        xs, ys, hypot = [], [], math.hypot
+        for (x, y, dx, dy, _), nk in zip(tan.tolist(), n.tolist()):
+            r = hypot(dx, dy)
+            xs.append(x - nk * dy / r)
+            ys.append(y + nk * dx / r)
+        return np.array(xs, dtype=float), np.array(ys, dtype=float), tan[:, 4].copy()
 
     def to_frenet(self, x, y, s_hint=None):
         """Cartesian (x, y) -> Frenet (s, n): exact projection onto the raceline spline.
@@ -469,3 +487,4 @@ def _piece(knots, s, last):
     """``bisect_right(knots, s) - 1`` clipped to ``[0, last]``: the spline piece holding ``s``."""
     i = locate(s, knots, -1)
     return min(max(i, 0), last)
+
