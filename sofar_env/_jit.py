@@ -33,11 +33,13 @@ def kernel(fn):
 @kernel
 def maximum(a, b):
     """``np.maximum`` of two floats inside a kernel (a nan propagates; ``acc = maximum(acc, x)`` is
-    ``np.max``'s reduction)."""
+    ``np.max``'s reduction). One difference: for two zeros of opposite sign this returns ``a``, numpy ``b``
+    (the value compares equal; only its sign bit differs)."""
     return a if (a >= b or a != a) else b
 
 
 @kernel
 def minimum(a, b):
-    """``np.minimum`` of two floats inside a kernel (a nan propagates)."""
+    """``np.minimum`` of two floats inside a kernel (a nan propagates; for two zeros of opposite sign this
+    returns ``a``, numpy ``b``, as in :func:`maximum`)."""
     return a if (a <= b or a != a) else b

@@ -151,8 +151,9 @@ def test_speed_cap_reaches_the_opponent_speed_follow_gap_behind(tracks):
     # at the same corner the follow decision flickered at every MIQP call (no hysteresis,
     # follow_release_slack = follow_slack), trading braking for pass attempts until a
     # collision at 119.6 s
-    # Recorded on an AVX-512 CPU. On AVX2 (e.g. AMD Zen 3) the episode drifts apart and the same
-    # failure recurs: the follow decision flickers at 117.3-118.1 s and the ego collides at 119.5 s.
+    # Recorded on the Intel Xeon VM of the committed tables. On AVX2 without AVX-512 (an AMD EPYC,
+    # Zen 3) the episode drifts apart and the same failure recurs: the follow decision flickers at
+    # 117.3-118.1 s and the ego collides at 119.5 s.
     # The fix holds on one variant of this corner, not on every one; kept as a known failure there.
     pytest.param(0.3, 1531305125, 0.05, 121.0, 14, marks=pytest.mark.xfail(
         not _AVX512, reason="on AVX2 builds the episode drifts and the last-corner follow flicker recurs "
