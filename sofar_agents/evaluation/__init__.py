@@ -20,6 +20,9 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
   preference-conditioned policy, fronts and their hypervolumes (``run_pareto``; ``eval/pareto.py``);
 * :mod:`~sofar_agents.evaluation.headroom`: what an adaptive gamma could gain over the best fixed one,
   by oracles over the fixed-gamma rows of Table I (``headroom``; ``eval/headroom.py``);
+* :mod:`~sofar_agents.evaluation.interventions`: the within-race part of that question: each failure of a
+  fixed gamma replayed with gamma switched just before it, against placebo switches (``run_interventions``;
+  ``eval/interventions.py``);
 * :mod:`~sofar_agents.evaluation.paired`: two strategies compared on the same seeded episodes, with an
   exact McNemar test (``paired_comparison``; ``eval/paired.py``);
 * :mod:`~sofar_agents.evaluation.latency`: Table III (``measure_latency``);
@@ -36,6 +39,9 @@ from sofar_agents.evaluation.experiments import TableReport, run_miqp_ablation, 
 from sofar_agents.evaluation.figures import plot_gamma_figures
 from sofar_agents.evaluation.headroom import (HeadroomRow, fixed_gamma_rows, format_flips, format_headroom, headroom,
                                               outcome_flips)
+from sofar_agents.evaluation.interventions import (Intervention, InterventionResult,
+                                                   default_interventions, failed_episodes, format_interventions,
+                                                   run_interventions, summarize_interventions)
 from sofar_agents.evaluation.latency import (PAPER_LATENCY_MS, format_latency, latency_stats, machine_info,
                                              measure_latency, write_json)
 from sofar_agents.evaluation.paired import PairedComparison, compare_to, format_paired, paired_comparison
@@ -71,6 +77,13 @@ __all__ = [
     "format_headroom",
     "outcome_flips",
     "format_flips",
+    "Intervention",
+    "InterventionResult",
+    "default_interventions",
+    "failed_episodes",
+    "run_interventions",
+    "summarize_interventions",
+    "format_interventions",
     "PairedComparison",
     "paired_comparison",
     "compare_to",

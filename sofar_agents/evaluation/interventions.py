@@ -1,0 +1,282 @@
+"""Could a gamma chosen *during* a race have saved it? Counterfactual switches before each failure.
+
+:mod:`~sofar_agents.evaluation.headroom` bounds what a gamma chosen once per episode or per
+condition could gain. This module measures the within-race part, which only a per-step policy
+can reach. For each failed episode of a fixed gamma it
+
+1. replays the episode (same circuit, pace ratio, seed and settings) and finds the control step at
+   which it failed (on this machine: a seeded run is reproducible on one instruction set, so an
+   episode recorded elsewhere may now end otherwise; it is then reported as not reproduced);
+2. runs it again with gamma switched to another value in a window before that step, and back to
+   the base gamma ``hold_s`` after it (:class:`Intervention`);
+3. records whether the switch **rescued** the episode (it reached the horizon without a collision,
+   leaving the track or stalling) and whether it at least got past the moment of the base failure
+   (**delayed**: it succeeded, or failed more than ``hold_s`` after that step).
+
+A rescue alone does not show that the other gamma was what the moment needed. A race's outcome
+turns on small perturbations (:func:`~sofar_agents.evaluation.headroom.outcome_flips`): any change of
+the trajectory re-draws it. :func:`default_interventions` therefore adds two placebo controls with
+the same window length:
+
+- **tiny change**: the window's gamma is only ``placebo_delta`` (0.01) above the base gamma, a
+  perturbation that barely changes the barrier;
+- **displaced**: the strongest switch, ``placebo_lead_s`` (20 s) earlier, at a moment unrelated to
+  the failure.
+
+Rescues beyond the placebos' are what a state-dependent gamma could gain, *if* a policy could tell
+the moments apart; rescues at the placebos' rate are re-drawn outcomes that no policy can aim at.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+from sofar_agents.evaluation.episode import make_env, run_episode
+from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
+
+__all__ = ["Intervention", "InterventionResult", "INTERVENTION_COLUMNS", "default_interventions",
+           "failed_episodes", "intervene", "run_interventions", "summarize_interventions", "format_interventions",
+           "intervention_rows"]
+
+_CONTROL_DT = 0.1
+"""Seconds per env step of the registered environments: one decision per control step of
+``sofar_env.race.RaceConfig().dt`` (a test keeps the two equal)."""
+
+_GAMMA_MIN, _GAMMA_MAX = 0.05, 1.0
+
+
+def _outcome(result) -> str:
+    if result.success:
+        return "success"
+    if result.collision:
+        return "collision"
+    if result.off_track:
+        return "off_track"
+    return "stalled" if result.stalled else "failure"
+
+
+@dataclass(frozen=True)
+class Intervention:
+    """Gamma ``gamma`` from ``window_s + lead_s`` seconds before the failure to ``hold_s - lead_s`` after it."""
+
+    gamma: float
+    """The gamma inside the window (action units, in [0.05, 1])."""
+    window_s: float
+    """How long before the failure step the window opens [s]."""
+    hold_s: float = 2.0
+    """How long after the failure step the window stays open [s] (the replay may fail later)."""
+    lead_s: float = 0.0
+    """Shift of the whole window to earlier times [s]; > 0 makes a displaced placebo."""
+    kind: str = "switch"
+    """``"switch"``, ``"tiny"`` (placebo: a tiny change) or ``"displaced"`` (placebo: an earlier window)."""
+
+    def __post_init__(self) -> None:
+        if not (_GAMMA_MIN <= self.gamma <= _GAMMA_MAX):
+            raise ValueError(f"intervention gamma must lie in [{_GAMMA_MIN}, {_GAMMA_MAX}], got {self.gamma!r}")
+        for name in ("window_s", "hold_s", "lead_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"intervention {name} must be a finite number >= 0 s, got {v!r}")
+        if self.window_s + self.hold_s <= 0.0:
+            raise ValueError("an intervention window needs window_s + hold_s > 0")
+        if self.kind not in ("switch", "tiny", "displaced"):
+            raise ValueError(f"intervention kind must be 'switch', 'tiny' or 'displaced', got {self.kind!r}")
+
+    @property
+    def label(self) -> str:
+        s = f"γ {self.gamma:.2f}, {self.window_s:g} s before"
+        if self.lead_s:
+            s += f", {self.lead_s:g} s earlier"
+        return s
+
+    def steps(self, failure_step: int, dt: float = _CONTROL_DT) -> tuple[int, int]:
+        """The window ``[first, end)`` in env steps (0-based indices of the actions) for a failure at
+        step ``failure_step`` (the 1-based count of steps of the failed episode)."""
+        lead = round(self.lead_s / dt)
+        first = max(0, failure_step - round(self.window_s / dt) - lead)
+        end = max(0, failure_step + round(self.hold_s / dt) - lead)
+        return first, end
+
+
+class _Schedule:
+    """obs -> gamma: ``base`` outside ``[first, end)`` (counted in calls), ``gamma`` inside."""
+
+    def __init__(self, base: float, gamma: float = math.nan, first: int = 0, end: int = 0) -> None:
+        self.base, self.gamma, self.first, self.end = float(base), float(gamma), int(first), int(end)
+        self.k = 0
+
+    def __call__(self, obs) -> list[float]:
+        g = self.gamma if self.first <= self.k < self.end else self.base
+        self.k += 1
+        return [g]
+
+
+@dataclass(frozen=True)
+class InterventionResult:
+    """One replay of a failed episode (the base replay has ``intervention=None``)."""
+
+    episode: EpisodeTask
+    """The replayed episode (its strategy is the base gamma)."""
+    base_gamma: float
+    intervention: Intervention | None
+    base_steps: int
+    """Steps of the base replay on this machine (the failure step if it failed)."""
+    base_outcome: str
+    steps: int
+    outcome: str
+    """``success``, ``collision``, ``off_track`` or ``stalled``."""
+
+    @property
+    def rescued(self) -> bool:
+        return self.intervention is not None and self.base_outcome != "success" and self.outcome == "success"
+
+    @property
+    def delayed(self) -> bool:
+        """The replay got past the base replay's failure: it succeeded, or failed more than the
+        intervention's ``hold_s`` after the step at which the base replay failed."""
+        if self.intervention is None or self.base_outcome == "success":
+            return False
+        return self.outcome == "success" or self.steps > self.base_steps + round(self.intervention.hold_s / _CONTROL_DT)
+
+
+INTERVENTION_COLUMNS = ("track", "rho", "seed", "stack", "scenario", "use_miqp", "duration", "n_opponents",
+                        "base_gamma", "kind", "gamma", "window_s", "hold_s", "lead_s", "base_steps", "base_outcome",
+                        "steps", "outcome", "rescued", "delayed")
+"""Columns of :func:`intervention_rows` (``kind`` is ``base`` for the base replay)."""
+
+
+def intervention_rows(results: Iterable[InterventionResult]) -> list[dict[str, Any]]:
+    """One CSV row per replay (columns :data:`INTERVENTION_COLUMNS`)."""
+    rows = []
+    for r in results:
+        e, iv = r.episode, r.intervention
+        rows.append({
+            "track": e.track, "rho": e.rho, "seed": e.seed, "stack": e.stack, "scenario": e.scenario,
+            "use_miqp": int(e.use_miqp), "duration": e.duration,
+            "n_opponents": "" if e.n_opponents is None else e.n_opponents, "base_gamma": r.base_gamma,
+            "kind": "base" if iv is None else iv.kind, "gamma": r.base_gamma if iv is None else iv.gamma,
+            "window_s": "" if iv is None else iv.window_s, "hold_s": "" if iv is None else iv.hold_s,
+            "lead_s": "" if iv is None else iv.lead_s, "base_steps": r.base_steps, "base_outcome": r.base_outcome,
+            "steps": r.steps, "outcome": r.outcome, "rescued": int(r.rescued), "delayed": int(r.delayed)})
+    return rows
+
+
+def default_interventions(base_gamma: float, gammas: Sequence[float] = (0.15, 0.3, 0.6),
+                          windows_s: Sequence[float] = (1.0, 2.0, 4.0), hold_s: float = 2.0,
+                          placebo_delta: float = 0.01, placebo_lead_s: float = 20.0) -> list[Intervention]:
+    """Every (gamma, window) switch, then the two placebos at the longest window (see the module docstring)."""
+    if not gammas or not windows_s:
+        raise ValueError("need at least one intervention gamma and one window")
+    out = [Intervention(float(g), float(w), hold_s) for w in windows_s for g in gammas]
+    w = float(max(windows_s))
+    out.append(Intervention(round(min(float(base_gamma) + placebo_delta, _GAMMA_MAX), 6), w, hold_s, kind="tiny"))
+    out.append(Intervention(float(max(gammas, key=lambda g: abs(g - base_gamma))), w, hold_s, placebo_lead_s,
+                            kind="displaced"))
+    return out
+
+
+def failed_episodes(rows: Iterable[Mapping[str, Any]], gamma: float, limit: int | None = None) -> list[EpisodeTask]:
+    """The failed episodes of the fixed gamma ``gamma`` in per-episode CSV rows
+    (:func:`~sofar_agents.evaluation.read_episode_csv`) as tasks of that gamma, in file order, at most ``limit``."""
+    strategy = Strategy.fixed(gamma)
+    out = []
+    for r in rows:
+        if r["strategy"] != strategy.name or r["success"]:
+            continue
+        n_opp = r.get("n_opponents", "")
+        out.append(EpisodeTask(
+            track=str(r["track"]), strategy=strategy, rho=float(r["rho"]), episode=int(r.get("episode", 0)),
+            seed=int(r["seed"]), use_miqp=bool(r["use_miqp"]), duration=float(r["duration"]),
+            n_opponents=None if n_opp in ("", None) else int(float(n_opp)), stack=str(r.get("stack") or "sofar"),
+            scenario=str(r.get("scenario") or "paper")))
+        if limit is not None and len(out) >= limit:
+            break
+    return out
+
+
+def _replay(env, task: EpisodeTask, schedule: _Schedule) -> tuple[int, str]:
+    result, _ = run_episode(env, schedule, task)
+    return result.steps, _outcome(result)
+
+
+def intervene(task: EpisodeTask, interventions: Sequence[Intervention]) -> list[InterventionResult]:
+    """Replay ``task`` (a fixed-gamma episode), then once per intervention; the base replay comes first.
+    If the base replay does not fail on this machine, only it is returned."""
+    if task.strategy.kind != "fixed":
+        raise ValueError(f"interventions replay a fixed-gamma episode, got strategy {task.strategy.name!r}")
+    base_gamma = float(task.strategy.gamma)
+    env = make_env(task.track, use_miqp=task.use_miqp, duration=task.duration, stack=task.stack,
+                   scenario=task.scenario)
+    try:
+        k_fail, base_out = _replay(env, task, _Schedule(base_gamma))
+        out = [InterventionResult(task, base_gamma, None, k_fail, base_out, k_fail, base_out)]
+        if base_out == "success":
+            return out
+        for iv in interventions:
+            first, end = iv.steps(k_fail)
+            if end <= first:  # a displaced window that would lie before the start
+                continue
+            steps, outcome = _replay(env, task, _Schedule(base_gamma, iv.gamma, first, end))
+            out.append(InterventionResult(task, base_gamma, iv, k_fail, base_out, steps, outcome))
+        return out
+    finally:
+        env.close()
+
+
+def _intervene_star(args) -> list[InterventionResult]:
+    return intervene(*args)
+
+
+def run_interventions(tasks: Sequence[EpisodeTask], interventions: Sequence[Intervention],
+                      workers: int = 1) -> list[InterventionResult]:
+    """:func:`intervene` for every task, over ``workers`` processes; results in the tasks' order."""
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    jobs = [(t, tuple(interventions)) for t in tasks]
+    if workers == 1 or len(jobs) <= 1:
+        nested = [_intervene_star(j) for j in jobs]
+    else:
+        import multiprocessing as mp
+
+        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+            nested = list(pool.map(_intervene_star, jobs))
+    return [r for rs in nested for r in rs]
+
+
+def summarize_interventions(results: Sequence[InterventionResult]) -> dict[str, Any]:
+    """Counts: episodes replayed, failures reproduced, and per intervention the episodes it ran on,
+    rescued and delayed (in the order of first appearance)."""
+    base = [r for r in results if r.intervention is None]
+    failed = [r for r in base if r.base_outcome != "success"]
+    rows: dict[Intervention, dict[str, int]] = {}
+    for r in results:
+        if r.intervention is None:
+            continue
+        c = rows.setdefault(r.intervention, {"episodes": 0, "rescued": 0, "delayed": 0})
+        c["episodes"] += 1
+        c["rescued"] += int(r.rescued)
+        c["delayed"] += int(r.delayed)
+    outcomes: dict[str, int] = {}
+    for r in failed:
+        outcomes[r.base_outcome] = outcomes.get(r.base_outcome, 0) + 1
+    return {"replayed": len(base), "failed": len(failed), "not_reproduced": len(base) - len(failed),
+            "failure_kinds": outcomes, "interventions": rows}
+
+
+def format_interventions(summary: Mapping[str, Any], base_gamma: float) -> str:
+    """The summary as a Markdown table (share of the reproduced failures rescued / delayed)."""
+    kinds = ", ".join(f"{v} {k.replace('_', '-')}" for k, v in sorted(summary["failure_kinds"].items()))
+    head = (f"Base gamma {base_gamma:.2f}: {summary['replayed']} failed episodes replayed, {summary['failed']} "
+            f"failed again on this machine ({kinds or 'none'}), {summary['not_reproduced']} did not.")
+    lines = [head, "",
+             "| intervention | kind | episodes | rescued | rescued [%] | got past the base failure |",
+             "|---|---|---:|---:|---:|---:|"]
+    for iv, c in summary["interventions"].items():
+        pct = 100.0 * c["rescued"] / c["episodes"] if c["episodes"] else float("nan")
+        kind = {"switch": "switch", "tiny": "placebo: tiny change", "displaced": "placebo: displaced"}[iv.kind]
+        lines.append(f"| {iv.label} | {kind} | {c['episodes']} | {c['rescued']} | {pct:.0f} | {c['delayed']} |")
+    return "\n".join(lines) + "\n"
