@@ -3,6 +3,7 @@
     python eval/interventions.py results/paper_stack/table1_episodes.csv --gamma 0.05 --workers 2 \
         --out results/paper_stack/interventions
     python eval/interventions.py CSV --quick          # 2 failed episodes, 2 switches + the placebos
+    python eval/interventions.py results/paper_stack/interventions/interventions.csv --report   # re-make the report
 
 For every failed episode of the fixed gamma ``--gamma`` in the given per-episode CSVs (Table I runs of
 `eval/table.py`), the episode is replayed to find its failure step, then replayed once per
@@ -10,8 +11,10 @@ intervention: gamma switched to each of ``--gammas`` from each of ``--windows`` 
 failure to ``--hold`` seconds after it. Two placebos use the longest window: a tiny change of gamma
 (``--placebo-delta``) and the strongest switch ``--placebo-lead`` seconds earlier. Rescues beyond the
 placebos' are what a within-race gamma could gain; rescues at their rate are re-drawn outcomes.
-Writes ``interventions.csv`` (one row per replay) and ``interventions.md`` to ``--out``.
-The logic is in sofar_agents.evaluation.interventions.
+The report ends with each timely switch of the placebo's window against the displaced placebo, paired on
+the failures both were run on (exact McNemar test). Writes ``interventions.csv`` (one row per replay) and
+``interventions.md`` to ``--out``; ``--report`` re-makes ``interventions.md`` from an ``interventions.csv``
+(in its folder, or ``--out``) without running an episode. The logic is in sofar_agents.evaluation.interventions.
 """
 
 from __future__ import annotations
@@ -32,7 +35,10 @@ logger = logging.getLogger("interventions")
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("csv", nargs="+", help="per-episode CSVs of Table I (table1_episodes.csv)")
+    p.add_argument("csv", nargs="+", help="per-episode CSVs of Table I (table1_episodes.csv); with --report, "
+                                          "one interventions.csv")
+    p.add_argument("--report", action="store_true",
+                   help="re-make the report of an interventions.csv (no episode is run)")
     p.add_argument("--gamma", type=float, default=0.05, help="the fixed gamma whose failures are replayed")
     p.add_argument("--gammas", type=float, nargs="+", default=[0.15, 0.3, 0.6], help="gammas inside the window")
     p.add_argument("--windows", type=float, nargs="+", default=[1.0, 2.0, 4.0],
@@ -44,7 +50,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--workers", type=int, default=1, help="worker processes")
     p.add_argument("--quick", action="store_true",
                    help="a first look: 2 failed episodes per CSV, gammas 0.6, windows 2 and 4 s (explicit options win)")
-    p.add_argument("--out", default="results/interventions", help="output folder")
+    p.add_argument("--out", default=None, help="output folder (default: results/interventions; with --report, the "
+                                               "CSV's folder)")
     args = p.parse_args(argv)
     if args.quick:
         given = {a.split("=")[0] for a in (argv if argv is not None else sys.argv[1:])}
@@ -57,9 +64,45 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
+def report(args) -> int:
+    """``--report``: the Markdown of an existing interventions.csv."""
+    try:
+        if len(args.csv) != 1:
+            raise ValueError(f"--report takes one interventions.csv, got {len(args.csv)} files")
+        path = Path(args.csv[0])
+        if not path.is_file():
+            raise ValueError(f"no such CSV: {path}")
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            missing = [c for c in iv.INTERVENTION_COLUMNS if c not in (reader.fieldnames or [])]
+            if missing:
+                raise ValueError(f"{path} is not an interventions.csv (missing columns {missing})")
+            results = iv.results_from_rows(list(reader))
+        gammas = {r.base_gamma for r in results}
+        if len(gammas) != 1:
+            raise ValueError(f"{path} mixes base gammas {sorted(gammas)}; one per file")
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.out) if args.out else path.parent
+    text = iv.format_interventions(iv.summarize_interventions(results), gammas.pop(), iv.placebo_comparisons(results))
+    old = out / "interventions.md"
+    if old.is_file():  # keep the run's own last paragraph (replays, wall time, command)
+        tail = old.read_text().split("\n\n")[-1]
+        if " replays, " in tail:
+            text += "\n" + tail
+    ev.write_markdown(out / "interventions.md", text)
+    print(text)
+    return 0
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if args.report:
+        return report(args)
+    if args.out is None:
+        args.out = "results/interventions"
     try:
         if args.limit is not None and args.limit < 1:
             raise ValueError(f"--limit must be >= 1, got {args.limit}")
@@ -84,7 +127,7 @@ def main(argv=None) -> int:
         w = csv.DictWriter(f, fieldnames=iv.INTERVENTION_COLUMNS, lineterminator="\n")
         w.writeheader()
         w.writerows(iv.intervention_rows(results))
-    text = iv.format_interventions(iv.summarize_interventions(results), args.gamma)
+    text = iv.format_interventions(iv.summarize_interventions(results), args.gamma, iv.placebo_comparisons(results))
     replays = len(results)
     steps = sum(r.steps for r in results)
     text += (f"\n{replays} replays, {steps:,} env steps, {wall:.0f} s on {args.workers} worker(s). "

@@ -36,11 +36,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from sofar_agents.evaluation.episode import make_env, run_episode
+from sofar_agents.evaluation.paired import PairedComparison, format_paired, paired_comparison
 from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
 
 __all__ = ["Intervention", "InterventionResult", "INTERVENTION_COLUMNS", "default_interventions",
-           "failed_episodes", "intervene", "run_interventions", "summarize_interventions", "format_interventions",
-           "intervention_rows"]
+           "failed_episodes", "intervene", "run_interventions", "summarize_interventions", "placebo_comparisons",
+           "format_interventions", "intervention_rows", "results_from_rows"]
 
 _CONTROL_DT = 0.1
 """Seconds per env step of the registered environments: one decision per control step of
@@ -165,6 +166,27 @@ def intervention_rows(results: Iterable[InterventionResult]) -> list[dict[str, A
     return rows
 
 
+def results_from_rows(rows: Iterable[Mapping[str, Any]]) -> list[InterventionResult]:
+    """The inverse of :func:`intervention_rows`: results from the rows of an ``interventions.csv``
+    (values as strings or numbers), e.g. to re-make its report without running an episode."""
+    out = []
+    for k, r in enumerate(rows):
+        try:
+            n_opp = r.get("n_opponents", "")
+            base = float(r["base_gamma"])
+            task = EpisodeTask(track=str(r["track"]), strategy=Strategy.fixed(base), rho=float(r["rho"]), episode=0,
+                               seed=int(r["seed"]), use_miqp=bool(int(r["use_miqp"])), duration=float(r["duration"]),
+                               n_opponents=None if n_opp in ("", None) else int(float(n_opp)),
+                               stack=str(r["stack"]), scenario=str(r["scenario"]))
+            iv = None if r["kind"] == "base" else Intervention(
+                float(r["gamma"]), float(r["window_s"]), float(r["hold_s"]), float(r["lead_s"]), str(r["kind"]))
+            out.append(InterventionResult(task, base, iv, int(r["base_steps"]), str(r["base_outcome"]),
+                                          int(r["steps"]), str(r["outcome"])))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"row {k + 1} is not an interventions.csv row: {exc}") from exc
+    return out
+
+
 def default_interventions(base_gamma: float, gammas: Sequence[float] = (0.15, 0.3, 0.6),
                           windows_s: Sequence[float] = (1.0, 2.0, 4.0), hold_s: float = 2.0,
                           placebo_delta: float = 0.01, placebo_lead_s: float = 20.0) -> list[Intervention]:
@@ -267,8 +289,26 @@ def summarize_interventions(results: Sequence[InterventionResult]) -> dict[str, 
             "failure_kinds": outcomes, "interventions": rows}
 
 
-def format_interventions(summary: Mapping[str, Any], base_gamma: float) -> str:
-    """The summary as a Markdown table (share of the reproduced failures rescued / delayed)."""
+def placebo_comparisons(results: Sequence[InterventionResult]) -> list[PairedComparison]:
+    """Each switch of the displaced placebo's window against that placebo, on the failures both were run on:
+    rescued counts as success, compared with :func:`~sofar_agents.evaluation.paired_comparison` (exact McNemar).
+    A timely gamma is worth something only where the switch wins clearly more of the discordant failures."""
+    rows = [{"track": r.episode.track, "rho": r.episode.rho, "seed": r.episode.seed, "use_miqp": r.episode.use_miqp,
+             "strategy": r.intervention.label, "success": r.rescued}
+            for r in results if r.intervention is not None and r.base_outcome != "success"]
+    ivs = list(dict.fromkeys(r.intervention for r in results if r.intervention is not None))
+    out = []
+    for placebo in (iv for iv in ivs if iv.kind == "displaced"):
+        for iv in ivs:
+            if iv.kind == "switch" and (iv.window_s, iv.hold_s) == (placebo.window_s, placebo.hold_s):
+                out.append(paired_comparison({"": rows}, iv.label, placebo.label))
+    return out
+
+
+def format_interventions(summary: Mapping[str, Any], base_gamma: float,
+                         comparisons: Sequence[PairedComparison] = ()) -> str:
+    """The summary as a Markdown table (share of the reproduced failures rescued / delayed), then the
+    :func:`placebo_comparisons` if given."""
     kinds = ", ".join(f"{v} {k.replace('_', '-')}" for k, v in sorted(summary["failure_kinds"].items()))
     head = (f"Base gamma {base_gamma:.2f}: {summary['replayed']} failed episodes replayed, {summary['failed']} "
             f"failed again on this machine ({kinds or 'none'}), {summary['not_reproduced']} did not.")
@@ -279,4 +319,8 @@ def format_interventions(summary: Mapping[str, Any], base_gamma: float) -> str:
         pct = 100.0 * c["rescued"] / c["episodes"] if c["episodes"] else float("nan")
         kind = {"switch": "switch", "tiny": "placebo: tiny change", "displaced": "placebo: displaced"}[iv.kind]
         lines.append(f"| {iv.label} | {kind} | {c['episodes']} | {c['rescued']} | {pct:.0f} | {c['delayed']} |")
-    return "\n".join(lines) + "\n"
+    text = "\n".join(lines) + "\n"
+    if comparisons:
+        text += ("\nTimely switches against the displaced placebo, on the failures both were run on (A: the switch, "
+                 "B: the placebo; success = rescued):\n\n" + format_paired(comparisons))
+    return text

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import math
 import sys
 from pathlib import Path
@@ -178,3 +179,70 @@ def test_cli_bad_input(tmp_path, capsys, extra, message):
                                   "success": False, "use_miqp": True}])
     assert interventions_cli.main([str(csv_path), "--out", str(tmp_path / "o"), *extra]) == 2
     assert message in capsys.readouterr().err
+
+
+def _task(seed):
+    return EpisodeTask(track="Monza", strategy=Strategy.fixed(0.05), rho=0.3, episode=0, seed=seed, stack="paper")
+
+
+def test_placebo_comparison_pairs_the_switch_with_the_displaced_placebo_by_hand():
+    sw = iv.Intervention(0.6, 4.0)
+    short = iv.Intervention(0.6, 1.0)  # another window: not compared
+    placebo = iv.Intervention(0.6, 4.0, lead_s=20.0, kind="displaced")
+    outcome = {True: "success", False: "collision"}
+    results = []
+    # failures 1-4: the switch rescues 1 and 2, the placebo 2 and 3; failure 5 is too early for the placebo
+    for seed, (by_switch, by_placebo) in enumerate([(True, False), (True, True), (False, True), (False, False)], 1):
+        results += [iv.InterventionResult(_task(seed), 0.05, None, 500, "collision", 500, "collision"),
+                    iv.InterventionResult(_task(seed), 0.05, sw, 500, "collision", 2000, outcome[by_switch]),
+                    iv.InterventionResult(_task(seed), 0.05, short, 500, "collision", 500, "collision"),
+                    iv.InterventionResult(_task(seed), 0.05, placebo, 500, "collision", 2000, outcome[by_placebo])]
+    results += [iv.InterventionResult(_task(5), 0.05, None, 100, "collision", 100, "collision"),
+                iv.InterventionResult(_task(5), 0.05, sw, 100, "collision", 2000, "success")]
+    (c,) = iv.placebo_comparisons(results)
+    assert (c.a, c.b) == (sw.label, placebo.label)
+    assert (c.n, c.a_only, c.b_only, c.unpaired) == (4, 1, 1, 1)
+    assert c.p_value == 1.0
+    text = iv.format_interventions(iv.summarize_interventions(results), 0.05, [c])
+    assert "against the displaced placebo" in text and f"| {sw.label} | {placebo.label} | 4 |" in text
+
+
+def test_rows_round_trip_through_results_from_rows():
+    results = [iv.InterventionResult(SHORT_FAILURE, 0.05, None, 32, "collision", 32, "collision"),
+               iv.InterventionResult(SHORT_FAILURE, 0.05, iv.Intervention(0.3, 2.0, 1.0), 32, "collision", 100,
+                                     "success"),
+               iv.InterventionResult(SHORT_FAILURE, 0.05, iv.Intervention(0.6, 4.0, 2.0, 20.0, "displaced"), 32,
+                                     "collision", 40, "off_track")]
+    rows = iv.intervention_rows(results)
+    as_text = [{k: str(v) for k, v in r.items()} for r in rows]  # as csv.DictReader gives them
+    back = iv.results_from_rows(as_text)
+    assert iv.intervention_rows(back) == rows
+    assert [r.rescued for r in back] == [False, True, False]
+    with pytest.raises(ValueError, match="row 1 is not an interventions.csv row"):
+        iv.results_from_rows([{**as_text[0], "kind": "switch", "gamma": "2.0", "window_s": "1", "hold_s": "1",
+                               "lead_s": "0"}])
+
+
+def test_cli_report_remakes_the_markdown_without_running(tmp_path, capsys):
+    results = [iv.InterventionResult(_task(1), 0.05, None, 500, "collision", 500, "collision"),
+               iv.InterventionResult(_task(1), 0.05, iv.Intervention(0.6, 4.0), 500, "collision", 2000, "success"),
+               iv.InterventionResult(_task(1), 0.05, iv.Intervention(0.6, 4.0, lead_s=20.0, kind="displaced"), 500,
+                                     "collision", 700, "collision")]
+    path = tmp_path / "interventions.csv"
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=iv.INTERVENTION_COLUMNS)
+        w.writeheader()
+        w.writerows(iv.intervention_rows(results))
+    (tmp_path / "interventions.md").write_text("old table\n\n3 replays, 2,700 env steps, 1 s on 1 worker(s).\n")
+    assert interventions_cli.main([str(path), "--report"]) == 0
+    md = (tmp_path / "interventions.md").read_text()
+    assert "| γ 0.60, 4 s before | switch | 1 | 1 | 100 | 1 |" in md
+    assert "against the displaced placebo" in md
+    assert md.rstrip().endswith("3 replays, 2,700 env steps, 1 s on 1 worker(s).")  # the run's own line is kept
+    capsys.readouterr()
+    bad = tmp_path / "bad.csv"
+    bad.write_text("track,rho\nMonza,0.1\n")
+    assert interventions_cli.main([str(bad), "--report"]) == 2
+    assert "is not an interventions.csv (missing columns" in capsys.readouterr().err
+    assert interventions_cli.main([str(path), str(path), "--report"]) == 2
+    assert "takes one interventions.csv" in capsys.readouterr().err
