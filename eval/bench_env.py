@@ -51,6 +51,7 @@ import sofar_env  # noqa: F401  (registers the ids)
 from sofar_env.env import SOfARRaceEnv
 from sofar_env.observation import observe
 from sofar_env.scenarios import SCENARIOS
+from sofar_env.stack.config import STACK_PRESETS
 
 TRACK_METHODS = ("to_frenet", "to_cartesian", "pose", "heading", "curvature", "width_left", "width_right", "speed",
                  "wrap", "gap", "normal")
@@ -203,8 +204,12 @@ def run_vector(args: argparse.Namespace) -> dict:
 
 
 def _scenario_kwargs(args: argparse.Namespace) -> dict:
-    """Keyword arguments selecting the world: none for the paper world (so older revisions run too)."""
-    return {} if args.scenario == "paper" else {"scenario": args.scenario}
+    """Keyword arguments selecting the world and the controller: none for the paper world and the default
+    controller (so older revisions run too)."""
+    kwargs = {} if args.scenario == "paper" else {"scenario": args.scenario}
+    if getattr(args, "stack", "sofar") != "sofar":
+        kwargs["stack"] = args.stack
+    return kwargs
 
 
 def reference_workload_ms(repeats: int = 5) -> float:
@@ -258,6 +263,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--scenario", default="paper", choices=SCENARIOS,
                         help="the world: paper (default, SOfAR-<Track>-v0) or interactive "
                              "(SOfAR-<Track>-Interactive-v0)")
+    parser.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
+                        help="the controller preset (default sofar)")
     parser.add_argument("--compare", default=None, metavar="REV",
                         help="interleaved A/B against the git revision REV instead of a plain run "
                              "(each pass in a fresh subprocess; see eval/bench_compare.py)")
@@ -309,8 +316,8 @@ def main(argv: list[str] | None = None) -> dict:
         compiled = {k: 1e3 * kernels.total.get(k, 0.0) / args.steps for k in COMPILED}
 
     result = {
-        "track": args.track, "scenario": args.scenario, "rho": args.rho, "opponents": args.opponents,
-        "gamma": args.gamma,
+        "track": args.track, "scenario": args.scenario, "stack": args.stack, "rho": args.rho,
+        "opponents": args.opponents, "gamma": args.gamma,
         "steps": args.steps, "repeats": args.repeats, "steps_per_s": float(np.median(rates)),
         "steps_per_s_best": float(max(rates)), "steps_per_s_passes": [float(r) for r in rates],
         "step_ms": {"median": 1e3 * float(np.median(times)), "p95": 1e3 * float(np.percentile(times, 95)),
@@ -325,7 +332,7 @@ def main(argv: list[str] | None = None) -> dict:
     }
     if args.vector:
         result["vector"] = run_vector(args)
-    print(f"{args.track} ({args.scenario} world), {args.opponents} opponents at rho={args.rho}, "
+    print(f"{args.track} ({args.scenario} world, stack {args.stack}), {args.opponents} opponents at rho={args.rho}, "
           f"gamma={args.gamma}, {args.steps} steps")
     print(f"  {result['steps_per_s']:.0f} env steps/s median of {args.repeats} passes, best "
           f"{result['steps_per_s_best']:.0f} (passes: {', '.join(f'{r:.0f}' for r in rates)})")

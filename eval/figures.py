@@ -22,6 +22,7 @@ import numpy as np
 
 from sofar_agents import evaluation as ev
 from sofar_env.scenarios import SCENARIOS
+from sofar_env.stack.config import STACK_PRESETS
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -32,7 +33,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--out", default="results/figures", help="output folder")
     p.add_argument("--policy", default=None, help="policy checkpoint (default: the shipped one)")
     p.add_argument("--track", default="LagunaSeca")
-    p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
+    p.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
                    help="controller preset (and which shipped policy is the default)")
     p.add_argument("--scenario", default="paper", choices=SCENARIOS,
                    help="world (the shipped policy of --stack and --scenario is the default)")

@@ -5,11 +5,17 @@
     python eval/paired.py results/paper_stack/table1_episodes.csv results/paper_stack/seed21/table1_episodes.csv \
         --a adaptive --out results/paper_stack/paired.md
 
+    python eval/paired.py results/interactive_dense/end_rows/*/table1_episodes.csv --by-stack \
+        --a sofar-recover:gamma=0.05 --b sofar:gamma=0.05
+
 Each CSV is one seed set (from `eval/table.py`); the sets are pooled with their episodes kept apart.
 Strategy names are those of the CSV's `strategy` column (`adaptive`, `gamma=0.05`, ...). Without
 `--b`, A is compared with every other strategy. For each pair: the paired episodes, both success
 rates, the difference with its standard error, the episodes only one of them wins, and the two-sided
-exact McNemar p-value. No episode is run. The logic is in sofar_agents.evaluation.paired.
+exact McNemar p-value. With `--by-stack` the strategies are named `<stack>:<strategy>`, to compare
+controller presets (`eval/table.py --stack`) run on the same episodes; the CSVs are then pooled into
+one set, episodes matched by circuit, pace ratio and seed (one CSV per preset and seed set). No episode
+is run. The logic is in sofar_agents.evaluation.paired.
 """
 
 from __future__ import annotations
@@ -26,6 +32,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("csv", nargs="+", help="per-episode CSVs (table1_episodes.csv), one per seed set")
     p.add_argument("--a", default="adaptive", help="the strategy under test (default: adaptive)")
     p.add_argument("--b", nargs="+", default=None, help="strategies to compare it with (default: every other one)")
+    p.add_argument("--by-stack", action="store_true",
+                   help="name strategies <stack>:<strategy> (e.g. sofar:gamma=0.05) and pool the CSVs, to compare "
+                        "controller presets run on the same episodes")
     p.add_argument("--out", default=None, help="also write the Markdown table to this file")
     return p.parse_args(argv)
 
@@ -34,6 +43,8 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     try:
         sets = ev.read_seed_sets(args.csv)
+        if args.by_stack:  # one set: the presets' CSVs hold the same episodes, matched by their seeds
+            sets = ev.label_by_stack({" + ".join(sets): [r for rows in sets.values() for r in rows]})
         rows = ev.compare_to(sets, args.a, args.b)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -18,6 +18,7 @@ import sys
 
 from sofar_agents import evaluation as ev
 from sofar_env.scenarios import SCENARIOS
+from sofar_env.stack.config import STACK_PRESETS
 
 QUICK_DURATION = 30.0
 """Episode horizon of --quick [s]."""
@@ -47,7 +48,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--duration", type=float, default=None,
                    help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
     p.add_argument("--scenario", default="paper", choices=SCENARIOS, help="world (default paper)")
-    p.add_argument("--stack", default="sofar", choices=("sofar", "paper"), help="controller preset (default sofar)")
+    p.add_argument("--stack", default="sofar", choices=STACK_PRESETS, help="controller preset (default sofar)")
     p.add_argument("--opponents", type=int, default=None,
                    help="opponents per episode (default: the environment's 4; part of the resume key)")
     p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")

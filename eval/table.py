@@ -21,6 +21,7 @@ import sys
 
 from sofar_agents import evaluation as ev
 from sofar_env.scenarios import SCENARIOS
+from sofar_env.stack.config import STACK_PRESETS
 
 QUICK_DURATION = 30.0
 """Episode horizon of --quick [s]: long enough for a few overtakes (3-4 per episode at rho 0.5)."""
@@ -61,8 +62,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
     p.add_argument("--scenario", default="paper", choices=SCENARIOS,
                    help="world: paper (default) or interactive (opponents that race back, noisy sensing)")
-    p.add_argument("--stack", default="sofar", choices=("sofar", "paper"),
-                   help="controller preset: sofar (default) or paper (the paper's Algorithm 1 as written)")
+    p.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
+                   help="controller preset: sofar (default), paper (the paper's Algorithm 1 as written) or "
+                        "sofar-ends (sofar with the MPC bounding both ends of the car)")
     p.add_argument("--opponents", type=int, default=None,
                    help="Table I: opponents per episode (default: the environment's 4); with --multi-agent: scripted "
                         "opponents besides the controlled cars (default 0); part of the resume key")

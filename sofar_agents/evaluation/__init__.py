@@ -44,7 +44,7 @@ from sofar_agents.evaluation.interventions import (Intervention, InterventionRes
                                                    run_interventions, summarize_interventions)
 from sofar_agents.evaluation.latency import (PAPER_LATENCY_MS, format_latency, latency_stats, machine_info,
                                              measure_latency, write_json)
-from sofar_agents.evaluation.paired import PairedComparison, compare_to, format_paired, paired_comparison
+from sofar_agents.evaluation.paired import PairedComparison, compare_to, format_paired, label_by_stack, paired_comparison
 from sofar_agents.evaluation.pareto import (ParetoPoint, ParetoReport, hypervolume, pareto_front,
                                             preference_family, run_pareto, strategy_points)
 from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FULL_TABLE1_STEPS, RHOS,
@@ -88,6 +88,7 @@ __all__ = [
     "paired_comparison",
     "compare_to",
     "format_paired",
+    "label_by_stack",
     "ParetoReport",
     "hypervolume",
     "pareto_front",

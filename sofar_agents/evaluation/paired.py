@@ -23,7 +23,7 @@ from typing import Any
 
 from scipy.stats import binomtest
 
-__all__ = ["PairedComparison", "paired_comparison", "compare_to", "format_paired"]
+__all__ = ["PairedComparison", "paired_comparison", "compare_to", "format_paired", "label_by_stack"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,14 @@ class PairedComparison:
         """Two-sided exact McNemar p-value (1.0 without discordant episodes)."""
         k = self.a_only + self.b_only
         return 1.0 if k == 0 else float(binomtest(self.a_only, k, 0.5).pvalue)
+
+
+def label_by_stack(sets: Mapping[str, Iterable[Mapping[str, Any]]]) -> dict[str, list[dict[str, Any]]]:
+    """The seed sets with each row's strategy named ``<stack>:<strategy>`` (``stack`` column, ``"sofar"``
+    when empty), so that one strategy run with two controller presets on the same episodes can be compared
+    (``"sofar-recover:gamma=0.05"`` against ``"sofar:gamma=0.05"``). The rows given are not changed."""
+    return {name: [{**r, "strategy": f"{r.get('stack') or 'sofar'}:{r['strategy']}"} for r in rows]
+            for name, rows in sets.items()}
 
 
 def _episode_key(set_name: str, r: Mapping[str, Any]) -> tuple:

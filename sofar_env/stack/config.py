@@ -127,7 +127,9 @@ class StackConfig:
     so a car on a steady line is not predicted to wander, while a defensive move (1.5 m/s) is."""
     footprint_edges: bool = True
     """Give the planners the narrowest edge within the car's length, and tighten the MPC's by
-    the heading error (:mod:`sofar_env.stack.edges`)."""
+    the heading error (:mod:`sofar_env.stack.edges`). With ``mpc.track_rows = "ends"`` the MPC bounds
+    the car's ends in its QP instead (also with ``"recoverable"``), and its edges are not tightened by
+    the heading error."""
     mpc: MPCConfig = field(default_factory=MPCConfig)
     """The low-level MPC-DCBF."""
     miqp: MIQPConfig = field(default_factory=lambda: MIQPConfig(closing_decel=BarrierParams().a_brake))
@@ -164,7 +166,7 @@ class StackConfig:
                              f"got {self.parked_clearance!r}")
 
 
-STACK_PRESETS: tuple[str, ...] = ("sofar", "paper")
+STACK_PRESETS: tuple[str, ...] = ("sofar", "paper", "sofar-ends", "sofar-recover")
 """Names accepted by :func:`stack_preset` (and by the environments' ``stack=`` key)."""
 
 
@@ -190,6 +192,23 @@ def stack_preset(name: str) -> StackConfig:
       window ``|gap| < safe_lon``, as in the paper's eq. (8), without the braking-distance
       extension.
 
+    ``"sofar-ends"`` is ``"sofar"`` with the MPC bounding both ends of the car in its QP
+    (``mpc.track_rows = "ends"``) instead of tightening its edges by the heading error of the
+    previous plan. That tightening is frozen over the horizon: a car standing at an angle near an
+    edge sees its edges pulled in by ``l |sin e|`` at every stage, even at the stages where turning
+    back to the track's direction would have brought its ends in, and may find no plan that moves
+    forward (a *stall*). The end rows let the plan trade heading against offset.
+
+    ``"sofar-recover"`` is ``"sofar-ends"`` with room kept for turning back (``mpc.track_rows =
+    "recoverable"``): the front end's rows bound the largest offset it reaches while the car turns
+    back to the track's direction at full lock (:mod:`sofar_env.control.mpc.ends`). A car turned
+    towards an edge by more than 0.31 rad cannot drive forward without its front end moving further
+    out; with no reverse gear, one standing near the edge is stuck. These rows keep it out of such
+    states.
+
+    Both are candidate fixes of the stalls, measured against ``"sofar"`` in the results;
+    ``"sofar"`` stays as it is, so the tables made with it stay valid.
+
     Where the paper leaves a choice open, both presets make the same one (so the
     difference between them is only the list above): the MIQP runs every second control
     step over 76 nodes 0.15 s apart; its side windows are ``safe_lon`` = 8 m and
@@ -210,4 +229,8 @@ def stack_preset(name: str) -> StackConfig:
             return dataclasses.replace(base, follow=False, parked_pass=False, pace_prediction=False,
                                        lateral_prediction=False, footprint_edges=False,
                                        miqp=dataclasses.replace(base.miqp, closing_decel=0.0))
+        if key in ("sofar-ends", "sofar-recover"):
+            base = StackConfig()
+            rows = "ends" if key == "sofar-ends" else "recoverable"
+            return dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, track_rows=rows))
     raise ValueError(f"unknown stack preset {name!r}; valid presets: {', '.join(STACK_PRESETS)}")

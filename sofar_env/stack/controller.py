@@ -129,7 +129,9 @@ class OvertakingStack:
             cap = self.pass_or_follow.speed_cap(ego_s, s_rel, self._mpc_t, self._step)
             if cap is not None:
                 v_ref = np.minimum(v_ref, cap)
-        n_min, n_max = self.edges.for_mpc(s_abs, self._last_pred, self._mpc_t, cfg.mpc.control_dt,
+        # an MPC that bounds the car's ends itself gets the edges without the frozen-heading tightening
+        x_prev = self._last_pred if cfg.mpc.track_rows == "reference" else None
+        n_min, n_max = self.edges.for_mpc(s_abs, x_prev, self._mpc_t, cfg.mpc.control_dt,
                                           edge_relative=cfg.use_miqp and self.pass_or_follow.parked_plan)
         return MPCStageData(
             kappa=np.asarray(self.track.curvature(s_abs), float),

@@ -33,6 +33,15 @@ def test_bench_env_reports_every_pass(tmp_path):
     assert 0 <= kernels["compiled: DAQP (MIQP B&B)"] < result["breakdown_ms_per_step"]["miqp"]
 
 
+def test_bench_env_runs_a_controller_preset(tmp_path):
+    out = tmp_path / "bench.json"
+    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--steps", "10", "--repeats", "1",
+                    "--no-breakdown", "--stack", "sofar-recover", "--json", str(out)],
+                   check=True, capture_output=True, text=True, timeout=300)
+    result = json.loads(out.read_text())
+    assert result["stack"] == "sofar-recover" and result["steps_per_s"] > 0
+
+
 def test_bench_env_times_an_async_vector_env(tmp_path):
     out = tmp_path / "bench.json"
     subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--steps", "10", "--repeats", "1",

@@ -103,3 +103,26 @@ def test_cli_bad_input(tmp_path, capsys, make_args, message):
     write_episode_csv(tmp_path / "a" / "table1_episodes.csv", _rows({"adaptive": [1], "gamma=0.05": [0]}))
     assert paired_cli.main(make_args(tmp_path)) == 2
     assert message in capsys.readouterr().err
+
+
+def test_one_strategy_of_two_stacks_is_compared_by_stack_label():
+    rows = [{**r, "stack": "sofar"} for r in _rows({"gamma=0.05": [1, 0, 0, 1]})]
+    rows += [{**r, "stack": "sofar-recover"} for r in _rows({"gamma=0.05": [1, 1, 1, 1]})]
+    with pytest.raises(ValueError, match="twice"):  # unlabelled, the two presets' episodes collide
+        ev.paired_comparison({"S": rows}, "gamma=0.05", "adaptive")
+    labelled = ev.label_by_stack({"S": rows})
+    assert rows[0]["strategy"] == "gamma=0.05"  # the input is not changed
+    c = ev.paired_comparison(labelled, "sofar-recover:gamma=0.05", "sofar:gamma=0.05")
+    assert (c.n, c.a_only, c.b_only) == (4, 2, 0)
+    # an empty stack column is the default preset
+    plain = ev.label_by_stack({"S": [{**rows[0], "stack": ""}]})
+    assert plain["S"][0]["strategy"] == "sofar:gamma=0.05"
+
+
+def test_cli_by_stack_pools_one_csv_per_preset(tmp_path, capsys):
+    a, b = tmp_path / "sofar" / "table1_episodes.csv", tmp_path / "ends" / "table1_episodes.csv"
+    write_episode_csv(a, [{**r, "stack": "sofar"} for r in _rows({"gamma=0.05": [1, 0, 0]})])
+    write_episode_csv(b, [{**r, "stack": "sofar-ends"} for r in _rows({"gamma=0.05": [1, 1, 0]})])
+    assert paired_cli.main([str(a), str(b), "--by-stack", "--a", "sofar-ends:gamma=0.05", "--b", "sofar:gamma=0.05"]) == 0
+    out = capsys.readouterr().out
+    assert "sofar-ends:gamma=0.05" in out and "| 3 |" in out

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -147,3 +150,42 @@ def test_reset_forgets_the_plan_and_the_counters(tracks):
     assert stack.counters["steps"] == 0 and stack.counters["miqp_solves"] == 0
     assert not stack.following and stack.pass_or_follow.target is None
     assert stack.step(race.frenet[0], np.zeros((0, 3)), 0.5).miqp_ran
+
+
+@pytest.mark.parametrize("name, preset", [("LagunaSeca", "sofar-ends"), ("Monza", "sofar-ends"),
+                                          ("LagunaSeca", "sofar-recover"), ("Monza", "sofar-recover")])
+def test_the_end_row_presets_lap_on_the_raceline(tracks, name, preset):
+    """``stack="sofar-ends"`` / ``"sofar-recover"``: the MPC bounds both ends of the car in its QP; on an
+    empty track it drives the raceline as the default stack does."""
+    from sofar_env.stack import stack_preset
+
+    track = tracks[name]
+    race = empty_race(track)
+    stack = OvertakingStack(track, stack_preset(preset))
+    t, n, off = drive(race, stack, gamma=0.5, laps=1.0)
+    assert race.laps() >= 1.0 and not off
+    assert np.max(np.abs(n[t >= SETTLE])) <= 0.3
+    assert stack.counters["mpc_failures"] == 0
+
+
+@pytest.mark.parametrize("preset, rows", [("sofar-ends", "ends"), ("sofar-recover", "recoverable")])
+def test_the_end_row_presets_give_the_mpc_edges_without_the_frozen_heading_swing(tracks, preset, rows):
+    from sofar_env.stack import stack_preset
+
+    track = tracks["LagunaSeca"]
+    race = empty_race(track)
+    default, ends = OvertakingStack(track), OvertakingStack(track, stack_preset(preset))
+    assert ends.config.mpc.track_rows == rows and default.config.mpc.track_rows == "reference"
+    assert dataclasses.replace(ends.config, mpc=default.config.mpc) == default.config  # nothing else differs
+    for stack in (default, ends):
+        stack.step(race.frenet[0], race.opponent_frenet(0), 0.5)
+        stack._last_pred[:, 2] = 0.3  # a previous plan turned 0.3 rad from the track's direction
+    s = float(race.frenet[0, 0])
+    s_abs = s + np.asarray(ends.mpc.predicted_s(), float)
+    n_min, n_max = ends.edges(s_abs)
+    stage = ends.stage_data(s)
+    np.testing.assert_array_equal(stage.n_min, n_min)
+    np.testing.assert_array_equal(stage.n_max, n_max)
+    swing = max(default.vehicle.cg_to_front, default.vehicle.cg_to_rear) * math.sin(0.3)
+    stage = default.stage_data(s)
+    np.testing.assert_allclose(stage.n_max, default.edges(s + np.asarray(default.mpc.predicted_s(), float))[1] - swing)

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from .ends import EndOffsets
 from .model import slack_weights, tracking_weights
 from .types import MPCConfig
 
@@ -92,14 +93,22 @@ class QPStructure:
     Rows of G, stage-major: [lat up, lat low] (if ``lat``), [trk up, trk low] (if ``trk``),
     cbf_0..m-1. A structure without the lateral-acceleration (or track) rows is used only
     when its solution is verified to satisfy them (``MPCDCBF._rows_needed``).
+
+    With ``end_offsets`` (``MPCConfig.track_rows`` other than ``"reference"``) the track rows bound both
+    ends of the car, ``n + g_r(e)`` linearised at ``ebar`` (:class:`~.ends.EndOffsets`): [front up, front
+    low, rear up, rear low], each ``dn + g_r'(ebar) de`` with the stage's one track slack. The ``de``
+    entries depend on the iterate: :meth:`fill_ends` writes them and the four bounds after the assembly.
     """
 
     def __init__(self, cfg: MPCConfig, m: int, lat: bool, trk: bool, a_sp: tuple, b_sp: tuple,
-                 layout: LinearisationLayout):
+                 layout: LinearisationLayout, end_offsets: EndOffsets | None = None):
         n_h = cfg.horizon
         self.m = m
         self.lat = lat
         self.trk = trk
+        self.end_offsets = end_offsets
+        ends = trk and end_offsets is not None
+        self.ends = ends
         col = N_FIXED
         self.col_lat = col
         col += int(lat)
@@ -112,7 +121,7 @@ class QPStructure:
         self.row_lat = row
         row += 2 * int(lat)
         self.row_trk = row
-        row += 2 * int(trk)
+        row += (4 if ends else 2) * int(trk)
         self.row_cbf = row
         self.nr = nr = row + m
         iu = np.arange(n_h) * nb  # column of du_k
@@ -151,14 +160,23 @@ class QPStructure:
                 rows.append(base + self.row_lat + r_off)
                 cols.append(iu + self.col_lat)
                 src.append(np.full(n_h, sgn))
-        if trk:  # track: n of x_{k+1} and its slack
-            for r_off, sgn in ((0, lay.trk_neg), (1, lay.trk_pos)):
+        if trk:  # track: n of x_{k+1} (with ends: and e) and its slack
+            track_rows = ((0, lay.trk_neg), (1, lay.trk_pos))
+            if ends:
+                track_rows += ((2, lay.trk_neg), (3, lay.trk_pos))
+            for r_off, sgn in track_rows:
                 rows.append(base + self.row_trk + r_off)
                 cols.append(ix + 1)
                 src.append(np.full(n_h, lay.one))
                 rows.append(base + self.row_trk + r_off)
                 cols.append(iu + self.col_trk)
                 src.append(np.full(n_h, sgn))
+            if ends:  # the e entries, as placeholders (1) until fill_ends writes the slopes g_r'(ebar)
+                first_end = sum(len(r) for r in rows)
+                for r_off in range(4):
+                    rows.append(base + self.row_trk + r_off)
+                    cols.append(ix + 2)  # e of x_{k+1}
+                    src.append(np.full(n_h, lay.one))
         n_fixed = sum(len(r) for r in rows)
         slot = [np.full(n_fixed, m)]
         gam = [np.zeros(n_fixed)]
@@ -221,6 +239,10 @@ class QPStructure:
         self.a_src, self.a_fac = eq_src[perm], eq_fac[perm]
         self.G, perm = self._csc(g_rows, g_cols, self.n_in)
         self.g_src, self.g_slot, self.g_gam, self.g_fac = g_src[perm], g_slot[perm], g_gam[perm], g_fac[perm]
+        if ends:  # where the e entries of the end rows landed in G.data, row-major over (row, stage)
+            where = np.empty(len(perm), dtype=np.int64)
+            where[perm] = np.arange(len(perm))
+            self.end_pos = where[first_end + np.arange(4 * n_h)]
         # rows of the DCBF constraints (for the near-activity test)
         self.cbf_rows = (np.arange(n_h)[:, None] * nr + self.row_cbf + np.arange(m)[None, :]).ravel()
         self.backend = cfg.qp_solver
@@ -244,6 +266,18 @@ class QPStructure:
         slot_offset = np.zeros(self.m + 1, dtype=np.int64)  # entries of slot m are not DCBF entries
         slot_offset[: self.m] = 3 * act
         self.G.data[:] = flat[self.g_src + slot_offset[self.g_slot]] * (self.g_fac + (1.0 - gamma) * self.g_gam)
+
+    def fill_ends(self, e_bar: np.ndarray, trk_lo: np.ndarray, trk_hi: np.ndarray) -> None:
+        """With end rows: their ``de`` entries and their bounds, at the headings ``e_bar`` (N,) of
+        x_1..x_N; ``trk_lo``/``trk_hi`` (N,) bound ``dn`` of the reference point. Row ``r`` keeps
+        ``n + g_r(e)`` inside them: ``dn + g_r'(ebar) de`` within ``[trk_lo, trk_hi] - g_r(ebar)``."""
+        values, slopes = self.end_offsets(e_bar)
+        self.G.data[self.end_pos] = slopes.ravel()
+        r = self.row_trk
+        self.hu_buf[:, r] = trk_hi - values[0]
+        self.hl_buf[:, r + 1] = trk_lo - values[1]
+        self.hu_buf[:, r + 2] = trk_hi - values[2]
+        self.hl_buf[:, r + 3] = trk_lo - values[3]
 
     def _csc(self, rows: np.ndarray, cols: np.ndarray, n_rows: int):
         order = np.lexsort((rows, cols))  # column-major

@@ -12,6 +12,8 @@ Multiple shooting over the time grid ``t_0 = 0, t_1 = dt_0, t_k = dt_0 + (k - 1)
          a_min <= a_k <= a_max,  |delta_dot_k| <= 0.35,  |delta_k| <= 0.25,  v_k >= 0  (hard)
          |a_lat(x_k)| <= 15 + sigma^lat_k                                          (k = 1..N)
          n_min_k + margin - sigma^trk_k <= n_k <= n_max_k - margin + sigma^trk_k    (k = 1..N)
+           (with MPCConfig.track_rows = "ends": for both n_k + l sin e_k and n_k - l sin e_k,
+            l = max(l_f, l_r), the two ends of the car)
          (1 - gamma) h(x_k, o_ik) - h(x_{k+1}, o_i,k+1) <= sigma^cbf_ik  (k = 0..N-1, every slot i)
          sigma >= 0
 

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from ...vehicle import VehicleParams
+from .ends import EndOffsets
 from .layout import N_FIXED
 from .model import (DUMMY_OPPONENT, OPPONENT_ROWS, predict_opponents, slack_weights, stage_reference, track_limits,
                     tracking_weights, variable_box)
@@ -81,6 +82,7 @@ class IpoptReference:
         par = ca.vertcat(x0, kappa, ref, n_lo, n_hi, opp, gamma)
         weights = tracking_weights(cfg)
         z1, z2 = slack_weights(cfg, True, True, m)
+        ends = None if cfg.track_rows == "reference" else EndOffsets(p, recoverable=cfg.track_rows == "recoverable")
 
         blocks = [w[k * nb:(k + 1) * nb] for k in range(n_h)]
         xs = [x0] + [b[2:7] for b in blocks]
@@ -100,9 +102,20 @@ class IpoptReference:
             g.append(x - f_k)
             lbg += [0.0] * 5
             ubg += [0.0] * 5
-            g += [alat - sl, alat + sl, x[1] - st - n_hi[k], x[1] + st - n_lo[k]]
-            lbg += [-ca.inf, -p.lat_acc_max, -ca.inf, 0.0]
-            ubg += [p.lat_acc_max, ca.inf, 0.0, ca.inf]
+            g += [alat - sl, alat + sl]
+            lbg += [-ca.inf, -p.lat_acc_max]
+            ubg += [p.lat_acc_max, ca.inf]
+            # the track rows bound the reference point, or both ends of the car (rows as in the RTI's QP)
+            if ends is None:
+                g += [x[1] - st - n_hi[k], x[1] + st - n_lo[k]]
+                lbg += [-ca.inf, 0.0]
+                ubg += [0.0, ca.inf]
+            else:
+                up, lo, rear_up, rear_lo = ends.symbolic(x[2])
+                g += [x[1] + up - st - n_hi[k], x[1] + lo + st - n_lo[k],
+                      x[1] + rear_up - st - n_hi[k], x[1] + rear_lo + st - n_lo[k]]
+                lbg += [-ca.inf, 0.0, -ca.inf, 0.0]
+                ubg += [0.0, ca.inf, 0.0, ca.inf]
             for i in range(m):
                 g.append((1.0 - gamma) * h_k[i] - h_next[i] - b[9 + i])
                 lbg.append(-ca.inf)

@@ -16,7 +16,7 @@ convergence with IPOPT, for validation (:mod:`.reference`).
 QP size (PIQP backend). Constraints far from the linearisation point are left out of
 the QP and checked afterwards: the lateral-acceleration rows when ``|a_lat|`` stays 3 m/s^2
 below its bound at every stage, the track rows when ``n`` stays 0.5 m inside the
-margined edges, and each box bound (on ``a``, ``delta_dot``, ``v >= 0``, ``delta``)
+margined edges (never with ``track_rows = "ends"``: those rows are always in), and each box bound (on ``a``, ``delta_dot``, ``v >= 0``, ``delta``)
 farther than a fixed distance from the linearisation point. When the solution
 violates a left-out constraint (by more than 1e-6), the QP is solved again with it.
 A constraint that holds at the optimum of the smaller QP leaves that optimum
@@ -70,6 +70,7 @@ from ..barrier import barrier_table
 from ..codegen import CodegenInfo
 from .assembly import STATUS_INCONSISTENT, STATUS_NONFINITE, all_finite, assemble, track_rows, violated_rows
 from .backends import dcbf_margin, solve_qp
+from .ends import EndOffsets
 from .layout import N_FIXED, QPStructure
 from .linearisation import StageLinearisation
 from .model import relevant_slots, select_opponents, variable_box
@@ -119,6 +120,9 @@ class MPCDCBF:
         self.codegen_info: CodegenInfo = self._lin.codegen_info
         """How the linearisation is evaluated (compiled C or CasADi), and whether it was built now."""
         self._qp: dict[tuple, QPStructure] = {}
+        # the end rows' offsets, unless the track rows bound the reference point
+        self._end_offsets = (None if config.track_rows == "reference"
+                             else EndOffsets(vehicle, recoverable=config.track_rows == "recoverable"))
         self._box = variable_box(vehicle)  # hard bounds on (u_k, x_{k+1})
         self._u_lo = self._box[0][:2].tolist()  # the hard input bounds, as floats (_clip_input)
         self._u_hi = self._box[1][:2].tolist()
@@ -329,7 +333,8 @@ class MPCDCBF:
         qs = self._qp.get(key)
         if qs is None:
             lin = self._lin
-            qs = QPStructure(self.config, m, lat, trk, lin.a_sparsity, lin.b_sparsity, lin.layout)
+            qs = QPStructure(self.config, m, lat, trk, lin.a_sparsity, lin.b_sparsity, lin.layout,
+                             end_offsets=self._end_offsets)
             self._qp[key] = qs
         return qs
 
@@ -353,7 +358,7 @@ class MPCDCBF:
         are near (:meth:`_rows_needed`); one compiled call (:func:`.assembly.track_rows`)."""
         lat, trk = track_rows(arrays, self.config.track_margin, xbar, self._lin.alat,
                               self.vehicle.lat_acc_max - _LAT_ROWS_MARGIN, _TRK_ROWS_MARGIN, self._trk_lo, self._trk_hi)
-        self._rows_near = (lat, trk)
+        self._rows_near = (lat, trk or self._end_offsets is not None)  # the end rows are always included
 
     def _rows_violated(self, qs: QPStructure, box_dist: np.ndarray | None,
                        zz: np.ndarray) -> tuple[bool, bool, np.ndarray | None]:
@@ -383,6 +388,8 @@ class MPCDCBF:
             float(gamma), qs.G.data, lin.f, lin.alat, lin.h,
             qs.lat, qs.row_lat, self.vehicle.lat_acc_max, qs.trk, qs.row_trk, self._trk_lo, self._trk_hi, qs.row_cbf,
             qs.c_buf, qs.b_buf, qs.hl_buf, qs.hu_buf, qs.xl_buf, qs.xu_buf, self._box_lo, self._box_hi)
+        if qs.ends:
+            qs.fill_ends(xbar[1:, 2], self._trk_lo, self._trk_hi)
         return qs.data(), status
 
     def _qp_solve(self, qs: QPStructure, data, status: int) -> tuple[np.ndarray | None, int, str]:

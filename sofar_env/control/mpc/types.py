@@ -17,6 +17,9 @@ from .assembly import all_finite
 __all__ = ["MPCConfig", "MPCStageData", "MPCResult", "STATUS_SOLVED", "STATUS_FALLBACK_SHIFT",
            "STATUS_FALLBACK_BRAKE", "validate_arguments"]
 
+TRACK_ROWS = ("reference", "ends", "recoverable")
+"""The values of :attr:`MPCConfig.track_rows`."""
+
 STATUS_SOLVED = "solved"
 STATUS_FALLBACK_SHIFT = "fallback_shift"
 STATUS_FALLBACK_BRAKE = "fallback_brake"
@@ -49,6 +52,15 @@ class MPCConfig:
     track_margin: float = 1.2
     """Distance kept between the car's reference point and each track edge [m]
     (half width 0.95 m + 0.25 m buffer)."""
+    track_rows: str = "reference"
+    """What the soft track constraints bound: ``"reference"``, the reference point's offset ``n`` (the
+    paper's form; a caller may tighten the edges for the car's length, as the stack's footprint-aware
+    edges do with the heading error of the previous plan), or ``"ends"``, the offsets ``n +- l sin e`` of
+    both ends of the car (``l = max(l_f, l_r)`` of the vehicle), linearised at each iterate, so that the
+    QP sees that turning towards the track's direction brings the ends in, or ``"recoverable"``, the ends
+    with room kept for turning back to the track's direction at full lock, so that the car never stands
+    turned towards an edge it cannot drive away from (:mod:`.ends`). Both have four track rows per stage
+    instead of two and always include them."""
     max_opponents: int = 4
     """Number of opponent slots in the QP [-]."""
     opponent_range_ahead: float = 150.0
@@ -107,6 +119,8 @@ class MPCConfig:
                 raise ValueError(f"{name} must be (L1 >= 0, L2 > 0)")
         if self.track_margin < 0.0:
             raise ValueError("track_margin must be >= 0")
+        if self.track_rows not in TRACK_ROWS:
+            raise ValueError(f"track_rows must be one of {', '.join(map(repr, TRACK_ROWS))}, got {self.track_rows!r}")
         if int(self.max_opponents) != self.max_opponents or self.max_opponents < 0:
             raise ValueError("max_opponents must be a non-negative integer")
         if self.qp_solver not in ("piqp", "osqp"):
