@@ -207,7 +207,7 @@ def _scenario_kwargs(args: argparse.Namespace) -> dict:
     """Keyword arguments selecting the world and the controller: none for the paper world and the default
     controller (so older revisions run too)."""
     kwargs = {} if args.scenario == "paper" else {"scenario": args.scenario}
-    if getattr(args, "stack", "sofar") != "sofar":
+    if args.stack != "sofar":
         kwargs["stack"] = args.stack
     return kwargs
 

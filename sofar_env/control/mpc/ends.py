@@ -59,6 +59,12 @@ class EndOffsets:
         """e* [rad]: from this heading error on the front end moves out while turning back."""
         self._top = self.reach * math.sin(self.e_star)
 
+    @classmethod
+    def for_rows(cls, track_rows: str, vehicle: VehicleParams) -> EndOffsets | None:
+        """The offsets of ``MPCConfig.track_rows``: None for ``"reference"`` (the rows bound the reference
+        point), else those of ``"ends"`` or ``"recoverable"``."""
+        return None if track_rows == "reference" else cls(vehicle, recoverable=track_rows == "recoverable")
+
     def _front(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``g_up(e)`` and its slope."""
         g = self.reach * np.sin(e)

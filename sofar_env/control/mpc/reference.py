@@ -82,7 +82,7 @@ class IpoptReference:
         par = ca.vertcat(x0, kappa, ref, n_lo, n_hi, opp, gamma)
         weights = tracking_weights(cfg)
         z1, z2 = slack_weights(cfg, True, True, m)
-        ends = None if cfg.track_rows == "reference" else EndOffsets(p, recoverable=cfg.track_rows == "recoverable")
+        ends = EndOffsets.for_rows(cfg.track_rows, p)
 
         blocks = [w[k * nb:(k + 1) * nb] for k in range(n_h)]
         xs = [x0] + [b[2:7] for b in blocks]

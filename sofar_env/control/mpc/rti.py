@@ -121,8 +121,7 @@ class MPCDCBF:
         """How the linearisation is evaluated (compiled C or CasADi), and whether it was built now."""
         self._qp: dict[tuple, QPStructure] = {}
         # the end rows' offsets, unless the track rows bound the reference point
-        self._end_offsets = (None if config.track_rows == "reference"
-                             else EndOffsets(vehicle, recoverable=config.track_rows == "recoverable"))
+        self._end_offsets = EndOffsets.for_rows(config.track_rows, vehicle)
         self._box = variable_box(vehicle)  # hard bounds on (u_k, x_{k+1})
         self._u_lo = self._box[0][:2].tolist()  # the hard input bounds, as floats (_clip_input)
         self._u_hi = self._box[1][:2].tolist()
