@@ -22,7 +22,8 @@ Two passes over the same seeded episodes:
    bound in the MIQP; what is left is Python (and numpy calls on small arrays).
 
 With ``--vector N`` a third pass times a gymnasium ``AsyncVectorEnv`` of N worker
-processes (the set-up ``train/pasta.py`` uses) and reports its total env steps/s.
+processes (the set-up ``train/pasta.py`` uses: each worker pinned to a CPU of its own, unless
+``--no-pin``) and reports its total env steps/s.
 With ``--compare REV`` the script instead runs an interleaved A/B against the git revision
 ``REV`` (see :mod:`bench_compare`, next to this script): the revision is exported into a
 temporary directory, and rounds of one timed pass of the old code and one of the working
@@ -174,7 +175,9 @@ def run_vector(args: argparse.Namespace) -> dict:
     """Total env steps/s of an AsyncVectorEnv with ``args.vector`` workers, ``args.steps`` vector steps.
 
     Worker i runs the benchmark's env seeded ``args.seed + i``; episodes that end are reset by the
-    vector env (next-step autoreset), and the steps that only reset are not counted.
+    vector env (next-step autoreset), and the steps that only reset are not counted. The workers are
+    pinned to a CPU each (:mod:`sofar_env.vector`) unless ``--no-pin``, or when the package predates
+    that module (the old side of ``--compare``: its vector env never pinned).
     """
     import functools
 
@@ -183,7 +186,14 @@ def run_vector(args: argparse.Namespace) -> dict:
     n = args.vector
     factory = functools.partial(SOfARRaceEnv, track=args.track, rho=args.rho, n_opponents=args.opponents,
                                 timing_info=True, **_scenario_kwargs(args))
-    envs = gym.vector.AsyncVectorEnv([factory] * n)
+    try:
+        from sofar_env.vector import pinned_factories, worker_cpus
+    except ImportError:
+        fns, pinned = [factory] * n, False
+    else:
+        pinned = not args.no_pin and worker_cpus(n) is not None
+        fns = pinned_factories([factory] * n, pin=pinned)
+    envs = gym.vector.AsyncVectorEnv(fns)
     try:
         actions = np.full((n, 1), args.gamma, np.float32)
         envs.reset(seed=[args.seed + i for i in range(n)])
@@ -199,7 +209,7 @@ def run_vector(args: argparse.Namespace) -> dict:
         wall = time.perf_counter() - t0
     finally:
         envs.close()
-    return {"workers": n, "vector_steps": args.steps, "env_steps": counted, "wall_s": wall,
+    return {"workers": n, "pinned": pinned, "vector_steps": args.steps, "env_steps": counted, "wall_s": wall,
             "steps_per_s": counted / wall, "episodes_ended": episodes}
 
 
@@ -260,6 +270,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--vector", type=int, default=0, metavar="N",
                         help="also time a gymnasium AsyncVectorEnv of N worker processes (the training set-up) "
                              "and report its total env steps/s; 0 (default) skips it")
+    parser.add_argument("--no-pin", action="store_true",
+                        help="with --vector: leave the workers to the operating system instead of one CPU each "
+                             "(sofar_env.vector, as train/pasta.py does by default)")
     parser.add_argument("--scenario", default="paper", choices=SCENARIOS,
                         help="the world: paper (default, SOfAR-<Track>-v0) or interactive "
                              "(SOfAR-<Track>-Interactive-v0)")
@@ -354,7 +367,8 @@ def main(argv: list[str] | None = None) -> dict:
             print(f"    {name:40s} {ms:6.3f} ms  {100 * ms / result['instrumented_ms_per_step']:5.1f} %")
     if args.vector:
         vec = result["vector"]
-        print(f"  AsyncVectorEnv, {vec['workers']} workers: {vec['steps_per_s']:.0f} env steps/s in total "
+        pin = "pinned" if vec["pinned"] else "unpinned"
+        print(f"  AsyncVectorEnv, {vec['workers']} workers ({pin}): {vec['steps_per_s']:.0f} env steps/s in total "
               f"({vec['vector_steps']} vector steps, {vec['episodes_ended']} episodes ended)")
     if args.json:
         with open(args.json, "w") as fh:

@@ -17,7 +17,17 @@ This script separates the two. Each round measures, in this order:
    lock-step (send N requests, wait for N replies), without gymnasium's pickling of actions,
    shared-memory observations and info merging;
 3. ``sofar`` (unless ``--no-sofar``): ``SOfAR-LagunaSeca-v0`` (4 opponents, rho 0.5, gamma 0.5):
-   one process, then an ``AsyncVectorEnv`` of N workers, as in ``eval/bench_env.py --vector``.
+   one process, then an ``AsyncVectorEnv`` of N workers, as in ``eval/bench_env.py --vector``;
+4. ``independent``: N processes, each stepping its own env with no messages at all, at the same
+   time (they start together after their warm-up, and each stops when the first one is done), for
+   the synthetic env and for SOfAR. Their summed throughput is what N workers can give on this host
+   under any protocol: above it, no vector env can go;
+5. ``lockstep`` (SOfAR, and the synthetic env): the ``AsyncVectorEnv`` run once more with every
+   worker's env wrapped in a timer, so that the wall time of one vector step splits into its parts
+   (``perf_counter`` is the system-wide monotonic clock on Linux, so the workers' and the main
+   process's stamps compare), at the worker that ends last (the lock-step waits for it): the
+   dispatch (from the main process's ``step`` call to that worker's start), its step, and the return
+   (from its end to ``step`` returning: pickling, merging the infos, copying the observations).
 
 Each row reports env steps per second (all workers together), medians over the rounds, and the
 ratio of the vector figure to the one-process figure. If the synthetic env's ratio is already far
@@ -35,6 +45,8 @@ import time
 
 import gymnasium as gym
 import numpy as np
+
+from sofar_env.vector import async_vector_env, worker_cpus
 
 N_OBS = 12
 
@@ -89,9 +101,10 @@ def one_process(make, steps: int, seed: int = 0) -> float:
     return counted / elapsed
 
 
-def vector(make, workers: int, steps: int, seed: int = 0) -> float:
-    """Env steps/s of an ``AsyncVectorEnv`` of ``workers`` processes (steps that only reset excluded)."""
-    envs = gym.vector.AsyncVectorEnv([make] * workers)
+def vector(make, workers: int, steps: int, seed: int = 0, pin: bool = False) -> float:
+    """Env steps/s of an ``AsyncVectorEnv`` of ``workers`` processes (steps that only reset excluded); ``pin``: each
+    worker on a CPU of its own (:func:`sofar_env.vector.async_vector_env`)."""
+    envs = async_vector_env([make] * workers, pin_workers=pin)
     try:
         actions = np.full((workers, 1), 0.5, np.float32)
         envs.reset(seed=[seed + i for i in range(workers)])
@@ -141,10 +154,129 @@ def pipe(workers: int, steps: int, work_ms: float) -> float:
             p.join(timeout=10)
 
 
+def _independent_worker(make, steps: int, seed: int, ready, stop, results) -> None:
+    """One of :func:`independent`'s processes: warm up, wait for the others, step until done or told to stop."""
+    env = make()
+    env.reset(seed=seed)
+    action = np.array([0.5], np.float32)
+    for _ in range(20):
+        env.step(action)
+    ready.wait()
+    counted, t0 = 0, time.perf_counter()
+    while counted < steps and not stop.is_set():
+        _, _, terminated, truncated, _ = env.step(action)
+        counted += 1
+        if terminated or truncated:
+            env.reset()
+    elapsed = time.perf_counter() - t0
+    stop.set()  # the overlap ends with the first process done: the others would then run alone
+    results.put(counted / elapsed)
+    env.close()
+
+
+def independent(make, workers: int, steps: int, seed: int = 0) -> float:
+    """Summed env steps/s of ``workers`` processes each stepping its own env at the same time, with no messages
+    between them (module docstring, item 4)."""
+    ctx = mp.get_context("spawn")
+    ready, stop, results = ctx.Barrier(workers), ctx.Event(), ctx.Queue()
+    procs = [ctx.Process(target=_independent_worker, args=(make, steps, seed + i, ready, stop, results), daemon=True)
+             for i in range(workers)]
+    for p in procs:
+        p.start()
+    try:
+        rates = [results.get(timeout=600) for _ in range(workers)]
+    finally:
+        for p in procs:
+            p.join(timeout=30)
+    return float(sum(rates))
+
+
+class StepTimer(gym.Wrapper):
+    """Records ``perf_counter`` stamps around every ``step`` and ``reset`` of the env it wraps (for :func:`lockstep`)."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        self.stamps: list[tuple[float, float]] = []
+
+    def step(self, action):
+        t0 = time.perf_counter()
+        out = self.env.step(action)
+        self.stamps.append((t0, time.perf_counter()))
+        return out
+
+    def reset(self, **kwargs):
+        t0 = time.perf_counter()
+        out = self.env.reset(**kwargs)
+        self.stamps.append((t0, time.perf_counter()))
+        return out
+
+    def clear_stamps(self) -> None:
+        self.stamps = []
+
+    def get_stamps(self) -> np.ndarray:
+        return np.array(self.stamps, dtype=float).reshape(-1, 2)
+
+
+def _timed(make):
+    return StepTimer(make())
+
+
+def split_lockstep(calls: np.ndarray, stamps: list[np.ndarray]) -> dict:
+    """Mean parts of one vector step [ms] from the main process's (K, 2) ``step`` call/return stamps and
+    every worker's (K, 2) start/end stamps of its env's ``step`` or ``reset`` (one per vector step).
+
+    A vector step is split at the worker that ends last: ``vector_step = dispatch + last_worker_step + return``
+    (the call to that worker's start, its step, its end to the return), exactly. Also given: the mean step
+    of all workers and the mean of the slowest one's."""
+    starts = np.stack([s[:, 0] for s in stamps])  # (workers, K)
+    ends = np.stack([s[:, 1] for s in stamps])
+    work = ends - starts
+    cols = np.arange(starts.shape[1])
+    last = ends.argmax(axis=0)
+    ms = 1e3
+    return {
+        "vector_step_ms": float(np.mean(calls[:, 1] - calls[:, 0]) * ms),
+        "dispatch_ms": float(np.mean(starts[last, cols] - calls[:, 0]) * ms),
+        "last_worker_step_ms": float(np.mean(work[last, cols]) * ms),
+        "return_ms": float(np.mean(calls[:, 1] - ends[last, cols]) * ms),
+        "worker_step_ms": float(np.mean(work) * ms),
+        "slowest_worker_step_ms": float(np.mean(work.max(axis=0)) * ms),
+    }
+
+
+def lockstep(make, workers: int, steps: int, seed: int = 0, pin: bool = False) -> dict:
+    """The parts of an ``AsyncVectorEnv`` step (module docstring, item 5), means over ``steps`` vector steps [ms],
+    and the throughputs they bound: ``workers`` over the mean worker step (no waiting, no protocol) and over the
+    mean slowest worker step (the lock-step's wait, no protocol)."""
+    envs = async_vector_env([functools.partial(_timed, make)] * workers, pin_workers=pin)
+    try:
+        actions = np.full((workers, 1), 0.5, np.float32)
+        envs.reset(seed=[seed + i for i in range(workers)])
+        for _ in range(20):
+            envs.step(actions)
+        envs.call("clear_stamps")
+        calls = np.empty((steps, 2))
+        for k in range(steps):
+            calls[k, 0] = time.perf_counter()
+            envs.step(actions)
+            calls[k, 1] = time.perf_counter()
+        parts = split_lockstep(calls, list(envs.call("get_stamps")))
+    finally:
+        envs.close()
+    parts["bound_no_wait_steps_per_s"] = 1e3 * workers / parts["worker_step_ms"]
+    parts["bound_lockstep_steps_per_s"] = 1e3 * workers / parts["slowest_worker_step_ms"]
+    return parts
+
+
 def _median_row(values: list[float], singles: list[float]) -> dict:
     ratios = [v / s for v, s in zip(values, singles)]
     return {"steps_per_s": float(np.median(values)), "per_round": [float(v) for v in values],
             "ratio_to_one_process": float(np.median(ratios)), "ratio_per_round": [float(r) for r in ratios]}
+
+
+def _median_split(rounds: list[dict]) -> dict:
+    """Per key of :func:`lockstep`'s dicts, the median over the rounds (and the per-round values)."""
+    return {k: float(np.median([r[k] for r in rounds])) for k in rounds[0]} | {"per_round": rounds}
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -168,34 +300,45 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error(f"--info-keys must be >= 0, got {args.info_keys}")
 
     synthetic = functools.partial(SyntheticEnv, work_ms=args.work_ms, info_keys=args.info_keys)
-    runs: dict[str, list[float]] = {k: [] for k in ("synthetic_one", "synthetic_vector", "pipe",
-                                                    "sofar_one", "sofar_vector")}
+    envs = {"synthetic": synthetic} if args.no_sofar else {"synthetic": synthetic, "sofar": _sofar_env}
+    pins = (False, True) if worker_cpus(args.workers) is not None else (False,)
+    n, steps = args.workers, args.steps
+    rates: dict[str, list[float]] = {}
+    splits: dict[str, list[dict]] = {}
     for r in range(args.rounds):
-        runs["synthetic_one"].append(one_process(synthetic, args.steps))
-        runs["synthetic_vector"].append(vector(synthetic, args.workers, args.steps))
-        runs["pipe"].append(pipe(args.workers, args.steps, args.work_ms))
-        if not args.no_sofar:
-            runs["sofar_one"].append(one_process(_sofar_env, args.steps))
-            runs["sofar_vector"].append(vector(_sofar_env, args.workers, args.steps))
-        print(f"round {r + 1}/{args.rounds}: " + ", ".join(f"{k} {v[-1]:.0f}" for k, v in runs.items() if v),
-              flush=True)
+        for name, make in envs.items():
+            rates.setdefault(f"{name}_one_process", []).append(one_process(make, steps))
+            for pin in pins:
+                suffix = "_pinned" if pin else ""
+                rates.setdefault(f"{name}_async_vector{suffix}", []).append(vector(make, n, steps, pin=pin))
+                splits.setdefault(f"{name}_lockstep{suffix}", []).append(lockstep(make, n, steps, pin=pin))
+            if name == "synthetic":
+                rates.setdefault("synthetic_bare_pipes", []).append(pipe(n, steps, args.work_ms))
+            rates.setdefault(f"{name}_independent", []).append(independent(make, n, steps))
+        print(f"round {r + 1}/{args.rounds}: " + ", ".join(f"{k} {v[-1]:.0f}" for k, v in rates.items()), flush=True)
 
-    result = {
-        "workers": args.workers, "steps": args.steps, "rounds": args.rounds, "work_ms": args.work_ms,
-        "info_keys": args.info_keys, "cpu_count": os.cpu_count(),
-        "synthetic_one_process": _median_row(runs["synthetic_one"], runs["synthetic_one"]),
-        "synthetic_async_vector": _median_row(runs["synthetic_vector"], runs["synthetic_one"]),
-        "synthetic_bare_pipes": _median_row(runs["pipe"], runs["synthetic_one"]),
-    }
-    if not args.no_sofar:
-        result["sofar_one_process"] = _median_row(runs["sofar_one"], runs["sofar_one"])
-        result["sofar_async_vector"] = _median_row(runs["sofar_vector"], runs["sofar_one"])
-    print(f"{args.workers} workers, {args.rounds} rounds of {args.steps} steps; medians, env steps/s (ratio to one process)")
-    for name in ("synthetic_one_process", "synthetic_async_vector", "synthetic_bare_pipes",
-                 "sofar_one_process", "sofar_async_vector"):
-        if name in result:
-            row = result[name]
-            print(f"  {name:24s} {row['steps_per_s']:8.0f}  ({row['ratio_to_one_process']:.2f}x)")
+    result: dict = {"workers": n, "steps": steps, "rounds": args.rounds, "work_ms": args.work_ms,
+                    "info_keys": args.info_keys, "cpu_count": os.cpu_count(), "pinned_cpus": worker_cpus(n)}
+    for key, values in rates.items():
+        result[key] = _median_row(values, rates[key.split("_")[0] + "_one_process"])
+    for key, rounds in splits.items():
+        result[key] = _median_split(rounds)
+    print(f"{n} workers, {args.rounds} rounds of {steps} steps; medians, env steps/s (ratio to one process)")
+    for key in rates:
+        row = result[key]
+        print(f"  {key:30s} {row['steps_per_s']:8.0f}  ({row['ratio_to_one_process']:.2f}x)")
+    for name in envs:
+        if f"{name}_async_vector_pinned" in rates:
+            ratios = [p / u for p, u in zip(rates[f"{name}_async_vector_pinned"], rates[f"{name}_async_vector"])]
+            result[f"{name}_pinned_over_unpinned"] = {"median": float(np.median(ratios)), "per_round": ratios}
+            print(f"  {name}: pinned over unpinned, per round: median {np.median(ratios):.2f}x "
+                  f"[{min(ratios):.2f}, {max(ratios):.2f}]")
+    print("AsyncVectorEnv step, ms (medians of the rounds' means) = dispatch + last worker's step + return")
+    for key in splits:
+        row = result[key]
+        print(f"  {key:30s} {row['vector_step_ms']:.3f} = {row['dispatch_ms']:.3f} + {row['last_worker_step_ms']:.3f}"
+              f" + {row['return_ms']:.3f}; worker step: mean {row['worker_step_ms']:.3f}, "
+              f"slowest {row['slowest_worker_step_ms']:.3f}")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(result, fh, indent=2)

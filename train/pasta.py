@@ -68,6 +68,7 @@ from sofar_agents.pasta.rollout import make_training_env
 from sofar_agents.pasta.self_play import make_self_play_race
 from sofar_agents.pasta.training_log import (check_out, code_commit, console_line, log_update, n_objectives,
                                              objective_names)
+from sofar_env.vector import async_vector_env
 
 logger = logging.getLogger("train.pasta")
 
@@ -102,6 +103,9 @@ class Args:
     n_envs: int | None = None
     """Parallel environments (``AsyncVectorEnv`` subprocesses when > 1); default 1, or
     ``--num-workers`` with ``--backend ray``."""
+    pin_workers: bool = True
+    """Pin each ``AsyncVectorEnv`` worker to a CPU of its own (Linux, and only when there are at least as
+    many CPUs as envs): the same results, fewer stalls between lock-steps (``sofar_env.vector``)."""
     backend: str = "local"
     """Where the environments run: ``local`` (this machine's processes) or ``ray`` (Ray
     actors, each owning a slice of the envs and their solvers; the learner stays here)."""
@@ -267,7 +271,7 @@ def make_vec_env(args: Args) -> Any:
         return RayEnvPool(fns, args.num_workers, address=args.address)
     mode = gym.vector.AutoresetMode.SAME_STEP
     if args.n_envs > 1:
-        return gym.vector.AsyncVectorEnv(fns, autoreset_mode=mode)
+        return async_vector_env(fns, pin_workers=args.pin_workers, autoreset_mode=mode)
     return gym.vector.SyncVectorEnv(fns, autoreset_mode=mode)
 
 
@@ -330,6 +334,7 @@ def main(argv: list[str] | None = None) -> Path:
         "env_kwargs": env_kwargs_of(args),
         "decision_interval": args.decision_interval,
         "n_envs": args.n_envs,
+        "pin_workers": args.pin_workers,
         "backend": args.backend,
         "num_workers": args.num_workers,
         "rho": None if args.multi_agent else (args.rho_values if args.rho_values is not None

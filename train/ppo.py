@@ -47,6 +47,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 from tqdm import tqdm
 
 from sofar_agents.wrappers import RandomRhoReset, RescaleGammaAction
+from sofar_env.vector import pinned_factories
 
 logger = logging.getLogger("train.ppo")
 
@@ -65,6 +66,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="scalarisation weights (default: reference preference for 5 objectives, else ones)")
     p.add_argument("--total-steps", type=int, default=1_000_000, help="environment steps over all envs")
     p.add_argument("--n-envs", type=int, default=1, help="parallel envs (subprocesses when > 1)")
+    p.add_argument("--pin-workers", action=argparse.BooleanOptionalAction, default=True,
+                   help="pin each env subprocess to a CPU of its own (Linux, when there are at least as many CPUs "
+                        "as envs; sofar_env.vector): same results, fewer stalls between lock-steps")
     p.add_argument("--n-steps", type=int, default=2048, help="rollout length per env")
     p.add_argument("--batch-size", type=int, default=64, help="minibatch size")
     p.add_argument("--n-epochs", type=int, default=10, help="epochs per update")
@@ -174,7 +178,7 @@ def main(argv: list[str] | None = None) -> Path:
     _ensure_registered(args.env_id)
 
     fns = [make_env(args, env_kwargs) for _ in range(args.n_envs)]
-    venv: VecEnv = SubprocVecEnv(fns) if args.n_envs > 1 else DummyVecEnv(fns)
+    venv: VecEnv = SubprocVecEnv(pinned_factories(fns, args.pin_workers)) if args.n_envs > 1 else DummyVecEnv(fns)
     venv.seed(args.seed)
     if args.normalize_reward:
         if norm_path is not None:

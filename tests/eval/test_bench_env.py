@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -100,11 +101,40 @@ def test_bench_vector_reports_the_synthetic_ceiling(tmp_path):
     assert "sofar_async_vector" not in result
     one = result["synthetic_one_process"]
     assert one["ratio_to_one_process"] == 1.0 and len(one["per_round"]) == 2
-    for name in ("synthetic_async_vector", "synthetic_bare_pipes"):
+    names = ["synthetic_async_vector", "synthetic_bare_pipes", "synthetic_independent"]
+    if result["pinned_cpus"] is not None:
+        names.append("synthetic_async_vector_pinned")
+    for name in names:
         row = result[name]
         assert row["steps_per_s"] > 0 and len(row["ratio_per_round"]) == 2
         # each ratio is its round's vector figure over the same round's one-process figure
         assert row["ratio_per_round"][0] == pytest.approx(row["per_round"][0] / one["per_round"][0])
+    for rnd in result["synthetic_lockstep"]["per_round"]:
+        # the parts of a vector step add up to it, and a worker's step costs at least its burnt CPU time
+        parts = rnd["dispatch_ms"] + rnd["last_worker_step_ms"] + rnd["return_ms"]
+        assert parts == pytest.approx(rnd["vector_step_ms"])
+        assert rnd["slowest_worker_step_ms"] >= rnd["last_worker_step_ms"] >= 0.5
+        assert rnd["slowest_worker_step_ms"] >= rnd["worker_step_ms"] >= 0.5
+        assert rnd["dispatch_ms"] > 0 and rnd["return_ms"] > 0
+
+
+def test_split_lockstep_on_known_stamps():
+    sys.path.insert(0, str(ROOT / "eval"))
+    try:
+        from bench_vector import split_lockstep
+    finally:
+        sys.path.remove(str(ROOT / "eval"))
+    # two vector steps [s]: the main process calls at 0 and 10, each worker starts 1 later, works 3 or 5
+    calls = np.array([[0.0, 8.0], [10.0, 17.0]])
+    stamps = [np.array([[1.0, 4.0], [11.0, 14.0]]), np.array([[1.0, 6.0], [12.0, 15.0]])]
+    parts = split_lockstep(calls, stamps)
+    # the second worker ends last in both steps: it starts 1 and 2 after the call, works 5 and 3
+    assert parts["vector_step_ms"] == pytest.approx(7.5e3)
+    assert parts["dispatch_ms"] == pytest.approx(1.5e3)
+    assert parts["last_worker_step_ms"] == pytest.approx(4e3)
+    assert parts["return_ms"] == pytest.approx(2e3)  # (8 - 6 + 17 - 15) / 2
+    assert parts["worker_step_ms"] == pytest.approx(3.5e3)
+    assert parts["slowest_worker_step_ms"] == pytest.approx(4e3)  # (5 + 3) / 2
 
 
 def test_synthetic_env_burns_the_cpu_time_it_is_given():
