@@ -82,22 +82,26 @@ def _sofar_env():
     return SOfARRaceEnv(track="LagunaSeca", rho=0.5, n_opponents=4)
 
 
-def one_process(make, steps: int, seed: int = 0) -> float:
-    """Env steps/s of one env stepped in this process (resets excluded from the count)."""
+def one_process(make, steps: int, seed: int = 0, cpu_ms: list | None = None) -> float:
+    """Env steps/s of one env stepped in this process (resets excluded from the count); the mean CPU time of a
+    step [ms] is appended to ``cpu_ms`` if given."""
     env = make()
     env.reset(seed=seed)
     action = np.array([0.5], np.float32)
     for _ in range(20):  # warm-up (SOfAR builds and loads its controllers)
         env.step(action)
-    counted, elapsed = 0, 0.0
+    counted, elapsed, cpu = 0, 0.0, 0.0
     for _ in range(steps):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         _, _, terminated, truncated, _ = env.step(action)
+        cpu += time.thread_time() - c0
         elapsed += time.perf_counter() - t0
         counted += 1
         if terminated or truncated:
             env.reset()
     env.close()
+    if cpu_ms is not None:
+        cpu_ms.append(1e3 * cpu / counted)
     return counted / elapsed
 
 
@@ -192,29 +196,31 @@ def independent(make, workers: int, steps: int, seed: int = 0) -> float:
 
 
 class StepTimer(gym.Wrapper):
-    """Records ``perf_counter`` stamps around every ``step`` and ``reset`` of the env it wraps (for :func:`lockstep`)."""
+    """Records, for every ``step`` and ``reset`` of the env it wraps, the ``perf_counter`` stamps around it and
+    the CPU time this thread spent in it (for :func:`lockstep`)."""
 
     def __init__(self, env: gym.Env):
         super().__init__(env)
-        self.stamps: list[tuple[float, float]] = []
+        self.stamps: list[tuple[float, float, float]] = []
+
+    def _timed_call(self, fn, *args, **kwargs):
+        t0, c0 = time.perf_counter(), time.thread_time()
+        out = fn(*args, **kwargs)
+        c1, t1 = time.thread_time(), time.perf_counter()
+        self.stamps.append((t0, t1, c1 - c0))
+        return out
 
     def step(self, action):
-        t0 = time.perf_counter()
-        out = self.env.step(action)
-        self.stamps.append((t0, time.perf_counter()))
-        return out
+        return self._timed_call(self.env.step, action)
 
     def reset(self, **kwargs):
-        t0 = time.perf_counter()
-        out = self.env.reset(**kwargs)
-        self.stamps.append((t0, time.perf_counter()))
-        return out
+        return self._timed_call(self.env.reset, **kwargs)
 
     def clear_stamps(self) -> None:
         self.stamps = []
 
     def get_stamps(self) -> np.ndarray:
-        return np.array(self.stamps, dtype=float).reshape(-1, 2)
+        return np.array(self.stamps, dtype=float).reshape(-1, 3)
 
 
 def _timed(make):
@@ -223,11 +229,13 @@ def _timed(make):
 
 def split_lockstep(calls: np.ndarray, stamps: list[np.ndarray]) -> dict:
     """Mean parts of one vector step [ms] from the main process's (K, 2) ``step`` call/return stamps and
-    every worker's (K, 2) start/end stamps of its env's ``step`` or ``reset`` (one per vector step).
+    every worker's (K, 2) start/end stamps of its env's ``step`` or ``reset`` (one per vector step), or (K, 3)
+    with the CPU time the worker's thread spent in it as third column.
 
     A vector step is split at the worker that ends last: ``vector_step = dispatch + last_worker_step + return``
     (the call to that worker's start, its step, its end to the return), exactly. Also given: the mean step
-    of all workers and the mean of the slowest one's."""
+    of all workers and the mean of the slowest one's, and with CPU times, their mean (``worker_cpu_ms``): a
+    step whose wall time exceeds its CPU time waited for a CPU; one whose CPU time grew ran slower."""
     starts = np.stack([s[:, 0] for s in stamps])  # (workers, K)
     ends = np.stack([s[:, 1] for s in stamps])
     work = ends - starts
@@ -241,7 +249,7 @@ def split_lockstep(calls: np.ndarray, stamps: list[np.ndarray]) -> dict:
         "return_ms": float(np.mean(calls[:, 1] - ends[last, cols]) * ms),
         "worker_step_ms": float(np.mean(work) * ms),
         "slowest_worker_step_ms": float(np.mean(work.max(axis=0)) * ms),
-    }
+    } | ({"worker_cpu_ms": float(np.mean([s[:, 2] for s in stamps]) * ms)} if stamps[0].shape[1] > 2 else {})
 
 
 def lockstep(make, workers: int, steps: int, seed: int = 0, pin: bool = False) -> dict:
@@ -304,10 +312,12 @@ def main(argv: list[str] | None = None) -> dict:
     pins = (False, True) if worker_cpus(args.workers) is not None else (False,)
     n, steps = args.workers, args.steps
     rates: dict[str, list[float]] = {}
+    cpu_one: dict[str, list[float]] = {}  # CPU time of a step in one process [ms], per round
     splits: dict[str, list[dict]] = {}
     for r in range(args.rounds):
         for name, make in envs.items():
-            rates.setdefault(f"{name}_one_process", []).append(one_process(make, steps))
+            rates.setdefault(f"{name}_one_process", []).append(
+                one_process(make, steps, cpu_ms=cpu_one.setdefault(name, [])))
             for pin in pins:
                 suffix = "_pinned" if pin else ""
                 rates.setdefault(f"{name}_async_vector{suffix}", []).append(vector(make, n, steps, pin=pin))
@@ -321,6 +331,8 @@ def main(argv: list[str] | None = None) -> dict:
                     "info_keys": args.info_keys, "cpu_count": os.cpu_count(), "pinned_cpus": worker_cpus(n)}
     for key, values in rates.items():
         result[key] = _median_row(values, rates[key.split("_")[0] + "_one_process"])
+    for name, values in cpu_one.items():
+        result[f"{name}_one_process"]["cpu_ms_per_step"] = float(np.median(values))
     for key, rounds in splits.items():
         result[key] = _median_split(rounds)
     print(f"{n} workers, {args.rounds} rounds of {steps} steps; medians, env steps/s (ratio to one process)")
@@ -333,12 +345,14 @@ def main(argv: list[str] | None = None) -> dict:
             result[f"{name}_pinned_over_unpinned"] = {"median": float(np.median(ratios)), "per_round": ratios}
             print(f"  {name}: pinned over unpinned, per round: median {np.median(ratios):.2f}x "
                   f"[{min(ratios):.2f}, {max(ratios):.2f}]")
-    print("AsyncVectorEnv step, ms (medians of the rounds' means) = dispatch + last worker's step + return")
+    print("AsyncVectorEnv step, ms (medians of the rounds' means) = dispatch + last worker's step + return; "
+          "one process: " + ", ".join(f"{name} {result[f'{name}_one_process']['cpu_ms_per_step']:.3f} ms of CPU per step"
+                                      for name in envs))
     for key in splits:
         row = result[key]
         print(f"  {key:30s} {row['vector_step_ms']:.3f} = {row['dispatch_ms']:.3f} + {row['last_worker_step_ms']:.3f}"
-              f" + {row['return_ms']:.3f}; worker step: mean {row['worker_step_ms']:.3f}, "
-              f"slowest {row['slowest_worker_step_ms']:.3f}")
+              f" + {row['return_ms']:.3f}; worker step: mean {row['worker_step_ms']:.3f} "
+              f"(CPU {row['worker_cpu_ms']:.3f}), slowest {row['slowest_worker_step_ms']:.3f}")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(result, fh, indent=2)

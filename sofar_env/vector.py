@@ -9,8 +9,9 @@ caches; it also has to find an idle CPU for it first, while the main process is 
 worker ``i`` to CPU ``i`` (``os.sched_setaffinity``) removes both. On a 2-core virtual machine,
 ``eval/bench_vector.py`` measured, for two workers running ``SOfAR-LagunaSeca-v0`` (10 rounds, medians),
 that the time from the main process's ``step`` call to the start of the worker waited for falls from 0.38
-to 0.17 ms, and the vector env's throughput rises by 1.23x (per round 1.01x to 1.33x). Pinning changes
-where the workers run, never what they compute: seeded results are the same.
+to 0.17 ms, and the vector env's throughput rises by 1.23x (per round 1.01x to 1.33x; in
+``eval/bench_env.py --vector``, whose passes run in separate processes, the gain was within the noise).
+Pinning changes where the workers run, never what they compute: seeded results are the same.
 
 A worker is pinned only where the platform can (Linux: ``os.sched_setaffinity``) and only when there are
 at least as many CPUs available to this process as workers; otherwise the workers are left to the

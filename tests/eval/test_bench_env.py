@@ -116,6 +116,7 @@ def test_bench_vector_reports_the_synthetic_ceiling(tmp_path):
         assert rnd["slowest_worker_step_ms"] >= rnd["last_worker_step_ms"] >= 0.5
         assert rnd["slowest_worker_step_ms"] >= rnd["worker_step_ms"] >= 0.5
         assert rnd["dispatch_ms"] > 0 and rnd["return_ms"] > 0
+        assert 0.5 <= rnd["worker_cpu_ms"] <= rnd["worker_step_ms"] + 0.05  # the burnt CPU time, within the wall time
 
 
 def test_split_lockstep_on_known_stamps():
@@ -135,6 +136,10 @@ def test_split_lockstep_on_known_stamps():
     assert parts["return_ms"] == pytest.approx(2e3)  # (8 - 6 + 17 - 15) / 2
     assert parts["worker_step_ms"] == pytest.approx(3.5e3)
     assert parts["slowest_worker_step_ms"] == pytest.approx(4e3)  # (5 + 3) / 2
+    assert "worker_cpu_ms" not in parts  # no CPU times given
+    with_cpu = split_lockstep(calls, [np.column_stack([s, [2.0, 3.0]]) for s in stamps])
+    assert with_cpu["worker_cpu_ms"] == pytest.approx(2.5e3)
+    assert {k: v for k, v in with_cpu.items() if k != "worker_cpu_ms"} == parts
 
 
 def test_synthetic_env_burns_the_cpu_time_it_is_given():
