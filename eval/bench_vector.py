@@ -49,6 +49,8 @@ import numpy as np
 from sofar_env.vector import async_vector_env, worker_cpus
 
 N_OBS = 12
+ACTION = np.array([0.5], np.float32)
+"""The action of every single-env pass: gamma 0.5."""
 
 
 def burn(work_s: float) -> None:
@@ -82,23 +84,35 @@ def _sofar_env():
     return SOfARRaceEnv(track="LagunaSeca", rho=0.5, n_opponents=4)
 
 
-def one_process(make, steps: int, seed: int = 0, cpu_ms: list | None = None) -> float:
-    """Env steps/s of one env stepped in this process (resets excluded from the count); the mean CPU time of a
-    step [ms] is appended to ``cpu_ms`` if given."""
+def _warmed_up(make, seed: int):
+    """A new env of ``make``, reset with ``seed`` and stepped 20 times (SOfAR builds and loads its controllers)."""
     env = make()
     env.reset(seed=seed)
-    action = np.array([0.5], np.float32)
-    for _ in range(20):  # warm-up (SOfAR builds and loads its controllers)
-        env.step(action)
+    for _ in range(20):
+        env.step(ACTION)
+    return env
+
+
+def _time_steps(env, steps: int, stop=None) -> tuple[int, float, float]:
+    """Steps ``env`` ``steps`` times (or until ``stop`` is set), resetting it when an episode ends; returns the steps
+    made, their wall time and their CPU time [s] (resets excluded)."""
     counted, elapsed, cpu = 0, 0.0, 0.0
-    for _ in range(steps):
+    while counted < steps and not (stop is not None and stop.is_set()):
         t0, c0 = time.perf_counter(), time.thread_time()
-        _, _, terminated, truncated, _ = env.step(action)
+        _, _, terminated, truncated, _ = env.step(ACTION)
         cpu += time.thread_time() - c0
         elapsed += time.perf_counter() - t0
         counted += 1
         if terminated or truncated:
             env.reset()
+    return counted, elapsed, cpu
+
+
+def one_process(make, steps: int, seed: int = 0, cpu_ms: list | None = None) -> float:
+    """Env steps/s of one env stepped in this process (resets excluded from the count); the mean CPU time of a
+    step [ms] is appended to ``cpu_ms`` if given."""
+    env = _warmed_up(make, seed)
+    counted, elapsed, cpu = _time_steps(env, steps)
     env.close()
     if cpu_ms is not None:
         cpu_ms.append(1e3 * cpu / counted)
@@ -160,19 +174,9 @@ def pipe(workers: int, steps: int, work_ms: float) -> float:
 
 def _independent_worker(make, steps: int, seed: int, ready, stop, results) -> None:
     """One of :func:`independent`'s processes: warm up, wait for the others, step until done or told to stop."""
-    env = make()
-    env.reset(seed=seed)
-    action = np.array([0.5], np.float32)
-    for _ in range(20):
-        env.step(action)
+    env = _warmed_up(make, seed)
     ready.wait()
-    counted, t0 = 0, time.perf_counter()
-    while counted < steps and not stop.is_set():
-        _, _, terminated, truncated, _ = env.step(action)
-        counted += 1
-        if terminated or truncated:
-            env.reset()
-    elapsed = time.perf_counter() - t0
+    counted, elapsed, _ = _time_steps(env, steps, stop)
     stop.set()  # the overlap ends with the first process done: the others would then run alone
     results.put(counted / elapsed)
     env.close()
