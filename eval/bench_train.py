@@ -1,8 +1,9 @@
-"""Training throughput A/B: wall time of a short PASTA run with two workers, the working tree against a revision.
+"""Training throughput: a short PASTA run with two workers, the working tree against a revision or backend against backend.
 
 Usage::
 
     python eval/bench_train.py --compare REV [--rounds 3] [--json PATH]
+    python eval/bench_train.py --backends one-process local processes [ray] [--rounds 3] [--json PATH]
 
 The revision is exported as in ``eval/bench_env.py --compare`` (:mod:`bench_compare`). Each
 round runs, in a fresh process per side and in alternating order, the side's own::
@@ -13,6 +14,23 @@ round runs, in a fresh process per side and in alternating order, the side's own
 and records its wall time (start-up, environment workers and PPO updates included). Reported:
 the median and range of the wall times per side, the env steps per second they imply
 (4096 / wall time) and the ratio of the medians.
+
+With ``--backends`` the working tree's training runs with each named set-up in turn (the order rotates
+every round), on episodes of the default length (200 s) and longer rollouts::
+
+    python train/pasta.py --total-steps 8192 --seed 1 --no-progress --force --n-envs 2 --n-steps 1024 \\
+        --backend B --out <temporary dir>
+
+with ``B`` one of ``local``, ``processes`` and ``ray``; the set-up ``one-process`` is ``--n-envs 1 --n-steps
+2048 --backend local`` (the env stepped in the learner's process: the reference for "N workers against one
+process").
+
+Besides the wall time (which includes each backend's start-up: Ray's is several seconds), the
+collection throughput is read from the run's TensorBoard log: env steps collected over the time
+spent collecting (``time/collect_s``, policy evaluation included, PPO updates and start-up left
+out). Reported per set-up: medians and ranges, and each set-up's per-round ratio to the first.
+The three backends give the same checkpoints, so only their times differ (``one-process`` trains on
+one env, so its run differs).
 """
 
 from __future__ import annotations
@@ -47,14 +65,93 @@ def time_training(tree: Path, out: Path) -> float:
     return wall
 
 
+BACKEND_STEPS = 8192
+BACKEND_ARGS = ["--total-steps", str(BACKEND_STEPS), "--seed", "1", "--no-progress", "--force"]
+BACKENDS = {"one-process": ["--n-envs", "1", "--n-steps", "2048", "--backend", "local"],
+            "local": ["--n-envs", "2", "--n-steps", "1024", "--backend", "local"],
+            "processes": ["--n-envs", "2", "--n-steps", "1024", "--backend", "processes"],
+            "ray": ["--n-envs", "2", "--n-steps", "1024", "--backend", "ray"]}
+"""The set-ups of ``--backends``: two envs on each backend of ``train/pasta.py``, and ``one-process``, one env
+stepped in the learner's process (rollouts of the same 2048 steps)."""
+
+
+def collect_time(out: Path) -> float:
+    """Seconds the run in ``out`` spent collecting rollouts (the sum of its ``time/collect_s`` scalars)."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    files = sorted(out.glob("tb/**/events.out.tfevents.*"))
+    if not files:
+        raise RuntimeError(f"no TensorBoard log under {out}")
+    acc = EventAccumulator(str(files[0]), size_guidance={"scalars": 0})
+    acc.Reload()
+    return float(sum(e.value for e in acc.Scalars("time/collect_s")))
+
+
+def time_backend(tree: Path, backend: str, out: Path) -> dict:
+    """Wall and collection time of :data:`BACKEND_ARGS` with the set-up ``backend`` of :data:`BACKENDS`."""
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "train/pasta.py", *BACKEND_ARGS, *BACKENDS[backend], "--out", str(out)],
+                          cwd=str(tree), env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True, text=True,
+                          check=False)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"training with {' '.join(BACKENDS[backend])} failed:\n{proc.stderr[-4000:]}")
+    return {"wall_s": wall, "collect_s": collect_time(out)}
+
+
+def compare_backends(backends: list[str], rounds: int) -> dict:
+    """Rounds of one run per backend (the order rotating), and the summary described in the module docstring."""
+    import tempfile
+
+    tree = Path(_git(_HERE, "rev-parse", "--show-toplevel"))
+    runs: dict[str, list[dict]] = {b: [] for b in backends}
+    with tempfile.TemporaryDirectory() as scratch:
+        for r in range(rounds):
+            order = backends[r % len(backends):] + backends[:r % len(backends)]
+            for b in order:
+                runs[b].append(time_backend(tree, b, Path(scratch) / f"{b}_{r}"))
+            print(f"  round {r + 1}: " + ", ".join(
+                f"{b} {BACKEND_STEPS / runs[b][-1]['collect_s']:.0f} steps/s collecting ({runs[b][-1]['wall_s']:.1f} s)"
+                for b in backends), flush=True)
+    first = backends[0]
+    result = {"command": {b: "python train/pasta.py " + " ".join(BACKEND_ARGS + BACKENDS[b]) + " --out DIR"
+                          for b in backends},
+              "rounds": rounds, "commit": _git(tree, "rev-parse", "HEAD"), "cpu_count": os.cpu_count(), "backends": {}}
+    for b in backends:
+        sps = [BACKEND_STEPS / x["collect_s"] for x in runs[b]]
+        ratio = [s / (BACKEND_STEPS / f["collect_s"]) for s, f in zip(sps, runs[first])]
+        result["backends"][b] = {"wall_s": _summary([x["wall_s"] for x in runs[b]]),
+                                 "collect_s": _summary([x["collect_s"] for x in runs[b]]),
+                                 "collect_env_steps_per_s": _summary(sps),
+                                 f"per_round_ratio_to_{first}": _summary(ratio)}
+        m = result["backends"][b]
+        print(f"  {b}: {m['collect_env_steps_per_s']['median']:.0f} env steps/s collecting (median), "
+              f"{m[f'per_round_ratio_to_{first}']['median']:.2f}x {first} per round "
+              f"[{m[f'per_round_ratio_to_{first}']['min']:.2f}, {m[f'per_round_ratio_to_{first}']['max']:.2f}]; "
+              f"wall {m['wall_s']['median']:.1f} s")
+    return result
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--compare", required=True, metavar="REV", help="git revision to compare against")
+    mode = parser.add_mutually_exclusive_group(required=True)
+    mode.add_argument("--compare", metavar="REV", help="git revision to compare against")
+    mode.add_argument("--backends", nargs="+", metavar="B",
+                      help="compare these set-ups instead: one-process, local, processes, ray (module docstring)")
     parser.add_argument("--rounds", type=int, default=3, help="rounds of one run per side, alternating (default 3)")
     parser.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error("--rounds must be >= 1")
+    if args.backends is not None:
+        unknown = [b for b in args.backends if b not in BACKENDS]
+        if unknown or len(set(args.backends)) != len(args.backends) or len(args.backends) < 2:
+            parser.error(f"--backends takes two or more distinct values of {', '.join(BACKENDS)}; got {args.backends}")
+        result = compare_backends(args.backends, args.rounds)
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(result, fh, indent=2)
+        return result
     repo = Path(_git(_HERE, "rev-parse", "--show-toplevel"))
     old_commit, walls = interleave(repo, args.compare, args.rounds,
                                    lambda side, tree, scratch, r: time_training(tree, scratch / f"run_{side}_{r}"),

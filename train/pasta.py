@@ -6,9 +6,10 @@ Usage (from the repository root, with the package installed)::
     python train/pasta.py --stack paper                     # with the paper's Algorithm 1 as controller
     python train/pasta.py --scenario interactive            # in the interactive world
     python train/pasta.py --quick                           # a few-minute run that finishes episodes
-    python train/pasta.py --n-envs 2 --total-steps 800000 --out runs/pasta_ls
+    python train/pasta.py --n-envs 2 --total-steps 800000 --out runs/pasta_ls   # 2 worker processes
     python train/pasta.py --resume runs/pasta_ls/pasta_final.json --total-steps 1200000 \
         --out runs/pasta_ls --force                         # continue in place
+    python train/pasta.py --n-envs 2 --backend local         # gymnasium's AsyncVectorEnv (lock-step) instead
     python train/pasta.py --backend ray --num-workers 4     # envs in Ray actors (pip install "sofar[ray]")
     python train/pasta.py --backend ray --address auto --num-workers 16 --n-envs 16   # on a Ray cluster
     python train/pasta.py --multi-agent --cars 4            # self-play: one shared policy drives 4 cars of a race
@@ -36,9 +37,13 @@ cars, ``--n-envs`` races): every car is one slot of the vector env
 ends for all its cars when one car terminates. There is no rho (the opponents are the other
 controlled cars, each with a speed factor drawn per race). Local backend only.
 
-``--backend ray`` runs the environments (and their solvers) in ``--num-workers`` Ray
-actors, the learner in this process; a seeded run gives the same checkpoints as the
-local backend with the same ``--n-envs`` (see :mod:`sofar_agents.pasta.ray_rollout`).
+With ``--n-envs`` above 1 the environments (and their solvers) run in ``--num-workers`` worker
+processes of this machine (``--backend processes``, the default then), or in Ray actors
+(``--backend ray``); each worker holds a copy of the policy and steps its envs without waiting
+for the others at every step, the learner stays in this process. ``--backend local`` steps them
+in a gymnasium ``AsyncVectorEnv`` instead (every worker one step, then a wait for all). A seeded
+run gives the same checkpoints on every backend with the same ``--n-envs`` (see
+:mod:`sofar_agents.pasta.actor_pool`); the backends differ only in speed.
 """
 
 from __future__ import annotations
@@ -82,6 +87,8 @@ QUICK_PASTA = {"n_steps": 512, "n_epochs": 4}
 """PASTA hyper-parameters of ``--quick``."""
 QUICK_EPISODE_S = 30.0
 """Episode length of ``--quick`` in simulated seconds (``race.duration``; default 200 s)."""
+BACKENDS = ("local", "processes", "ray")
+"""Values of ``--backend`` (see :attr:`Args.backend`)."""
 
 
 @dataclass
@@ -102,15 +109,20 @@ class Args:
     """Environment steps to train for, counted over all envs (including resumed steps)."""
     n_envs: int | None = None
     """Parallel environments (``AsyncVectorEnv`` subprocesses when > 1); default 1, or
-    ``--num-workers`` with ``--backend ray``."""
+    ``--num-workers`` with ``--backend processes`` or ``ray``."""
     pin_workers: bool = True
-    """Pin each ``AsyncVectorEnv`` worker to a CPU of its own (Linux, and only when there are at least as
-    many CPUs as envs): the same results, fewer stalls between lock-steps (``sofar_env.vector``)."""
-    backend: str = "local"
-    """Where the environments run: ``local`` (this machine's processes) or ``ray`` (Ray
-    actors, each owning a slice of the envs and their solvers; the learner stays here)."""
+    """Pin each worker (of the ``AsyncVectorEnv``, or of ``--backend processes``) to a CPU of its own (Linux,
+    and only when there are at least as many CPUs as workers): the same results, fewer stalls between lock-steps
+    (``sofar_env.vector``)."""
+    backend: str | None = None
+    """Where the environments run: ``local`` (in this process with one env; a gymnasium ``AsyncVectorEnv``
+    with several: every worker steps once, then waits for the others), ``processes`` (worker processes on
+    this machine, each owning a slice of the envs, their solvers and a copy of the policy, stepping in chunks
+    without a per-step barrier) or ``ray`` (the same in Ray actors, on this machine or a cluster); the learner
+    stays here. Default: ``processes`` with more than one env or with ``--num-workers``, else ``local``
+    (always ``local`` with ``--multi-agent``). Every backend gives the same checkpoints."""
     num_workers: int | None = None
-    """Ray actors with ``--backend ray`` (one CPU each; default: one per env)."""
+    """Workers with ``--backend processes`` or ``ray`` (one CPU each; default: one per env)."""
     address: str | None = None
     """Ray cluster to join with ``--backend ray``: ``auto`` or ``HOST:PORT`` (default:
     start a private local Ray instance with ``--num-workers`` CPUs)."""
@@ -178,10 +190,15 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
     overrides = {k: v for k, v in ns.items() if k not in run_names and v is not None}
     if "hidden_sizes" in overrides:
         overrides["hidden_sizes"] = tuple(overrides["hidden_sizes"])
-    if args.backend not in ("local", "ray"):
-        parser.error(f"--backend must be 'local' or 'ray', got {args.backend!r}")
-    if args.backend == "local" and (args.num_workers is not None or args.address is not None):
-        parser.error("--num-workers and --address need --backend ray")
+    if args.backend is None:
+        several = args.num_workers is not None or (args.n_envs or 1) > 1
+        args.backend = "processes" if several and not args.multi_agent else "local"
+    if args.backend not in BACKENDS:
+        parser.error(f"--backend must be one of {', '.join(BACKENDS)}, got {args.backend!r}")
+    if args.backend == "local" and args.num_workers is not None:
+        parser.error("--num-workers needs --backend processes or ray")
+    if args.backend != "ray" and args.address is not None:
+        parser.error("--address needs --backend ray")
     if args.num_workers is not None and args.num_workers < 1:
         parser.error(f"--num-workers must be positive, got {args.num_workers}")
     if args.multi_agent and args.backend != "local":
@@ -192,7 +209,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
         args.n_envs = args.num_workers if args.num_workers is not None else 1
     if args.n_envs < 1:
         parser.error(f"--n-envs must be positive, got {args.n_envs}")
-    if args.backend == "ray":
+    if args.backend != "local":
         args.num_workers = args.num_workers if args.num_workers is not None else args.n_envs
         if args.num_workers > args.n_envs:
             parser.error(f"--num-workers {args.num_workers} exceeds --n-envs {args.n_envs} (each worker owns envs)")
@@ -252,7 +269,7 @@ def race_of(env_id: str, env_kwargs: dict[str, Any]) -> tuple[Any, dict[str, Any
 
 
 def make_vec_env(args: Args) -> Any:
-    """The training envs: a gymnasium vector env (local backend) or a :class:`RayEnvPool`."""
+    """The training envs: a gymnasium vector env (local backend), a :class:`ProcessEnvPool` or a :class:`RayEnvPool`."""
     env_kwargs = env_kwargs_of(args)
     if args.decision_interval is not None:
         env_kwargs["decision_interval"] = args.decision_interval
@@ -269,6 +286,11 @@ def make_vec_env(args: Args) -> Any:
 
         assert args.num_workers is not None
         return RayEnvPool(fns, args.num_workers, address=args.address)
+    if args.backend == "processes":
+        from sofar_agents.pasta.process_rollout import ProcessEnvPool
+
+        assert args.num_workers is not None
+        return ProcessEnvPool(fns, args.num_workers, pin_workers=args.pin_workers)
     mode = gym.vector.AutoresetMode.SAME_STEP
     if args.n_envs > 1:
         return async_vector_env(fns, pin_workers=args.pin_workers, autoreset_mode=mode)

@@ -7,8 +7,8 @@ when it has shape ``(n_envs, K)``, otherwise from ``info["reward_vector"]`` (see
 :class:`sofar_agents.wrappers.LinearReward`).
 
 A "vector env" that collects its rollouts itself (it has a ``collect_rollout(agent,
-t_steps)`` method, e.g. :class:`sofar_agents.pasta.ray_rollout.RayEnvPool`, whose envs
-live in Ray actors) is handed the whole rollout instead of being stepped here.
+t_steps)`` method, an :class:`sofar_agents.pasta.actor_pool.ActorEnvPool` whose envs live in
+worker processes or Ray actors) is handed the whole rollout instead of being stepped here.
 :func:`make_training_env` builds the training env of ``train/pasta.py`` (picklable, so
 that remote workers can build it).
 """

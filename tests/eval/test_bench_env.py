@@ -92,6 +92,37 @@ def test_bench_train_rejects_zero_rounds():
     assert proc.returncode != 0 and "--rounds" in proc.stderr
 
 
+@pytest.mark.parametrize("argv", [
+    ["--backends", "local"],                            # one backend: nothing to compare
+    ["--backends", "local", "spark"],                   # not a backend of train/pasta.py
+    ["--backends", "local", "local"],                   # the same twice
+    ["--backends", "local", "processes", "--compare", "HEAD"],  # two modes at once
+    [],                                                 # no mode
+])
+def test_bench_train_rejects_bad_backend_lists(argv):
+    proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_train.py"), *argv],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and ("--backends" in proc.stderr or "--compare" in proc.stderr)
+
+
+def test_bench_train_reads_the_collection_time_from_the_tensorboard_log(tmp_path):
+    from torch.utils.tensorboard import SummaryWriter
+
+    sys.path.insert(0, str(ROOT / "eval"))
+    try:
+        from bench_train import collect_time
+    finally:
+        sys.path.remove(str(ROOT / "eval"))
+    writer = SummaryWriter(str(tmp_path / "tb" / "run"))
+    for step, seconds in enumerate((1.5, 2.25, 0.75)):
+        writer.add_scalar("time/collect_s", seconds, step)
+        writer.add_scalar("time/update_s", 10.0, step)  # not collection
+    writer.close()
+    assert collect_time(tmp_path) == pytest.approx(4.5)
+    with pytest.raises(RuntimeError, match="no TensorBoard log"):
+        collect_time(tmp_path / "empty")
+
+
 def test_bench_vector_reports_the_synthetic_ceiling(tmp_path):
     out = tmp_path / "vector.json"
     subprocess.run([sys.executable, str(ROOT / "eval" / "bench_vector.py"), "--no-sofar", "--steps", "20",
