@@ -3,7 +3,7 @@
 Usage::
 
     python eval/bench_train.py --compare REV [--rounds 3] [--json PATH]
-    python eval/bench_train.py --backends one-process local processes [ray] [--rounds 3] [--json PATH]
+    python eval/bench_train.py --backends one-process local processes [ray] [--scenario S] [--rounds 3] [--json PATH]
 
 The revision is exported as in ``eval/bench_env.py --compare`` (:mod:`bench_compare`). Each
 round runs, in a fresh process per side and in alternating order, the side's own::
@@ -87,10 +87,12 @@ def collect_time(out: Path) -> float:
     return float(sum(e.value for e in acc.Scalars("time/collect_s")))
 
 
-def time_backend(tree: Path, backend: str, out: Path) -> dict:
-    """Wall and collection time of :data:`BACKEND_ARGS` with the set-up ``backend`` of :data:`BACKENDS`."""
+def time_backend(tree: Path, backend: str, out: Path, extra: list[str] = ()) -> dict:
+    """Wall and collection time of :data:`BACKEND_ARGS` with the set-up ``backend`` of :data:`BACKENDS` (and
+    the options ``extra``)."""
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "train/pasta.py", *BACKEND_ARGS, *BACKENDS[backend], "--out", str(out)],
+    proc = subprocess.run([sys.executable, "train/pasta.py", *BACKEND_ARGS, *BACKENDS[backend], *extra,
+                           "--out", str(out)],
                           cwd=str(tree), env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True, text=True,
                           check=False)
     wall = time.perf_counter() - t0
@@ -99,22 +101,23 @@ def time_backend(tree: Path, backend: str, out: Path) -> dict:
     return {"wall_s": wall, "collect_s": collect_time(out)}
 
 
-def compare_backends(backends: list[str], rounds: int) -> dict:
+def compare_backends(backends: list[str], rounds: int, scenario: str | None = None) -> dict:
     """Rounds of one run per backend (the order rotating), and the summary described in the module docstring."""
     import tempfile
 
     tree = Path(_git(_HERE, "rev-parse", "--show-toplevel"))
     runs: dict[str, list[dict]] = {b: [] for b in backends}
+    extra = [] if scenario is None else ["--scenario", scenario]
     with tempfile.TemporaryDirectory() as scratch:
         for r in range(rounds):
             order = backends[r % len(backends):] + backends[:r % len(backends)]
             for b in order:
-                runs[b].append(time_backend(tree, b, Path(scratch) / f"{b}_{r}"))
+                runs[b].append(time_backend(tree, b, Path(scratch) / f"{b}_{r}", extra))
             print(f"  round {r + 1}: " + ", ".join(
                 f"{b} {BACKEND_STEPS / runs[b][-1]['collect_s']:.0f} steps/s collecting ({runs[b][-1]['wall_s']:.1f} s)"
                 for b in backends), flush=True)
     first = backends[0]
-    result = {"command": {b: "python train/pasta.py " + " ".join(BACKEND_ARGS + BACKENDS[b]) + " --out DIR"
+    result = {"command": {b: "python train/pasta.py " + " ".join(BACKEND_ARGS + BACKENDS[b] + extra) + " --out DIR"
                           for b in backends},
               "rounds": rounds, "commit": _git(tree, "rev-parse", "HEAD"), "cpu_count": os.cpu_count(), "backends": {}}
     for b in backends:
@@ -139,6 +142,8 @@ def main(argv: list[str] | None = None) -> dict:
     mode.add_argument("--backends", nargs="+", metavar="B",
                       help="compare these set-ups instead: one-process, local, processes, ray (module docstring)")
     parser.add_argument("--rounds", type=int, default=3, help="rounds of one run per side, alternating (default 3)")
+    parser.add_argument("--scenario", choices=("paper", "interactive", "dynamic"), default=None,
+                        help="with --backends: the world trained in (train/pasta.py --scenario; default: its own)")
     parser.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = parser.parse_args(argv)
     if args.rounds < 1:
@@ -147,7 +152,7 @@ def main(argv: list[str] | None = None) -> dict:
         unknown = [b for b in args.backends if b not in BACKENDS]
         if unknown or len(set(args.backends)) != len(args.backends) or len(args.backends) < 2:
             parser.error(f"--backends takes two or more distinct values of {', '.join(BACKENDS)}; got {args.backends}")
-        result = compare_backends(args.backends, args.rounds)
+        result = compare_backends(args.backends, args.rounds, args.scenario)
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump(result, fh, indent=2)

@@ -53,6 +53,7 @@ import dataclasses
 import functools
 import json
 import logging
+import os
 import shlex
 import sys
 import time
@@ -122,7 +123,8 @@ class Args:
     stays here. Default: ``processes`` with more than one env or with ``--num-workers``, else ``local``
     (always ``local`` with ``--multi-agent``). Every backend gives the same checkpoints."""
     num_workers: int | None = None
-    """Workers with ``--backend processes`` or ``ray`` (one CPU each; default: one per env)."""
+    """Workers with ``--backend processes`` or ``ray`` (one CPU each; default: one per env, with ``processes``
+    at most one per CPU this process may use)."""
     address: str | None = None
     """Ray cluster to join with ``--backend ray``: ``auto`` or ``HOST:PORT`` (default:
     start a private local Ray instance with ``--num-workers`` CPUs)."""
@@ -209,14 +211,24 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
         args.n_envs = args.num_workers if args.num_workers is not None else 1
     if args.n_envs < 1:
         parser.error(f"--n-envs must be positive, got {args.n_envs}")
+    if args.num_workers is None and args.backend == "processes":
+        args.num_workers = min(args.n_envs, available_cpus())  # more workers than CPUs only add switching
+    elif args.num_workers is None and args.backend == "ray":
+        args.num_workers = args.n_envs  # a cluster's CPUs are not this machine's
     if args.backend != "local":
-        args.num_workers = args.num_workers if args.num_workers is not None else args.n_envs
         if args.num_workers > args.n_envs:
             parser.error(f"--num-workers {args.num_workers} exceeds --n-envs {args.n_envs} (each worker owns envs)")
     return args, overrides
 
 
 # ---------------------------------------------------------------------------- environments
+
+
+def available_cpus() -> int:
+    """CPUs this process may run on (its affinity set where the platform tells it, else the CPU count)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def ensure_registered(env_id: str) -> None:

@@ -90,9 +90,23 @@ def test_bad_backend_options_are_refused(capsys):
     (["--n-envs", "2"], "processes", 2, 2),                   # several: worker processes
     (["--num-workers", "2"], "processes", 2, 2),
     (["--n-envs", "4", "--num-workers", "2"], "processes", 4, 2),
+    (["--n-envs", "4", "--num-workers", "3"], "processes", 4, 3),
     (["--n-envs", "2", "--multi-agent"], "local", 2, None),   # self-play races: the vector env of races
     (["--n-envs", "2", "--backend", "local"], "local", 2, None),
 ])
-def test_the_default_backend_is_worker_processes_for_several_envs(argv, backend, n_envs, num_workers):
-    args, _ = _script().parse_args(argv)
+def test_the_default_backend_is_worker_processes_for_several_envs(argv, backend, n_envs, num_workers, monkeypatch):
+    script = _script()
+    monkeypatch.setattr(script, "available_cpus", lambda: 2)
+    args, _ = script.parse_args(argv)
     assert (args.backend, args.n_envs, args.num_workers) == (backend, n_envs, num_workers)
+
+
+@pytest.mark.parametrize(("argv", "num_workers"), [
+    (["--n-envs", "8"], 2),                                   # worker processes: at most one per CPU
+    (["--n-envs", "8", "--backend", "ray"], 8),               # Ray: one per env (a cluster has its own CPUs)
+    (["--n-envs", "8", "--num-workers", "4"], 4),             # asked for
+])
+def test_worker_processes_default_to_one_per_cpu(argv, num_workers, monkeypatch):
+    script = _script()
+    monkeypatch.setattr(script, "available_cpus", lambda: 2)
+    assert script.parse_args(argv)[0].num_workers == num_workers
