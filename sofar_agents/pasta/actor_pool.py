@@ -35,6 +35,7 @@ the pool: the other actors are mid-rollout with calls unanswered.
 
 from __future__ import annotations
 
+import abc
 import itertools
 import logging
 import warnings
@@ -145,7 +146,7 @@ class EnvSlice:
         return chunk
 
 
-class ActorEnvPool:
+class ActorEnvPool(abc.ABC):
     """``n_envs`` training envs in actors, used by :meth:`PASTA.learn` like a vector env (module docstring).
 
     A subclass starts the actors (each an :class:`EnvSlice` of ``slices[w]``) and provides the transport:
@@ -169,20 +170,25 @@ class ActorEnvPool:
 
     # ----------------------------------------------------------------- transport (subclasses)
 
+    @abc.abstractmethod
     def _submit(self, w: int, method: str, *args: Any) -> Any:
-        raise NotImplementedError
+        """Call ``method(*args)`` of actor ``w`` without waiting; a handle of the call."""
 
+    @abc.abstractmethod
     def _wait_any(self, handles: list) -> Any:
-        raise NotImplementedError
+        """The first of the calls ``handles`` to finish."""
 
+    @abc.abstractmethod
     def _result(self, w: int, handle: Any) -> Any:
-        raise NotImplementedError
+        """The value of actor ``w``'s finished call ``handle``; raises what the call raised."""
 
     def _share(self, obj: Any) -> Any:
+        """``obj`` as an argument of calls to every actor (Ray: one copy in its object store)."""
         return obj
 
+    @abc.abstractmethod
     def close(self) -> None:
-        raise NotImplementedError
+        """Stop the actors; sets :attr:`closed`. A second call does nothing."""
 
     # ----------------------------------------------------------------- common
 
@@ -215,7 +221,15 @@ class ActorEnvPool:
         if self.closed:
             raise RuntimeError(f"the {type(self).__name__} is closed")
         refs = [self._call(w, "get_attr", name) for w in range(len(self.slices))]
-        return tuple(v for w, ref in enumerate(refs) for v in self._get(w, ref))
+        values, error = [], None
+        for w, ref in enumerate(refs):  # every answer is read, so that none is left for a later call
+            try:
+                values.extend(self._get(w, ref))
+            except RuntimeError as err:
+                error = error or err
+        if error is not None:
+            raise error
+        return tuple(values)
 
     # ----------------------------------------------------------------- rollout
 

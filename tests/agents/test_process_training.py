@@ -37,6 +37,16 @@ def test_processes_run_writes_the_checkpoint_of_the_local_run(tmp_path):
     assert states[0] == states[1]
 
 
+def test_a_failing_call_names_the_worker_and_leaves_the_pool_usable():
+    pool = ProcessEnvPool(env_fns(2), num_workers=2, pin_workers=False)
+    try:
+        with pytest.raises(RuntimeError, match=r"rollout worker process 0 \(envs 0\.\.0\) failed: AttributeError"):
+            pool.get_attr("no_such_attribute")
+        assert pool.get_attr("objective_names")[1][0] == "safety"  # both answers of the failed call were read
+    finally:
+        pool.close()
+
+
 def test_a_dead_worker_fails_the_rollout_and_leaves_the_agent_unchanged():
     pool = ProcessEnvPool(env_fns(2), num_workers=2, pin_workers=False)
     agent = small_agent()
