@@ -3,7 +3,8 @@
 Usage::
 
     python eval/bench_train.py --compare REV [--rounds 3] [--json PATH]
-    python eval/bench_train.py --backends one-process local processes [ray] [--scenario S] [--rounds 3] [--json PATH]
+    python eval/bench_train.py --backends one-process local processes [ray] [--scenario S] [--multi-agent CARS]
+                               [--rounds 3] [--json PATH]
 
 The revision is exported as in ``eval/bench_env.py --compare`` (:mod:`bench_compare`). Each
 round runs, in a fresh process per side and in alternating order, the side's own::
@@ -101,13 +102,15 @@ def time_backend(tree: Path, backend: str, out: Path, extra: list[str] = ()) -> 
     return {"wall_s": wall, "collect_s": collect_time(out)}
 
 
-def compare_backends(backends: list[str], rounds: int, scenario: str | None = None) -> dict:
+def compare_backends(backends: list[str], rounds: int, scenario: str | None = None, cars: int | None = None) -> dict:
     """Rounds of one run per backend (the order rotating), and the summary described in the module docstring."""
     import tempfile
 
     tree = Path(_git(_HERE, "rev-parse", "--show-toplevel"))
     runs: dict[str, list[dict]] = {b: [] for b in backends}
     extra = [] if scenario is None else ["--scenario", scenario]
+    if cars is not None:
+        extra += ["--multi-agent", "--cars", str(cars)]
     with tempfile.TemporaryDirectory() as scratch:
         for r in range(rounds):
             order = backends[r % len(backends):] + backends[:r % len(backends)]
@@ -144,6 +147,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--rounds", type=int, default=3, help="rounds of one run per side, alternating (default 3)")
     parser.add_argument("--scenario", choices=("paper", "interactive", "dynamic"), default=None,
                         help="with --backends: the world trained in (train/pasta.py --scenario; default: its own)")
+    parser.add_argument("--multi-agent", type=int, default=None, metavar="CARS",
+                        help="with --backends: self-play on races of CARS cars (train/pasta.py --multi-agent --cars "
+                             "CARS); --n-envs counts races, the steps car decisions")
     parser.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = parser.parse_args(argv)
     if args.rounds < 1:
@@ -152,7 +158,9 @@ def main(argv: list[str] | None = None) -> dict:
         unknown = [b for b in args.backends if b not in BACKENDS]
         if unknown or len(set(args.backends)) != len(args.backends) or len(args.backends) < 2:
             parser.error(f"--backends takes two or more distinct values of {', '.join(BACKENDS)}; got {args.backends}")
-        result = compare_backends(args.backends, args.rounds, args.scenario)
+        if args.multi_agent is not None and args.multi_agent < 2:
+            parser.error(f"--multi-agent takes a car count of at least 2, got {args.multi_agent}")
+        result = compare_backends(args.backends, args.rounds, args.scenario, args.multi_agent)
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump(result, fh, indent=2)

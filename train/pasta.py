@@ -35,7 +35,8 @@ given explicitly win over it.
 cars, ``--n-envs`` races): every car is one slot of the vector env
 (:class:`sofar_agents.pasta.self_play.RaceVectorEnv`), so steps count car decisions, and a race
 ends for all its cars when one car terminates. There is no rho (the opponents are the other
-controlled cars, each with a speed factor drawn per race). Local backend only.
+controlled cars, each with a speed factor drawn per race). With several races, each worker of
+``--backend processes`` (or ``ray``) runs whole races.
 
 With ``--n-envs`` above 1 the environments (and their solvers) run in ``--num-workers`` worker
 processes of this machine (``--backend processes``, the default then), or in Ray actors
@@ -109,8 +110,8 @@ class Args:
     total_steps: int = 1_000_000
     """Environment steps to train for, counted over all envs (including resumed steps)."""
     n_envs: int | None = None
-    """Parallel environments (``AsyncVectorEnv`` subprocesses when > 1); default 1, or
-    ``--num-workers`` with ``--backend processes`` or ``ray``."""
+    """Parallel environments (with ``--multi-agent``: races), in worker processes when > 1 (``--backend``);
+    default 1, or ``--num-workers``."""
     pin_workers: bool = True
     """Pin each worker (of the ``AsyncVectorEnv``, or of ``--backend processes``) to a CPU of its own (Linux,
     and only when there are at least as many CPUs as workers): the same results, fewer stalls between lock-steps
@@ -120,8 +121,8 @@ class Args:
     with several: every worker steps once, then waits for the others), ``processes`` (worker processes on
     this machine, each owning a slice of the envs, their solvers and a copy of the policy, stepping in chunks
     without a per-step barrier) or ``ray`` (the same in Ray actors, on this machine or a cluster); the learner
-    stays here. Default: ``processes`` with more than one env or with ``--num-workers``, else ``local``
-    (always ``local`` with ``--multi-agent``). Every backend gives the same checkpoints."""
+    stays here. Default: ``processes`` with more than one env (with ``--multi-agent``: race) or with
+    ``--num-workers``, else ``local``. Every backend gives the same checkpoints."""
     num_workers: int | None = None
     """Workers with ``--backend processes`` or ``ray`` (one CPU each; default: one per env, with ``processes``
     at most one per CPU this process may use)."""
@@ -194,7 +195,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
         overrides["hidden_sizes"] = tuple(overrides["hidden_sizes"])
     if args.backend is None:
         several = args.num_workers is not None or (args.n_envs or 1) > 1
-        args.backend = "processes" if several and not args.multi_agent else "local"
+        args.backend = "processes" if several else "local"
     if args.backend not in BACKENDS:
         parser.error(f"--backend must be one of {', '.join(BACKENDS)}, got {args.backend!r}")
     if args.backend == "local" and args.num_workers is not None:
@@ -203,8 +204,6 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
         parser.error("--address needs --backend ray")
     if args.num_workers is not None and args.num_workers < 1:
         parser.error(f"--num-workers must be positive, got {args.num_workers}")
-    if args.multi_agent and args.backend != "local":
-        parser.error("--multi-agent runs on the local backend only")
     if args.cars < 2:
         parser.error(f"--cars must be at least 2, got {args.cars}")
     if args.n_envs is None:
@@ -286,23 +285,27 @@ def make_vec_env(args: Args) -> Any:
     if args.decision_interval is not None:
         env_kwargs["decision_interval"] = args.decision_interval
     assert args.n_envs is not None
+    cars = None
     if args.multi_agent:
-        from sofar_agents.pasta.self_play import RaceVectorEnv
-
         track, race_kwargs = race_of(args.env_id, env_kwargs)
-        return RaceVectorEnv([functools.partial(make_self_play_race, track, args.cars, race_kwargs)
-                              for _ in range(args.n_envs)])
-    fns = [make_env(args.env_id, env_kwargs, args) for _ in range(args.n_envs)]
+        fns = [functools.partial(make_self_play_race, track, args.cars, race_kwargs) for _ in range(args.n_envs)]
+        cars = args.cars
+        if args.backend == "local":
+            from sofar_agents.pasta.self_play import RaceVectorEnv
+
+            return RaceVectorEnv(fns)
+    else:
+        fns = [make_env(args.env_id, env_kwargs, args) for _ in range(args.n_envs)]
     if args.backend == "ray":
         from sofar_agents.pasta.ray_rollout import RayEnvPool
 
         assert args.num_workers is not None
-        return RayEnvPool(fns, args.num_workers, address=args.address)
+        return RayEnvPool(fns, args.num_workers, address=args.address, cars_per_race=cars)
     if args.backend == "processes":
         from sofar_agents.pasta.process_rollout import ProcessEnvPool
 
         assert args.num_workers is not None
-        return ProcessEnvPool(fns, args.num_workers, pin_workers=args.pin_workers)
+        return ProcessEnvPool(fns, args.num_workers, pin_workers=args.pin_workers, cars_per_race=cars)
     mode = gym.vector.AutoresetMode.SAME_STEP
     if args.n_envs > 1:
         return async_vector_env(fns, pin_workers=args.pin_workers, autoreset_mode=mode)

@@ -36,6 +36,7 @@ the pool: the other actors are mid-rollout with calls unanswered.
 from __future__ import annotations
 
 import abc
+import functools
 import itertools
 import logging
 import warnings
@@ -64,14 +65,31 @@ def slices(n_envs: int, num_workers: int) -> list[tuple[int, int]]:
     return list(itertools.pairwise(cuts))
 
 
-class EnvSlice:
-    """Actor body: envs ``start .. start + m - 1`` of the pool and a copy of the PASTA actor network."""
+def sync_vector_env(env_fns: Sequence[Callable[[], gym.Env]]) -> gym.vector.SyncVectorEnv:
+    """The envs of one actor: a gymnasium ``SyncVectorEnv`` with same-step autoreset."""
+    return gym.vector.SyncVectorEnv(list(env_fns), autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
 
-    def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], start: int, n_total: int) -> None:
+
+def slice_factories(fns: Sequence[Callable[[], Any]], worker_slices: list[tuple[int, int]],
+                    cars_per_race: int | None) -> list[Callable[[], Any]]:
+    """Per worker, a picklable factory of its vector env: :func:`sync_vector_env` of its envs, or with
+    ``cars_per_race`` a :class:`~sofar_agents.pasta.self_play.RaceVectorEnv` of its races."""
+    if cars_per_race is None:
+        return [functools.partial(sync_vector_env, list(fns[lo:hi])) for lo, hi in worker_slices]
+    from sofar_agents.pasta.self_play import RaceVectorEnv
+
+    return [functools.partial(RaceVectorEnv, list(fns[lo:hi])) for lo, hi in worker_slices]
+
+
+class EnvSlice:
+    """Actor body: slots ``start .. start + m - 1`` of the pool (the envs, or the cars of the races, of one
+    vector env) and a copy of the PASTA actor network."""
+
+    def __init__(self, make_vector: Callable[[], Any], start: int, n_total: int) -> None:
         warnings.simplefilter("ignore", UserWarning)  # keep worker output off the driver's console
         torch.set_num_threads(1)
-        self.env = gym.vector.SyncVectorEnv(list(env_fns), autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
-        self.start, self.m, self.n_total = int(start), len(env_fns), int(n_total)
+        self.env = make_vector()
+        self.start, self.m, self.n_total = int(start), int(self.env.num_envs), int(n_total)
         self.policy: Actor | None = None
         self.obs: np.ndarray | None = None
 
@@ -82,8 +100,9 @@ class EnvSlice:
     def get_attr(self, name: str) -> tuple:
         return self.env.get_attr(name)
 
-    def reset(self, seeds: list[int]) -> None:
-        obs, _ = self.env.reset(seed=seeds)
+    def reset(self, seed: int) -> None:
+        """Reset the vector env with ``seed`` (env, or race, ``i`` of it with ``seed + i``)."""
+        obs, _ = self.env.reset(seed=seed)
         self.obs = np.asarray(obs, dtype=np.float32).reshape(self.m, -1)
 
     def begin(self, state: dict[str, np.ndarray], spec: tuple, noise: np.ndarray, prefs: np.ndarray,
@@ -149,7 +168,11 @@ class EnvSlice:
 class ActorEnvPool(abc.ABC):
     """``n_envs`` training envs in actors, used by :meth:`PASTA.learn` like a vector env (module docstring).
 
-    A subclass starts the actors (each an :class:`EnvSlice` of ``slices[w]``) and provides the transport:
+    ``fns`` are picklable factories of the envs, or with ``cars_per_race`` of PettingZoo races of that many cars
+    (:func:`~sofar_agents.pasta.self_play.make_self_play_race`; every car is a slot, as in
+    :class:`~sofar_agents.pasta.self_play.RaceVectorEnv`). They are split over ``num_workers`` workers in
+    contiguous slices. A subclass starts the actors (actor ``w`` an :class:`EnvSlice` of ``_vector_fns[w]``,
+    its slots ``slices[w]``) and provides the transport:
     :meth:`_submit` (call a method of actor ``w``, without waiting), :meth:`_wait_any` (the first finished of
     some calls), :meth:`_result` (the value of a finished call, raising the actor's failure), :meth:`_share`
     (an argument sent to every actor) and :meth:`close`. Each actor has at most one call in flight.
@@ -160,11 +183,20 @@ class ActorEnvPool(abc.ABC):
     worker_label = "rollout worker"
     """How an error message names an actor."""
 
-    def __init__(self, n_envs: int, num_workers: int, chunk_steps: int) -> None:
+    def __init__(self, fns: Sequence[Callable[[], Any]], num_workers: int, chunk_steps: int,
+                 cars_per_race: int | None = None) -> None:
         if chunk_steps < 1:
             raise ValueError(f"chunk_steps must be positive, got {chunk_steps}")
-        self.slices = slices(n_envs, num_workers)
-        self.num_envs, self.chunk_steps = int(n_envs), int(chunk_steps)
+        if cars_per_race is not None and int(cars_per_race) < 1:
+            raise ValueError(f"cars_per_race must be positive, got {cars_per_race}")
+        units = slices(len(fns), num_workers)  # envs (or races) per worker
+        per = 1 if cars_per_race is None else int(cars_per_race)
+        self.slices = [(lo * per, hi * per) for lo, hi in units]
+        """Per worker, its slots ``[lo, hi)`` (an env each, or a car of a race each)."""
+        self.seed_offsets = [lo for lo, _ in units]
+        """Per worker, the index of its first env (or race): the offset of its reset seed."""
+        self._vector_fns = slice_factories(fns, units, cars_per_race)
+        self.num_envs, self.chunk_steps = len(fns) * per, int(chunk_steps)
         self.closed = False
         self._state: dict[str, np.ndarray] | None = None  # per-env episode state between rollouts
 
@@ -235,7 +267,7 @@ class ActorEnvPool(abc.ABC):
 
     def _reset(self, agent: Any) -> dict[str, np.ndarray]:
         seed = agent.seed + agent.num_updates * 7919  # as RolloutCollector.reset
-        refs = [self._call(w, "reset", [seed + i for i in range(lo, hi)]) for w, (lo, hi) in enumerate(self.slices)]
+        refs = [self._call(w, "reset", seed + offset) for w, offset in enumerate(self.seed_offsets)]
         for w, ref in enumerate(refs):
             self._get(w, ref)
         n, k = self.num_envs, agent.n_objectives

@@ -24,8 +24,6 @@ from collections.abc import Callable, Sequence
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-import gymnasium as gym
-
 from sofar_agents.pasta.actor_pool import ActorEnvPool, EnvSlice
 from sofar_env.vector import worker_cpus
 
@@ -39,7 +37,7 @@ def _describe_failure(exc: BaseException) -> str:
     return "".join(traceback.format_exception_only(exc)).strip() + "\n\nin the worker:\n" + traceback.format_exc()
 
 
-def _serve(conn: Connection, env_fns: list, start: int, n_total: int, cpu: int | None) -> None:
+def _serve(conn: Connection, make_vector: Callable, start: int, n_total: int, cpu: int | None) -> None:
     """Worker process: build the :class:`EnvSlice`, then answer ``(method, args)`` calls until ``None`` arrives.
 
     Every answer is ``(True, value)`` or ``(False, the exception and its traceback)``; the construction is answered
@@ -49,7 +47,7 @@ def _serve(conn: Connection, env_fns: list, start: int, n_total: int, cpu: int |
     if cpu is not None:
         os.sched_setaffinity(0, {cpu})
     try:
-        actor = EnvSlice(env_fns, start, n_total)
+        actor = EnvSlice(make_vector, start, n_total)
     except Exception as exc:  # noqa: BLE001 (any failure is reported to the learner, which raises it)
         conn.send((False, _describe_failure(exc)))
         conn.close()
@@ -84,17 +82,19 @@ class ProcessEnvPool(ActorEnvPool):
             most one chunk long); it does not change the result.
         pin_workers: pin worker w to the w-th CPU of this process's affinity set (only where
             :func:`sofar_env.vector.worker_cpus` allows it); it does not change the result.
+        cars_per_race: ``env_fns`` build PettingZoo races of this many cars (self-play; every car is a slot,
+            as in :class:`~sofar_agents.pasta.self_play.RaceVectorEnv`); None: they build gymnasium envs.
 
     Raises:
-        ValueError: ``num_workers`` outside ``[1, n_envs]`` or ``chunk_steps < 1``.
+        ValueError: ``num_workers`` outside ``[1, len(env_fns)]``, ``chunk_steps < 1`` or ``cars_per_race < 1``.
         RuntimeError: a worker failed to build its envs (the message holds its traceback).
     """
 
     worker_label = "rollout worker process"
 
-    def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], num_workers: int, chunk_steps: int = 64,
-                 pin_workers: bool = True) -> None:
-        super().__init__(len(env_fns), num_workers, chunk_steps)
+    def __init__(self, env_fns: Sequence[Callable[[], Any]], num_workers: int, chunk_steps: int = 64,
+                 pin_workers: bool = True, cars_per_race: int | None = None) -> None:
+        super().__init__(env_fns, num_workers, chunk_steps, cars_per_race)
         cpus = worker_cpus(len(self.slices)) if pin_workers else None
         self.pinned = cpus is not None
         """Whether each worker runs on a CPU of its own."""
@@ -104,7 +104,7 @@ class ProcessEnvPool(ActorEnvPool):
         try:
             for w, (lo, hi) in enumerate(self.slices):
                 parent, child = ctx.Pipe()
-                proc = ctx.Process(target=_serve, args=(child, list(env_fns[lo:hi]), lo, self.num_envs,
+                proc = ctx.Process(target=_serve, args=(child, self._vector_fns[w], lo, self.num_envs,
                                                         None if cpus is None else cpus[w]),
                                    name=f"sofar-rollout-{w}", daemon=True)
                 proc.start()

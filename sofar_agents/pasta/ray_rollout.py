@@ -11,8 +11,6 @@ import copy
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import gymnasium as gym
-
 from sofar_agents.pasta.actor_pool import ActorEnvPool, EnvSlice
 from sofar_agents.ray_support import init_ray, require_ray
 
@@ -31,17 +29,18 @@ class RayEnvPool(ActorEnvPool):
             is already initialised); ``"auto"`` or ``"HOST:PORT"`` joins a running cluster.
         chunk_steps: steps an actor runs per call (the waits for preference draws are at
             most one chunk long); it does not change the result.
+        cars_per_race: ``env_fns`` build PettingZoo races of this many cars (self-play); None: gymnasium envs.
     """
 
     worker_label = "Ray rollout worker"
 
-    def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], num_workers: int, address: str | None = None,
-                 chunk_steps: int = 64) -> None:
-        super().__init__(len(env_fns), num_workers, chunk_steps)
+    def __init__(self, env_fns: Sequence[Callable[[], Any]], num_workers: int, address: str | None = None,
+                 chunk_steps: int = 64, cars_per_race: int | None = None) -> None:
+        super().__init__(env_fns, num_workers, chunk_steps, cars_per_race)
         self._ray = require_ray()
         self._started = init_ray(address, num_workers)
         actor_cls = self._ray.remote(num_cpus=1, max_restarts=0)(EnvSlice)
-        self.actors = [actor_cls.remote(list(env_fns[a:b]), a, self.num_envs) for a, b in self.slices]
+        self.actors = [actor_cls.remote(fn, lo, self.num_envs) for fn, (lo, _) in zip(self._vector_fns, self.slices)]
         self._describe()
         # deep copies: arrays that Ray deserialises are read-only
         self.single_observation_space = copy.deepcopy(self.single_observation_space)

@@ -58,10 +58,16 @@ def assert_identical(a, b, where: str = "") -> None:
         assert a == b, where
 
 
-def assert_rollouts_equal_local(pool, n_envs: int) -> None:
+def assert_rollouts_equal_local(pool, n_envs: int, local=None) -> None:
     """Two rollouts and updates of a small agent through ``pool`` (an actor pool over ``env_fns(n_envs)``) equal,
-    bit for bit, those through a local ``SyncVectorEnv`` of the same envs; closes both."""
-    venv = gym.vector.SyncVectorEnv(env_fns(n_envs), autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
+    bit for bit, those through ``local`` (default: a ``SyncVectorEnv`` of the same envs); closes both.
+
+    The learner runs one torch thread, as ``train/pasta.py`` does by default: the workers evaluate the policy
+    with one, and a batch split over several threads may round differently in its last bits."""
+    venv = local if local is not None else gym.vector.SyncVectorEnv(
+        env_fns(n_envs), autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
     try:
         assert pool.single_observation_space == venv.single_observation_space
         local, remote = small_agent(), small_agent()
@@ -74,7 +80,8 @@ def assert_rollouts_equal_local(pool, n_envs: int) -> None:
             local.update(a)
             remote.update(b)
         assert np.array_equal(local.return_rms.var, remote.return_rms.var)
-        assert pool.get_attr("objective_names") == venv.get_attr("objective_names")
+        assert pool.get_attr("objective_names") == tuple(venv.get_attr("objective_names"))
     finally:
+        torch.set_num_threads(threads)
         pool.close()
         venv.close()

@@ -4,6 +4,7 @@ leaves the agent unchanged, and bad arguments are refused before any process sta
 
 from __future__ import annotations
 
+import functools
 import json
 
 import pytest
@@ -12,6 +13,7 @@ from pool_runs import assert_identical, assert_rollouts_equal_local, env_fns, ru
 from test_train_smoke import _pasta_script as _script
 
 from sofar_agents.pasta.process_rollout import ProcessEnvPool
+from sofar_agents.pasta.self_play import RaceVectorEnv, make_self_play_race
 
 
 def test_rollouts_equal_the_local_vector_env_with_uneven_slices_and_short_chunks():
@@ -22,6 +24,13 @@ def test_rollouts_equal_the_local_vector_env_with_uneven_slices_and_short_chunks
     with pytest.raises(RuntimeError, match="closed"):
         small_agent().collect(pool)
     pool.close()  # a second close does nothing
+
+
+def test_self_play_races_in_worker_processes_equal_the_local_race_vector_env():
+    races = [functools.partial(make_self_play_race, "LagunaSeca", 2, {"race": {"duration": 3.0}}) for _ in range(3)]
+    pool = ProcessEnvPool(races, num_workers=2, chunk_steps=5, cars_per_race=2)  # races {0, 1} and {2}
+    assert pool.slices == [(0, 4), (4, 6)] and pool.seed_offsets == [0, 2] and pool.num_envs == 6
+    assert_rollouts_equal_local(pool, 6, local=RaceVectorEnv(races))
 
 
 def test_processes_run_writes_the_checkpoint_of_the_local_run(tmp_path):
@@ -73,6 +82,7 @@ def test_a_worker_that_cannot_build_its_envs_fails_the_construction_with_its_err
     (2, {"num_workers": 0}, "num_workers must lie in"),
     (2, {"num_workers": 3}, "num_workers must lie in"),
     (2, {"num_workers": 2, "chunk_steps": 0}, "chunk_steps must be positive"),
+    (2, {"num_workers": 2, "cars_per_race": 0}, "cars_per_race must be positive"),
 ])
 def test_bad_arguments_are_refused_before_any_worker_starts(n_envs, kwargs, message, monkeypatch):
     started = []
@@ -101,7 +111,8 @@ def test_bad_backend_options_are_refused(capsys):
     (["--num-workers", "2"], "processes", 2, 2),
     (["--n-envs", "4", "--num-workers", "2"], "processes", 4, 2),
     (["--n-envs", "4", "--num-workers", "3"], "processes", 4, 3),
-    (["--n-envs", "2", "--multi-agent"], "local", 2, None),   # self-play races: the vector env of races
+    (["--n-envs", "2", "--multi-agent"], "processes", 2, 2),  # self-play: races in worker processes
+    (["--multi-agent"], "local", 1, None),                    # one race: in the learner's process
     (["--n-envs", "2", "--backend", "local"], "local", 2, None),
 ])
 def test_the_default_backend_is_worker_processes_for_several_envs(argv, backend, n_envs, num_workers, monkeypatch):

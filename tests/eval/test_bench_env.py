@@ -98,6 +98,7 @@ def test_bench_train_rejects_zero_rounds():
     ["--backends", "local", "local"],                   # the same twice
     ["--backends", "local", "processes", "--compare", "HEAD"],  # two modes at once
     [],                                                 # no mode
+    ["--backends", "local", "processes", "--multi-agent", "1"],  # a race of one car
 ])
 def test_bench_train_rejects_bad_backend_lists(argv):
     proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_train.py"), *argv],
