@@ -121,8 +121,8 @@ class Args:
     with several: every worker steps once, then waits for the others), ``processes`` (worker processes on
     this machine, each owning a slice of the envs, their solvers and a copy of the policy, stepping in chunks
     without a per-step barrier) or ``ray`` (the same in Ray actors, on this machine or a cluster); the learner
-    stays here. Default: ``processes`` with more than one env (with ``--multi-agent``: race) or with
-    ``--num-workers``, else ``local``. Every backend gives the same checkpoints."""
+    stays here. Every backend gives the same checkpoints; default: ``processes`` with more than one env (with
+    ``--multi-agent``: race) or with ``--num-workers``, else ``local``."""
     num_workers: int | None = None
     """Workers with ``--backend processes`` or ``ray`` (one CPU each; default: one per env, with ``processes``
     at most one per CPU this process may use)."""

@@ -9,7 +9,8 @@ updates and checkpoints as ``AsyncVectorEnv`` (and as the Ray backend) with the 
 :mod:`sofar_agents.pasta.actor_pool`. Needs no Ray.
 
 Workers are started with the ``spawn`` method (no state inherited from the learner, whose torch threads
-a forked child must not share) and, with ``pin_workers``, each is pinned to a CPU of its own
+a forked child must not share; as with every spawned pool, the main script must be importable, so not
+``python -`` reading standard input) and, with ``pin_workers``, each is pinned to a CPU of its own
 (:func:`sofar_env.vector.worker_cpus`: Linux, and at least as many CPUs as workers). A worker that dies
 or raises fails the rollout with ``RuntimeError`` naming it; the agent is left as it was.
 """
