@@ -54,16 +54,20 @@ TRAIN_ARGS = ["--n-envs", "2", "--total-steps", str(TOTAL_STEPS), "--n-steps", "
               "--env-kwargs", '{"race": {"duration": 20.0}}', "--no-progress", "--force"]
 
 
-def time_training(tree: Path, out: Path) -> float:
-    """Wall time [s] of the training command of :data:`TRAIN_ARGS` with the scripts and package of ``tree``."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
+def run_training(tree: Path, options: list[str], out: Path) -> float:
+    """Wall time [s] of ``python train/pasta.py OPTIONS --out OUT`` with the scripts and package of ``tree``."""
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "train/pasta.py", *TRAIN_ARGS, "--out", str(out)], cwd=str(tree),
-                          env=env, capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "train/pasta.py", *options, "--out", str(out)], cwd=str(tree),
+                          env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True, text=True, check=False)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
-        raise RuntimeError(f"training in {tree} failed:\n{proc.stderr[-4000:]}")
+        raise RuntimeError(f"training with {' '.join(options)} in {tree} failed:\n{proc.stderr[-4000:]}")
     return wall
+
+
+def time_training(tree: Path, out: Path) -> float:
+    """Wall time [s] of the training command of :data:`TRAIN_ARGS` with the scripts and package of ``tree``."""
+    return run_training(tree, TRAIN_ARGS, out)
 
 
 BACKEND_STEPS = 8192
@@ -91,14 +95,7 @@ def collect_time(out: Path) -> float:
 def time_backend(tree: Path, backend: str, out: Path, extra: list[str] = ()) -> dict:
     """Wall and collection time of :data:`BACKEND_ARGS` with the set-up ``backend`` of :data:`BACKENDS` (and
     the options ``extra``)."""
-    t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "train/pasta.py", *BACKEND_ARGS, *BACKENDS[backend], *extra,
-                           "--out", str(out)],
-                          cwd=str(tree), env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True, text=True,
-                          check=False)
-    wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise RuntimeError(f"training with {' '.join(BACKENDS[backend])} failed:\n{proc.stderr[-4000:]}")
+    wall = run_training(tree, [*BACKEND_ARGS, *BACKENDS[backend], *extra], out)
     return {"wall_s": wall, "collect_s": collect_time(out)}
 
 

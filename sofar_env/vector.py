@@ -30,9 +30,16 @@ from typing import Any
 
 import gymnasium as gym
 
-__all__ = ["PinnedFactory", "async_vector_env", "pinned_factories", "worker_cpus"]
+__all__ = ["PinnedFactory", "async_vector_env", "available_cpus", "pinned_factories", "worker_cpus"]
 
 logger = logging.getLogger(__name__)
+
+
+def available_cpus() -> int:
+    """How many CPUs this process may run on: its affinity set where the platform tells it, else the CPU count."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def worker_cpus(n_workers: int) -> list[int] | None:

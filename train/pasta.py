@@ -54,7 +54,6 @@ import dataclasses
 import functools
 import json
 import logging
-import os
 import shlex
 import sys
 import time
@@ -75,7 +74,7 @@ from sofar_agents.pasta.rollout import make_training_env
 from sofar_agents.pasta.self_play import make_self_play_race
 from sofar_agents.pasta.training_log import (check_out, code_commit, console_line, log_update, n_objectives,
                                              objective_names)
-from sofar_env.vector import async_vector_env
+from sofar_env.vector import async_vector_env, available_cpus
 
 logger = logging.getLogger("train.pasta")
 
@@ -221,13 +220,6 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
 
 
 # ---------------------------------------------------------------------------- environments
-
-
-def available_cpus() -> int:
-    """CPUs this process may run on (its affinity set where the platform tells it, else the CPU count)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 def ensure_registered(env_id: str) -> None:

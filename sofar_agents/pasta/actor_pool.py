@@ -230,6 +230,10 @@ class ActorEnvPool(abc.ABC):
         self.single_observation_space, self.single_action_space = obs_space, act_space
         self.metadata = {**metadata, "autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}
 
+    def _check_open(self) -> None:
+        if self.closed:
+            raise RuntimeError(f"the {type(self).__name__} is closed")
+
     def _failure(self, w: int, err: BaseException) -> RuntimeError:
         lo, hi = self.slices[w]
         return RuntimeError(f"{self.worker_label} {w} (envs {lo}..{hi - 1}) failed: {err}")
@@ -250,8 +254,7 @@ class ActorEnvPool(abc.ABC):
 
     def get_attr(self, name: str) -> tuple:
         """Attribute ``name`` of every env (through the wrappers), in env order."""
-        if self.closed:
-            raise RuntimeError(f"the {type(self).__name__} is closed")
+        self._check_open()
         refs = [self._call(w, "get_attr", name) for w in range(len(self.slices))]
         values, error = [], None
         for w, ref in enumerate(refs):  # every answer is read, so that none is left for a later call
@@ -276,8 +279,7 @@ class ActorEnvPool(abc.ABC):
 
     def collect_rollout(self, agent: Any, t_steps: int) -> RolloutBuffer:
         """One rollout of ``t_steps`` steps per env, as :meth:`RolloutCollector.collect` would collect it locally."""
-        if self.closed:
-            raise RuntimeError(f"the {type(self).__name__} is closed")
+        self._check_open()
         rng_state, torch_state = agent.rng.bit_generator.state, agent.torch_gen.get_state()
         try:
             start = self._state if self._state is not None else self._reset(agent)

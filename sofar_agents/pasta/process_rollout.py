@@ -123,7 +123,7 @@ class ProcessEnvPool(ActorEnvPool):
         try:
             self._conns[w].send((method, args))
         except OSError as err:  # a broken pipe: the worker is gone
-            raise RuntimeError(f"the process exited (exit code {self._procs[w].exitcode})") from err
+            raise self._exited(w) from err
         return w
 
     def _wait_any(self, handles: list) -> int:
@@ -134,10 +134,13 @@ class ProcessEnvPool(ActorEnvPool):
         try:
             ok, value = self._conns[w].recv()
         except (EOFError, OSError) as err:
-            raise RuntimeError(f"the process exited (exit code {self._procs[w].exitcode})") from err
+            raise self._exited(w) from err
         if not ok:
             raise RuntimeError(value)
         return value
+
+    def _exited(self, w: int) -> RuntimeError:
+        return RuntimeError(f"the process exited (exit code {self._procs[w].exitcode})")
 
     def close(self) -> None:
         """Stop the workers (those that do not stop within a few seconds are terminated)."""
