@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numba
 
-__all__ = ["kernel", "maximum", "minimum"]
+__all__ = ["kernel", "maximum", "minimum", "py_max", "py_min"]
 
 
 def kernel(fn):
@@ -43,3 +43,16 @@ def minimum(a, b):
     """``np.minimum`` of two floats inside a kernel (a nan propagates; for two zeros of opposite sign this
     returns ``a``, numpy ``b``, as in :func:`maximum`)."""
     return a if (a <= b or a != a) else b
+
+
+@kernel
+def py_max(a, b):
+    """Python's ``max(a, b)`` of two floats inside a kernel: ``a`` unless ``b > a`` (a nan ``b`` is never
+    taken; for two zeros, ``a``)."""
+    return max(a, b)
+
+
+@kernel
+def py_min(a, b):
+    """Python's ``min(a, b)`` of two floats inside a kernel: ``a`` unless ``b < a``."""
+    return min(a, b)

@@ -31,9 +31,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._jit import kernel, py_max
 from .config import DefenceConfig
 
-__all__ = ["IDLE", "MOVING", "HOLDING", "Defence", "ego_guarded"]
+__all__ = ["HOLDING", "IDLE", "MOVING", "Defence", "defence_step", "ego_guarded", "guarded"]
 
 IDLE, MOVING, HOLDING = 0, 1, 2
 """Modes of a car: following its line; making its move; holding the offset it moved to."""
@@ -44,11 +45,16 @@ _ARRIVED = 0.05
 
 def ego_guarded(gap: float, closing: float, cfg: DefenceConfig, car_length: float, lead: float = 0.0) -> bool:
     """Whether the ego is alongside the car or will be within ``guard_time + lead`` [s] at the current
-    closing speed."""
-    along = car_length + cfg.alongside_margin
-    horizon = cfg.guard_time + lead
-    ahead = along + max(closing, 0.0) * horizon  # the ego closing from behind
-    behind = along + max(-closing, 0.0) * horizon  # the car closing on an ego ahead of it
+    closing speed (:func:`guarded`)."""
+    return guarded(float(gap), float(closing), car_length + cfg.alongside_margin, cfg.guard_time, float(lead))
+
+
+@kernel
+def guarded(gap, closing, along, guard_time, lead):
+    """:func:`ego_guarded` with ``along = car_length + alongside_margin`` [m] (inside kernels)."""
+    horizon = guard_time + lead
+    ahead = along + py_max(closing, 0.0) * horizon  # the ego closing from behind
+    behind = along + py_max(-closing, 0.0) * horizon  # the car closing on an ego ahead of it
     return -behind < gap < ahead
 
 
@@ -77,29 +83,38 @@ class Defence:
         self.mode[i] = IDLE
 
     def update(self, i: int, gap: float, closing: float, n_car: float, n_dot: float, n_ego: float) -> None:
-        """Advance the state machine of car ``i`` (see the module docstring)."""
-        if self.aggressiveness[i] <= 0.0:
-            return
+        """Advance the state machine of car ``i`` (see the module docstring; :func:`defence_step`)."""
         cfg = self.cfg
-        along = self.car_length + cfg.alongside_margin
-        alongside = abs(gap) < along
-        in_window = cfg.min_gap <= gap <= cfg.max_gap and not alongside
-        if self.approach[i] and (gap > cfg.max_gap + cfg.release or gap <= -along):
-            self.forget(i)
-        if not self.approach[i]:
-            if not in_window:
-                return
-            self.approach[i], self.used[i] = True, False
-        mode = self.mode[i]
-        if mode == MOVING and alongside:
-            self.mode[i], self.target[i] = HOLDING, n_car
-        elif (mode == IDLE and not self.used[i] and in_window and closing >= cfg.min_closing
-              and abs(n_ego - n_car) >= cfg.trigger):
-            self.used[i], self.mode[i], self.target[i] = True, MOVING, n_ego
-            self.moves[i] += 1
-        elif mode == MOVING and abs(self.target[i] - n_car) < _ARRIVED and abs(n_dot) < _ARRIVED:
-            self.mode[i] = HOLDING
+        defence_step(i, float(gap), float(closing), float(n_car), float(n_dot), float(n_ego), self.aggressiveness,
+                     self.approach, self.used, self.mode, self.target, self.moves, self.car_length + cfg.alongside_margin,
+                     cfg.min_gap, cfg.max_gap, cfg.release, cfg.min_closing, cfg.trigger)
 
     def limits(self, i: int) -> tuple[float, float]:
         """Bounds on the lateral speed [m/s] and acceleration [m/s^2] of car ``i``'s move."""
         return self.aggressiveness[i] * self.cfg.lateral_speed, self.cfg.lateral_accel
+
+
+@kernel
+def defence_step(i, gap, closing, n_car, n_dot, n_ego, aggressiveness, approach, used, mode, target, moves, along,
+                 min_gap, max_gap, release, min_closing, trigger):
+    """:meth:`Defence.update` of car ``i`` on the state arrays of :class:`Defence` (changed in place), with
+    ``along = car_length + alongside_margin`` [m] and the other :class:`DefenceConfig` fields."""
+    if aggressiveness[i] <= 0.0:
+        return
+    alongside = abs(gap) < along
+    in_window = min_gap <= gap <= max_gap and not alongside
+    if approach[i] and (gap > max_gap + release or gap <= -along):
+        approach[i] = used[i] = False  # Defence.forget
+        mode[i] = IDLE
+    if not approach[i]:
+        if not in_window:
+            return
+        approach[i], used[i] = True, False
+    m = mode[i]
+    if m == MOVING and alongside:
+        mode[i], target[i] = HOLDING, n_car
+    elif m == IDLE and not used[i] and in_window and closing >= min_closing and abs(n_ego - n_car) >= trigger:
+        used[i], mode[i], target[i] = True, MOVING, n_ego
+        moves[i] += 1
+    elif m == MOVING and abs(target[i] - n_car) < _ARRIVED and abs(n_dot) < _ARRIVED:
+        mode[i] = HOLDING

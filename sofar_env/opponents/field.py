@@ -205,11 +205,12 @@ class Opponents:
             v_new.append(min(vi, ds[i] / dt) if capped[i] else vi)
 
         # across the track
-        n_new, n_dot_new, clamps, self._squeezed = steer(dt, ego, (s, n, n_dot, v), gap, s_new, v_new, ep,
-                                                         self._band, cfg, self.vehicle)
+        s_new, v_new = np.array(s_new), np.array(v_new)
+        n_new, n_dot_new, clamps, self._squeezed = steer(dt, ego, (self.s, self.n, self.n_dot, self.v), gap, s_new,
+                                                         v_new, ep, self._band, cfg, self.vehicle)
         self.clamps += clamps
-        self.s, self.v = np.array(s_new), np.array(v_new)
-        self.n, self.n_dot = np.array(n_new), np.array(n_dot_new)
+        self.s, self.v = s_new, v_new
+        self.n, self.n_dot = n_new, n_dot_new
 
     # ------------------------------------------------------------------ overtakes
     def update_overtakes(self, ego_s: float) -> np.ndarray:

@@ -1,7 +1,8 @@
 """Lateral motion of an opponent: a rate- and acceleration-bounded tracker, edge bands, keep-clear bounds.
 
-Pure math on Python floats and small arrays; the lateral step of the field
-(:mod:`sofar_env.opponents.steering`) combines them:
+Pure math on floats and small arrays, compiled (:mod:`sofar_env._jit`) so that the lateral step of the
+field (:mod:`sofar_env.opponents.steering`) combines them in one compiled call; each is also callable from
+Python:
 
 * :func:`track_target`: one step of a tracker of a target offset whose lateral speed
   and acceleration never exceed the given bounds (a braking curve near the target
@@ -17,16 +18,16 @@ Pure math on Python floats and small arrays; the lateral step of the field
 
 from __future__ import annotations
 
-import bisect
 import math
 
 import numpy as np
 from scipy.ndimage import minimum_filter1d
 
 from .._interp import interp, interp_located, locate
-from .._jit import kernel, maximum, minimum
+from .._jit import kernel, maximum, minimum, py_max, py_min
+from ..tracks.curve import floor_mod, lerp_wrapped
 
-__all__ = ["track_target", "keep_clear", "EdgeBand"]
+__all__ = ["EdgeBand", "keep_clear", "track_target"]
 
 _APPROACH_TIME = 0.5
 """Time constant of the first-order approach of the tracker in the last decimetres [s]."""
@@ -48,6 +49,7 @@ _ROOM_SAMPLES = 400
 """Most points of :meth:`EdgeBand.room` (2 km at the 5 m spacing)."""
 
 
+@kernel
 def track_target(n: float, n_dot: float, target: float, target_rate: float, v_max: float, a_max: float,
                  dt: float, lo: float = -math.inf, hi: float = math.inf) -> tuple[float, float]:
     """One step of length ``dt`` of the lateral tracker: the new ``(n, n_dot)``.
@@ -61,21 +63,22 @@ def track_target(n: float, n_dot: float, target: float, target_rate: float, v_ma
     integrates the rate with the trapezoidal rule.
     """
     e = target - n
-    mag = min(math.sqrt(a_max * abs(e)), abs(e) / _APPROACH_TIME)
+    mag = py_min(math.sqrt(a_max * abs(e)), abs(e) / _APPROACH_TIME)
     r = target_rate + math.copysign(mag, e)
-    up = min(v_max, _stopping_rate(hi - n, a_max))
-    down = min(v_max, _stopping_rate(n - lo, a_max))
-    r = min(max(r, -down), up)
+    up = py_min(v_max, _stopping_rate(hi - n, a_max))
+    down = py_min(v_max, _stopping_rate(n - lo, a_max))
+    r = py_min(py_max(r, -down), up)
     step = a_max * dt
-    n_dot_new = n_dot + min(max(r - n_dot, -step), step)
+    n_dot_new = n_dot + py_min(py_max(r - n_dot, -step), step)
     return n + 0.5 * (n_dot + n_dot_new) * dt, n_dot_new
 
 
-def _stopping_rate(room: float, a_max: float) -> float:
+@kernel
+def _stopping_rate(room, a_max):
     """Largest rate toward a bound ``room`` [m] away that still stops in time (0 at or past it)."""
     if room <= 0.0:
         return 0.0
-    return min(math.sqrt(a_max * room), room / _APPROACH_TIME) if room < math.inf else math.inf
+    return py_min(math.sqrt(a_max * room), room / _APPROACH_TIME) if room < math.inf else math.inf
 
 
 def keep_clear(n: float, n_other: float, separation: float, share: float = 1.0,
@@ -90,9 +93,15 @@ def keep_clear(n: float, n_other: float, separation: float, share: float = 1.0,
     """
     if left is None:
         left = n >= n_other
+    return keep_clear_of(float(n), float(n_other), float(separation), float(share), bool(left))
+
+
+@kernel
+def keep_clear_of(n, n_other, separation, share, left):
+    """:func:`keep_clear` with ``left`` given (inside kernels)."""
     if left:
-        return min(n, n - share * (n - n_other - separation)), math.inf
-    return -math.inf, max(n, n + share * (n_other - separation - n))
+        return py_min(n, n - share * (n - n_other - separation)), math.inf
+    return -math.inf, py_max(n, n + share * (n_other - separation - n))
 
 
 class EdgeBand:
@@ -114,18 +123,17 @@ class EdgeBand:
         wr = minimum_filter1d(np.asarray(track.width_right(samples), float), size, mode="wrap")
         self._knots = np.append(samples, track.length)
         wl, wr = np.append(wl, wl[0]), np.append(wr, wr[0])
-        self._lists = (self._knots.tolist(), wl.tolist(), wr.tolist())
+        self._widths = (wl, wr)
+        self._kappa = track.table("kappa")
+        self._half_length_sq = self.half_length ** 2
         lo, hi = self.inner - wr, wl - self.inner
         mid = 0.5 * (lo + hi)
         self._soft = (np.minimum(lo, mid), np.maximum(hi, mid))  # an empty band collapses to its middle
 
     def widths(self, s: float) -> tuple[float, float]:
-        """Smallest left and right widths within the corner window around ``s`` [m] (Python floats)."""
-        knots, wl, wr = self._lists
-        s = s % self.track.length
-        k = min(max(bisect.bisect_right(knots, s) - 1, 0), len(knots) - 2)
-        w = (s - knots[k]) / (knots[k + 1] - knots[k])
-        return wl[k] + w * (wl[k + 1] - wl[k]), wr[k] + w * (wr[k + 1] - wr[k])
+        """Smallest left and right widths within the corner window around ``s`` [m] (Python floats;
+        :func:`_widths`)."""
+        return _widths(float(s), self._knots, *self._widths, float(self.track.length))
 
     def soft(self, s) -> tuple[np.ndarray, np.ndarray]:
         """The soft band ``(lo, hi)`` at ``s`` (an array): the footprint ``inner`` inside both edges."""
@@ -135,9 +143,8 @@ class EdgeBand:
     def envelope(self, s: float, v: float, lateral_speed: float, lateral_accel: float) -> tuple[float, float]:
         """The soft band at ``s`` tightened so that a car at speed ``v`` [m/s] that starts moving back
         from rest (accelerating at ``lateral_accel`` [m/s^2] up to ``lateral_speed`` [m/s]) stays inside
-        it as it narrows ahead (looking 8 s or at least 50 m ahead). One compiled call (:func:`_envelope`)."""
-        return _envelope(float(s), float(v), float(lateral_speed), float(lateral_accel), self._knots,
-                         self._soft[0], self._soft[1], _LOOKAHEAD, _LOOKAHEAD_TIME, float(self.track.length))
+        it as it narrows ahead (looking 8 s or at least 50 m ahead). One compiled call (:func:`envelope_at`)."""
+        return envelope_at(float(s), float(v), float(lateral_speed), float(lateral_accel), *self.envelope_data())
 
     def room(self, s: float, distance: float) -> float:
         """Narrowest width of the soft band over ``[s, s + distance]`` [m] (sampled every <= 5 m)."""
@@ -147,27 +154,32 @@ class EdgeBand:
 
     def hard(self, s: float, heading: float) -> tuple[float, float]:
         """The hard band at ``s`` for a car at ``heading`` [rad] to the raceline: every corner inside
-        (the footprint's reach across the track at that heading, plus its bulge on a curve)."""
-        c, sn = abs(math.cos(heading)), abs(math.sin(heading))
-        # the corners half a length ahead and behind sit kappa l^2 / 2 further out on a curve
-        bend = 0.5 * abs(float(self.track.curvature(float(s)))) * self.half_length ** 2
-        reach = self.half_width * c + self.half_length * sn + bend + _HARD_SLACK
-        wl, wr = self.widths(float(s))
-        lo, hi = reach - wr, wl - reach
-        return (lo, hi) if lo <= hi else (0.5 * (lo + hi),) * 2
+        (the footprint's reach across the track at that heading, plus its bulge on a curve; :func:`hard_at`)."""
+        return hard_at(float(s), float(heading), *self.hard_data())
+
+    def envelope_data(self) -> tuple:
+        """The trailing arguments of :func:`envelope_at` (for kernels): ``knots, soft lo, soft hi, look-ahead
+        fractions, look-ahead time, length``."""
+        return (self._knots, self._soft[0], self._soft[1], _LOOKAHEAD, _LOOKAHEAD_TIME, float(self.track.length))
+
+    def hard_data(self) -> tuple:
+        """The trailing arguments of :func:`hard_at` (for kernels): ``half_width, half_length,
+        half_length ** 2, knots, width_left, width_right, length, curvature knots, curvature``."""
+        return (self.half_width, self.half_length, self._half_length_sq, self._knots, *self._widths,
+                float(self.track.length), *self._kappa)
 
 
 @kernel
-def _envelope(s, v, lateral_speed, lateral_accel, knots, soft_lo, soft_hi, lookahead, lookahead_time, length):
+def envelope_at(s, v, lateral_speed, lateral_accel, knots, soft_lo, soft_hi, lookahead, lookahead_time, length):
     """:meth:`EdgeBand.envelope`: at the points ``s + d``, ``d = max(lookahead_time v, 50) lookahead``, the soft
     band widened by the room ``back`` a car gains by moving back from rest in the time ``d / max(v, 1e-3)`` it
     takes to get there (``a t^2 / 2`` while accelerating, then ``u t - u t_ramp / 2``); the largest lower and
     the smallest upper bound (their middle if they cross). Python's ``max`` picks and numpy's arithmetic."""
     x = lookahead_time * v
-    reach = 50.0 if 50.0 > x else x
-    v_div = 1e-3 if 1e-3 > v else v
+    reach = max(x, 50.0)
+    v_div = max(v, 0.001)
     u = lateral_speed
-    a = 1e-9 if 1e-9 > lateral_accel else lateral_accel
+    a = max(lateral_accel, 1e-09)
     t_ramp = u / a
     lo_e, hi_e = -np.inf, np.inf
     j = -1
@@ -182,3 +194,28 @@ def _envelope(s, v, lateral_speed, lateral_accel, knots, soft_lo, soft_hi, looka
     if lo_e > hi_e:
         lo_e = hi_e = 0.5 * (lo_e + hi_e)
     return lo_e, hi_e
+
+
+@kernel
+def _widths(s, knots, wl, wr, length):
+    """:meth:`EdgeBand.widths`: the widths at ``s`` wrapped into [0, length) (floor modulo), on the piece of
+    the last knot <= s, as ``w_k + t (w_{k+1} - w_k)``."""
+    s = floor_mod(s, length)
+    k = min(max(locate(s, knots, -1), 0), knots.shape[0] - 2)
+    t = (s - knots[k]) / (knots[k + 1] - knots[k])
+    return wl[k] + t * (wl[k + 1] - wl[k]), wr[k] + t * (wr[k + 1] - wr[k])
+
+
+@kernel
+def hard_at(s, heading, half_width, half_length, half_length_sq, knots, wl, wr, length, kappa_knots, kappa):
+    """:meth:`EdgeBand.hard` (its trailing arguments: :meth:`EdgeBand.hard_data`)."""
+    c, sn = abs(math.cos(heading)), abs(math.sin(heading))
+    # the corners half a length ahead and behind sit kappa l^2 / 2 further out on a curve
+    bend = 0.5 * abs(lerp_wrapped(s, length, kappa_knots, kappa)) * half_length_sq
+    reach = half_width * c + half_length * sn + bend + _HARD_SLACK
+    w_l, w_r = _widths(s, knots, wl, wr, length)
+    lo, hi = reach - w_r, w_l - reach
+    if lo <= hi:
+        return lo, hi
+    mid = 0.5 * (lo + hi)
+    return mid, mid

@@ -17,9 +17,10 @@ import math
 
 import numpy as np
 
+from .._jit import kernel
 from .config import LineConfig
 
-__all__ = ["wave_numbers", "Lines"]
+__all__ = ["Lines", "line_at", "wave_numbers"]
 
 _DRAWS_PER_CAR = 6
 """Random numbers drawn per car (also when lines are off, so other draws do not depend on them)."""
@@ -63,7 +64,15 @@ class Lines:
         """Offset of line ``i`` at ``s`` [m] and its slope dn/ds [-]."""
         if not self.active:
             return float(self.offsets[i]), 0.0
-        x1, x2 = self.w1[i] * s + self.p1[i], self.w2[i] * s + self.p2[i]
-        n = self.offsets[i] + self.a1[i] * math.sin(x1) + self.a2[i] * math.sin(x2)
-        slope = self.a1[i] * self.w1[i] * math.cos(x1) + self.a2[i] * self.w2[i] * math.cos(x2)
-        return float(n), float(slope)
+        return line_at(float(s), self.offsets[i], self.a1[i], self.a2[i], self.w1[i], self.w2[i], self.p1[i],
+                       self.p2[i])
+
+
+@kernel
+def line_at(s, offset, a1, a2, w1, w2, p1, p2):
+    """Offset and slope dn/ds of the line ``offset + a1 sin(w1 s + p1) + a2 sin(w2 s + p2)`` at ``s`` [m]
+    (:meth:`Lines.at` of one car; the lateral step of the field calls it inside its kernel)."""
+    x1, x2 = w1 * s + p1, w2 * s + p2
+    n = offset + a1 * math.sin(x1) + a2 * math.sin(x2)
+    slope = a1 * w1 * math.cos(x1) + a2 * w2 * math.cos(x2)
+    return n, slope

@@ -31,11 +31,14 @@ import math
 
 import numpy as np
 
+from .._jit import kernel, py_max, py_min
+from ..tracks.curve import floor_mod, lerp_wrapped
 from .config import OpponentConfig
-from .defence import IDLE, ego_guarded
-from .lateral import EdgeBand, keep_clear, track_target
+from .defence import IDLE, defence_step, guarded
+from .lateral import EdgeBand, envelope_at, hard_at, keep_clear_of, track_target
+from .lines import line_at
 
-__all__ = ["MAX_HEADING_TAN", "BRAKE_LEAD", "HARD_GAP", "steer"]
+__all__ = ["BRAKE_LEAD", "HARD_GAP", "MAX_HEADING_TAN", "steer"]
 
 MAX_HEADING_TAN = math.tan(0.1)
 """Lateral speed bound relative to the arc-length speed: the lateral motion never turns a car more
@@ -50,112 +53,183 @@ HARD_GAP = 0.3
 bounds keep ``band_margin``)."""
 
 
-def steer(dt: float, ego, state: tuple[list, list, list, list], gap: np.ndarray, s_new: list, v_new: list,
-          episode, band: EdgeBand, cfg: OpponentConfig, vehicle) -> tuple[list[float], list[float], int, list[bool]]:
+def steer(dt: float, ego, state: tuple, gap: np.ndarray, s_new, v_new,
+          episode, band: EdgeBand, cfg: OpponentConfig, vehicle) -> tuple[np.ndarray, np.ndarray, int, list[bool]]:
     """New offsets and lateral rates of every car, the number of clamps, and which cars are squeezed
     (their envelope and keep-clear bounds conflict: they will not fit beside the car or ego next to them).
 
-    ``state``: the start-of-step ``(s, n, n_dot, v)`` lists; ``gap[i, j] = s_j - s_i``; ``s_new``,
+    ``state``: the start-of-step ``(s, n, n_dot, v)`` arrays (or lists); ``gap[i, j] = s_j - s_i``; ``s_new``,
     ``v_new``: the new arc lengths and speeds; ``ego``: ``(s, n, v)``, a list of such tuples (the
     controlled cars of a multi-car race) or None. With several, each car defends against the nearest
     one behind it (else the nearest one), and keeps clear of every one alongside or about to be.
+    The defence state of ``episode`` advances. One compiled call (:func:`_steer`).
     """
-    s, n, n_dot, v = state
-    m = len(s)
-    defence, lines, traffic = episode.defence, episode.lines, cfg.traffic
-    sep_soft, sep_hard = vehicle.width + traffic.band_margin, vehicle.width + HARD_GAP
-    sep_ego = vehicle.width + cfg.defence.clearance
-    # the cars beside each one: within side_window (hard), or about to be within BRAKE_LEAD (soft)
-    soft_near, hard_near = [], []
-    for i in range(m):
-        soft_near.append([j for j in range(m) if j != i
-                          and abs(gap[i, j]) < traffic.side_window + abs(v[i] - v[j]) * BRAKE_LEAD])
-        hard_near.append([j for j in soft_near[i] if abs(gap[i, j]) < traffic.side_window])
+    s, n, n_dot, v = (np.asarray(x, dtype=float) for x in state)
+    m = s.shape[0]
+    if ego is None:
+        egos = np.zeros((0, 3))
+    else:
+        egos = np.array([[float(x) for x in e] for e in (ego if isinstance(ego, list) else [ego])], dtype=float)
+        egos = egos.reshape(-1, 3)
+    defence, lines, traffic, dcfg = episode.defence, episode.lines, cfg.traffic, cfg.defence
+    n_out, nd_out, squeezed = np.empty(m), np.empty(m), np.zeros(m, dtype=np.bool_)
+    clamps = _steer(
+        float(dt), s, n, n_dot, v, np.ascontiguousarray(gap, dtype=float), np.asarray(s_new, dtype=float),
+        np.asarray(v_new, dtype=float), egos,
+        defence.aggressiveness, defence.approach, defence.used, defence.mode, defence.target, defence.moves,
+        vehicle.length + dcfg.alongside_margin, dcfg.min_gap, dcfg.max_gap, dcfg.release, dcfg.min_closing,
+        dcfg.trigger, dcfg.guard_time, dcfg.lateral_speed, dcfg.lateral_accel,
+        bool(lines.active), lines.offsets, lines.a1, lines.a2, lines.w1, lines.w2, lines.p1, lines.p2,
+        cfg.lines.lateral_speed, cfg.lines.lateral_accel,
+        traffic.side_window, vehicle.width + traffic.band_margin, vehicle.width + HARD_GAP,
+        vehicle.width + dcfg.clearance,
+        *band.envelope_data(), *band.hard_data(),
+        n_out, nd_out, squeezed)
+    return n_out, nd_out, int(clamps), squeezed.tolist()
 
-    # 1. intents
-    # ego_soft[i] / ego_hard[i]: offsets of the egos car i keeps clear of, at its target / position
-    intents, ego_soft, ego_hard = [], [()] * m, [()] * m
-    egos = [] if ego is None else [tuple(float(x) for x in e) for e in (ego if isinstance(ego, list) else [ego])]
+
+@kernel
+def _steer(dt, s, n, n_dot, v, gap, s_new, v_new, egos,
+           aggressiveness, approach, used, mode, d_target, moves, along, min_gap, max_gap, release, min_closing,
+           trigger, guard_time, d_lateral_speed, d_lateral_accel,
+           lines_active, offsets, a1, a2, w1, w2, p1, p2, l_lateral_speed, l_lateral_accel,
+           side_window, sep_soft, sep_hard, sep_ego,
+           soft_knots, soft_lo, soft_hi, lookahead, lookahead_time, length,
+           half_width, half_length, half_length_sq, knots, wl, wr, hard_length, kappa_knots, kappa,
+           n_out, nd_out, squeezed):
+    """:func:`steer` on arrays (its steps 1-4 in the module docstring, in the order and with the operations of
+    the Python form it replaced; ``min``/``max`` as Python's). ``egos`` (E, 3) rows ``(s, n, v)``; the
+    defence arrays change in place; writes ``n_out``, ``nd_out``, ``squeezed``; returns the clamps. The band's
+    data: :meth:`EdgeBand.envelope_data` then :meth:`EdgeBand.hard_data` (both end with the track length)."""
+    m = s.shape[0]
+    n_egos = egos.shape[0]
+    # the cars beside each one: within side_window (hard), or about to be within BRAKE_LEAD (soft)
+    soft_near = np.zeros((m, m), dtype=np.bool_)
+    hard_near = np.zeros((m, m), dtype=np.bool_)
     for i in range(m):
-        if egos:
-            rows = [(float(band.track.gap(s[i], s_e)), v_e - v[i], n_e) for s_e, n_e, v_e in egos]
-            behind = [r for r in rows if r[0] >= 0.0]
-            gap_e, closing, n_e = (min(behind, key=lambda r: r[0]) if behind
-                                   else min(rows, key=lambda r: abs(r[0])))
-            defence.update(i, gap_e, closing, n[i], n_dot[i], n_e)
-            ego_soft[i] = tuple(r[2] for r in rows
-                                if ego_guarded(r[0], r[1], cfg.defence, vehicle.length, BRAKE_LEAD))
-            ego_hard[i] = tuple(r[2] for r in rows if ego_guarded(r[0], r[1], cfg.defence, vehicle.length))
-        if defence.mode[i] != IDLE:
-            target, rate = float(defence.target[i]), 0.0
-            v_max, a_max = defence.limits(i)
+        for j in range(m):
+            if j != i and abs(gap[i, j]) < side_window + abs(v[i] - v[j]) * BRAKE_LEAD:
+                soft_near[i, j] = True
+                hard_near[i, j] = abs(gap[i, j]) < side_window
+
+    # 1. intents; ego_soft[i, e] / ego_hard[i, e]: car i keeps clear of ego e at its target / position
+    target = np.empty(m)
+    rate = np.empty(m)
+    v_lim = np.empty(m)
+    a_lim = np.empty(m)
+    ego_soft = np.zeros((m, n_egos), dtype=np.bool_)
+    ego_hard = np.zeros((m, n_egos), dtype=np.bool_)
+    half = 0.5 * length
+    for i in range(m):
+        if n_egos > 0:
+            best, best_key, best_behind = -1, 0.0, False
+            for e in range(n_egos):
+                r = floor_mod(s[i] - egos[e, 0] + half, length)
+                g = (0.0 if r >= length else r) - half
+                closing = egos[e, 2] - v[i]
+                behind = g >= 0.0
+                # the nearest ego behind the car, else the nearest one (the first of equals)
+                key = g if behind else abs(g)
+                if best < 0 or (behind and not best_behind) or (behind == best_behind and key < best_key):
+                    best, best_key, best_behind = e, key, behind
+                ego_soft[i, e] = guarded(g, closing, along, guard_time, BRAKE_LEAD)
+                ego_hard[i, e] = guarded(g, closing, along, guard_time, 0.0)
+            r = floor_mod(s[i] - egos[best, 0] + half, length)
+            g = (0.0 if r >= length else r) - half
+            defence_step(i, g, egos[best, 2] - v[i], n[i], n_dot[i], egos[best, 1], aggressiveness, approach, used,
+                         mode, d_target, moves, along, min_gap, max_gap, release, min_closing, trigger)
+        if mode[i] != IDLE:
+            target[i], rate[i] = d_target[i], 0.0
+            v_max, a_lim[i] = aggressiveness[i] * d_lateral_speed, d_lateral_accel
         else:
-            target, slope = lines.at(i, s_new[i])
-            rate = slope * v_new[i]
-            v_max, a_max = cfg.lines.lateral_speed, cfg.lines.lateral_accel
-        intents.append((target, rate, min(v_max, MAX_HEADING_TAN * max(min(v[i], v_new[i]), 0.0)), a_max))
+            if lines_active:
+                target[i], slope = line_at(s_new[i], offsets[i], a1[i], a2[i], w1[i], w2[i], p1[i], p2[i])
+            else:
+                target[i], slope = offsets[i], 0.0
+            rate[i] = slope * v_new[i]
+            v_max, a_lim[i] = l_lateral_speed, l_lateral_accel
+        v_lim[i] = py_min(v_max, MAX_HEADING_TAN * py_max(py_min(v[i], v_new[i]), 0.0))
 
     # 2. envelopes, pushed apart by the cars alongside
-    env = [band.envelope(s_new[i], v_new[i], 0.5 * intents[i][2], 0.5 * intents[i][3]) for i in range(m)]
-    pushed = [list(e) for e in env]
+    env_lo = np.empty(m)
+    env_hi = np.empty(m)
     for i in range(m):
-        for j in soft_near[i]:
-            if _left_of(i, j, n):
-                pushed[i][0] = max(pushed[i][0], env[j][0] + sep_soft)
-            else:
-                pushed[i][1] = min(pushed[i][1], env[j][1] - sep_soft)
+        env_lo[i], env_hi[i] = envelope_at(s_new[i], v_new[i], 0.5 * v_lim[i], 0.5 * a_lim[i], soft_knots, soft_lo,
+                                         soft_hi, lookahead, lookahead_time, length)
+    push_lo = env_lo.copy()
+    push_hi = env_hi.copy()
+    for i in range(m):
+        for j in range(m):
+            if soft_near[i, j]:
+                if _left_of(i, j, n):
+                    push_lo[i] = py_max(push_lo[i], env_lo[j] + sep_soft)
+                else:
+                    push_hi[i] = py_min(push_hi[i], env_hi[j] - sep_soft)
 
     # 3.-4. keep-clear bounds, tracker, hard bounds
-    n_out, nd_out, clamps, squeezed = list(n), list(n_dot), 0, [False] * m
+    clamps = 0
     for i in range(m):
-        lo_k, hi_k = _clear_of(i, soft_near[i], n, sep_soft)
-        lo_p, hi_p = _clear_of(i, hard_near[i], n, sep_hard)
-        for n_e in ego_soft[i]:
-            lo_k, hi_k = _tighten(lo_k, hi_k, keep_clear(n[i], n_e, sep_ego))
-        for n_e in ego_hard[i]:
-            lo_p, hi_p = _tighten(lo_p, hi_p, keep_clear(n[i], n_e, sep_ego))
-        target, rate, v_max, a_max = intents[i]
-        lo_e, hi_e = pushed[i] if pushed[i][0] <= pushed[i][1] else env[i]
-        lo_t, hi_t = max(lo_e, lo_k), min(hi_e, hi_k)
+        lo_k, hi_k = _clear_of(i, soft_near, n, sep_soft)
+        lo_p, hi_p = _clear_of(i, hard_near, n, sep_hard)
+        for e in range(n_egos):
+            if ego_soft[i, e]:
+                lo, hi = keep_clear_of(n[i], egos[e, 1], sep_ego, 1.0, n[i] >= egos[e, 1])
+                lo_k, hi_k = py_max(lo_k, lo), py_min(hi_k, hi)
+        for e in range(n_egos):
+            if ego_hard[i, e]:
+                lo, hi = keep_clear_of(n[i], egos[e, 1], sep_ego, 1.0, n[i] >= egos[e, 1])
+                lo_p, hi_p = py_max(lo_p, lo), py_min(hi_p, hi)
+        tgt, rt, v_max, a_max = target[i], rate[i], v_lim[i], a_lim[i]
+        if push_lo[i] <= push_hi[i]:
+            lo_e, hi_e = push_lo[i], push_hi[i]
+        else:
+            lo_e, hi_e = env_lo[i], env_hi[i]
+        lo_t, hi_t = py_max(lo_e, lo_k), py_min(hi_e, hi_k)
+        squeezed[i] = False
         if lo_t > hi_t:  # the keep-clear bounds win, as close to the envelope as they allow
             squeezed[i] = True
-            lo_t = hi_t = min(max(min(max(target, lo_e), hi_e), lo_k), hi_k)
-        clipped = min(max(target, lo_t), hi_t)
-        if clipped != target or (target <= lo_t and rate < 0.0) or (target >= hi_t and rate > 0.0):
+            lo_t = py_min(py_max(py_min(py_max(tgt, lo_e), hi_e), lo_k), hi_k)
+            hi_t = lo_t
+        clipped = py_min(py_max(tgt, lo_t), hi_t)
+        if clipped != tgt or (tgt <= lo_t and rt < 0.0) or (tgt >= hi_t and rt > 0.0):
             # a target held at a bound moves with the bound: with an edge band, as it will one step on
-            rate = 0.0
-            if clipped in env[i] and clipped not in (lo_k, hi_k):
-                ahead = band.envelope(s_new[i] + v_new[i] * dt, v_new[i], 0.5 * v_max, 0.5 * a_max)
-                rate = (ahead[0 if clipped == env[i][0] else 1] - clipped) / dt
-        n_i, nd_i = track_target(n[i], n_dot[i], clipped, rate, v_max, a_max, dt, min(lo_t, n[i]), max(hi_t, n[i]))
-        crab = MAX_HEADING_TAN * max(v_new[i], 0.0)
+            rt = 0.0
+            if (clipped == env_lo[i] or clipped == env_hi[i]) and not (clipped == lo_k or clipped == hi_k):
+                ahead_lo, ahead_hi = envelope_at(s_new[i] + v_new[i] * dt, v_new[i], 0.5 * v_max, 0.5 * a_max,
+                                               soft_knots, soft_lo, soft_hi, lookahead, lookahead_time, length)
+                rt = ((ahead_lo if clipped == env_lo[i] else ahead_hi) - clipped) / dt
+        n_i, nd_i = track_target(n[i], n_dot[i], clipped, rt, v_max, a_max, dt, py_min(lo_t, n[i]),
+                                 py_max(hi_t, n[i]))
+        crab = MAX_HEADING_TAN * py_max(v_new[i], 0.0)
         if abs(nd_i) > crab:  # a car that brakes hard cannot keep its lateral speed
             nd_i = math.copysign(crab, nd_i)
             n_i = n[i] + 0.5 * (n_dot[i] + nd_i) * dt
-        along = max(v_new[i] * (1.0 - band.track.curvature(s_new[i]) * n_i), 1e-3)
-        lo_h, hi_h = band.hard(s_new[i], math.atan2(abs(nd_i), along))
-        lo, hi = max(lo_h, lo_p), min(hi_h, hi_p)
+        along_s = py_max(v_new[i] * (1.0 - lerp_wrapped(s_new[i], length, kappa_knots, kappa) * n_i), 1e-3)
+        lo_h, hi_h = hard_at(s_new[i], math.atan2(abs(nd_i), along_s), half_width, half_length, half_length_sq, knots,
+                           wl, wr, hard_length, kappa_knots, kappa)
+        lo, hi = py_max(lo_h, lo_p), py_min(hi_h, hi_p)
         if lo > hi:  # never leave the track
             lo, hi = lo_h, hi_h
         if not lo <= n_i <= hi:
-            n_i, nd_i = min(max(n_i, lo), hi), 0.0
+            n_i, nd_i = py_min(py_max(n_i, lo), hi), 0.0
             clamps += 1
         n_out[i], nd_out[i] = n_i, nd_i
-    return n_out, nd_out, clamps, squeezed
+    return clamps
 
 
-def _left_of(i: int, j: int, n: list) -> bool:
+@kernel
+def _left_of(i, j, n):
     """Whether car ``i`` is on the left of car ``j`` (a tie puts the higher index on the left)."""
     return n[i] > n[j] or (n[i] == n[j] and i > j)
 
 
-def _tighten(lo: float, hi: float, bounds: tuple[float, float]) -> tuple[float, float]:
-    return max(lo, bounds[0]), min(hi, bounds[1])
-
-
-def _clear_of(i: int, others: list, n: list, separation: float) -> tuple[float, float]:
-    """Keep-clear bounds of car ``i`` against ``others`` (each of the two takes half the room)."""
+@kernel
+def _clear_of(i, near, n, separation):
+    """Keep-clear bounds of car ``i`` against the cars ``j`` with ``near[i, j]`` (each of the two takes half
+    the room)."""
     lo, hi = -math.inf, math.inf
-    for j in others:
-        lo, hi = _tighten(lo, hi, keep_clear(n[i], n[j], separation, share=0.5, left=_left_of(i, j, n)))
+    for j in range(n.shape[0]):
+        if near[i, j]:
+            b_lo, b_hi = keep_clear_of(n[i], n[j], separation, 0.5, _left_of(i, j, n))
+            lo, hi = py_max(lo, b_lo), py_min(hi, b_hi)
     return lo, hi
