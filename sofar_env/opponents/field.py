@@ -37,16 +37,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._jit import kernel
+from .._jit import kernel, py_min
 from ..tracks.curve import floor_mod, lerp_wrapped
 from ..vehicle import AV21, VehicleParams
 from .config import OpponentConfig
 from .defence import IDLE, Defence
 from .lateral import EdgeBand
 from .lines import Lines
-from .pace import LiftSchedule, draw_paces
+from .pace import LiftSchedule, draw_paces, lift_factor_at
 from .steering import MAX_HEADING_TAN, steer
-from .traffic import limit_advances
+from .traffic import limit_advances_at
 
 __all__ = ["Opponents"]
 
@@ -92,7 +92,7 @@ class Opponents:
         """Lateral positions stopped at a hard bound since the reset (a diagnostic; rare)."""
         self._next_id = 0
         self._episode: _Episode | None = None
-        self._squeezed: list[bool] = []
+        self._squeezed = np.zeros(0, dtype=np.bool_)
         self._band: EdgeBand | None = None
         self._pose_cache: tuple | None = None
         self._speed_table = track.table("v")
@@ -130,7 +130,7 @@ class Opponents:
         self.time = 0.0
         self.clamps = 0
         self._episode = None
-        self._squeezed = [False] * m
+        self._squeezed = np.zeros(m, dtype=np.bool_)
         if not (cfg.interactive and m):
             self.v = self._speed(self.s)
             return
@@ -185,27 +185,17 @@ class Opponents:
         track, cfg, ep, t = self.track, self.config, self._episode, self.time
         m = self.count
         ep.lifts.advance(t + dt)
-        s, n, n_dot, v = self.s.tolist(), self.n.tolist(), self.n_dot.tolist(), self.v.tolist()
         gap = np.asarray(track.gap(self.s[None, :], self.s[:, None]), float).reshape(m, m)  # [i, j] = s_j - s_i
-        band_width = self.vehicle.width + cfg.traffic.band_margin
-        pace = ep.pace.tolist()  # Python floats keep the track on its fast scalar paths
-
+        pace_cfg = cfg.pace
+        knots, soft_lo, soft_hi, _, _, length = self._band.envelope_data()
+        s_new, v_new = np.empty(m), np.empty(m)
         # along the track: nominal pace, then the traffic rules (following, passing, yielding)
-        ds = []
-        for i in range(m):
-            v0 = pace[i] * ep.lifts.factor(i, t) * track.speed(s[i])
-            v_mid = pace[i] * ep.lifts.factor(i, t + 0.5 * dt) * track.speed(track.wrap(s[i] + 0.5 * dt * v0))
-            ds.append(dt * v_mid)
-        capped = limit_advances(ds, s, n, v, gap, dt, self._band, cfg.traffic, band_width,
-                                self.vehicle.length + cfg.defence.alongside_margin, self._squeezed)
-        s_new = [track.wrap(s[i] + ds[i]) for i in range(m)]
-        v_new = []
-        for i in range(m):
-            vi = pace[i] * ep.lifts.factor(i, t + dt) * track.speed(s_new[i])
-            v_new.append(min(vi, ds[i] / dt) if capped[i] else vi)
-
+        _advance_along(self.s, self.n, self.v, gap, self._squeezed, ep.pace, ep.lifts.start, float(t), float(dt),
+                       pace_cfg.lift_duration, pace_cfg.lift_ramp, pace_cfg.lift_depth, *self._speed_table,
+                       cfg.traffic.follow_gap, self.vehicle.width + cfg.traffic.band_margin,
+                       self.vehicle.length + cfg.defence.alongside_margin, knots, soft_lo, soft_hi, length,
+                       s_new, v_new)
         # across the track
-        s_new, v_new = np.array(s_new), np.array(v_new)
         n_new, n_dot_new, clamps, self._squeezed = steer(dt, ego, (self.s, self.n, self.n_dot, self.v), gap, s_new,
                                                          v_new, ep, self._band, cfg, self.vehicle)
         self.clamps += clamps
@@ -323,3 +313,35 @@ def _unwrap_gaps(s, ego_s, rel, was_ahead, length, threshold, new, passed):
             passed[k] = i
             k += 1
     return k
+
+
+@kernel
+def _advance_along(s, n, v, gap, squeezed, pace, lift_start, t, dt, lift_duration, lift_ramp, lift_depth, knots, table,
+                   follow, band_width, alongside, soft_knots, soft_lo, soft_hi, length, s_new, v_new):
+    """Into ``s_new``, ``v_new``: the along-track step of an interactive field. Each car drives its pace times its
+    lift factor (:func:`~.pace.lift_factor_at` at ``t - lift_start``) times the speed profile ``table`` for
+    ``dt`` [s] by the midpoint rule; the traffic rules then limit the advances
+    (:func:`~.traffic.limit_advances_at`); the new speed is the pace at the new arc length, at most the
+    advance over ``dt`` for a limited car. The track's scalar interpolation and wrap (``Track.speed``,
+    ``Track.wrap`` at a float)."""
+    m = s.shape[0]
+    ds = np.empty(m)
+    for i in range(m):
+        t_mid = t + 0.5 * dt
+        v0 = pace[i] * lift_factor_at(t - lift_start[i], lift_duration, lift_ramp, lift_depth) * lerp_wrapped(
+            s[i], length, knots, table)
+        x = floor_mod(s[i] + 0.5 * dt * v0, length)
+        x = 0.0 if x >= length else x
+        v_mid = pace[i] * lift_factor_at(t_mid - lift_start[i], lift_duration, lift_ramp, lift_depth) * lerp_wrapped(
+            x, length, knots, table)
+        ds[i] = dt * v_mid
+    capped = np.zeros(m, dtype=np.bool_)
+    limit_advances_at(ds, s, n, v, gap, dt, squeezed, follow, band_width, alongside, soft_knots, soft_lo, soft_hi,
+                      length, capped)
+    t_end = t + dt
+    for i in range(m):
+        x = floor_mod(s[i] + ds[i], length)
+        s_new[i] = 0.0 if x >= length else x
+        vi = pace[i] * lift_factor_at(t_end - lift_start[i], lift_duration, lift_ramp, lift_depth) * lerp_wrapped(
+            s_new[i], length, knots, table)
+        v_new[i] = py_min(vi, ds[i] / dt) if capped[i] else vi

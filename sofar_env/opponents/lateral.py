@@ -147,10 +147,9 @@ class EdgeBand:
         return envelope_at(float(s), float(v), float(lateral_speed), float(lateral_accel), *self.envelope_data())
 
     def room(self, s: float, distance: float) -> float:
-        """Narrowest width of the soft band over ``[s, s + distance]`` [m] (sampled every <= 5 m)."""
-        k = min(int(math.ceil(max(distance, 0.0) / 5.0)) + 1, _ROOM_SAMPLES)
-        lo, hi = self.soft(s + np.linspace(0.0, max(distance, 0.0), k))
-        return float(np.minimum.reduce(hi - lo))  # np.min
+        """Narrowest width of the soft band over ``[s, s + distance]`` [m] (sampled every <= 5 m;
+        :func:`room_at`)."""
+        return room_at(float(s), float(distance), self._knots, self._soft[0], self._soft[1], float(self.track.length))
 
     def hard(self, s: float, heading: float) -> tuple[float, float]:
         """The hard band at ``s`` for a car at ``heading`` [rad] to the raceline: every corner inside
@@ -219,3 +218,32 @@ def hard_at(s, heading, half_width, half_length, half_length_sq, knots, wl, wr, 
         return lo, hi
     mid = 0.5 * (lo + hi)
     return mid, mid
+
+
+@kernel
+def room_at(s, distance, knots, soft_lo, soft_hi, length):
+    """:meth:`EdgeBand.room` (``knots, soft_lo, soft_hi``: the soft band's table): the band's width at
+    ``k = min(ceil(max(distance, 0) / 5) + 1, 400)`` points spread as ``np.linspace(0, max(distance, 0), k)``
+    computes them (``i * step``, the last one ``stop``), added to ``s`` and wrapped (floor modulo), interpolated
+    as ``np.interp``; the smallest (a nan propagates, as ``np.min``)."""
+    stop = py_max(distance, 0.0)
+    k = min(int(math.ceil(stop / 5.0)) + 1, _ROOM_SAMPLES)
+    div = k - 1
+    step = stop / div if div > 0 else 0.0
+    out = np.inf
+    j = -1
+    for i in range(k):
+        if div <= 0:
+            y = float(i) * stop
+        elif step == 0.0:
+            y = float(i) / div * stop
+        else:
+            y = float(i) * step
+        y = y + 0.0
+        if div > 0 and i == k - 1:
+            y = stop
+        p = floor_mod(s + y, length)
+        j = locate(p, knots, j)
+        width = interp_located(j, p, knots, soft_hi) - interp_located(j, p, knots, soft_lo)
+        out = width if i == 0 else minimum(out, width)
+    return out

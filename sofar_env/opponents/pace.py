@@ -14,9 +14,10 @@ import math
 
 import numpy as np
 
+from .._jit import kernel
 from .config import PaceConfig
 
-__all__ = ["draw_paces", "lift_factor", "LiftSchedule"]
+__all__ = ["draw_paces", "lift_factor", "lift_factor_at", "LiftSchedule"]
 
 
 def draw_paces(rho: float, m: int, cfg: PaceConfig, rng: np.random.Generator) -> np.ndarray:
@@ -26,11 +27,17 @@ def draw_paces(rho: float, m: int, cfg: PaceConfig, rng: np.random.Generator) ->
 
 
 def lift_factor(tau: float, cfg: PaceConfig) -> float:
-    """Pace multiplier ``tau`` [s] after the start of a lift (1 outside the lift)."""
-    if not (0.0 <= tau <= cfg.lift_duration):
+    """Pace multiplier ``tau`` [s] after the start of a lift (1 outside the lift; :func:`lift_factor_at`)."""
+    return lift_factor_at(float(tau), cfg.lift_duration, cfg.lift_ramp, cfg.lift_depth)
+
+
+@kernel
+def lift_factor_at(tau, duration, ramp, depth):
+    """:func:`lift_factor` with the :class:`PaceConfig` fields ``lift_duration``, ``lift_ramp``, ``lift_depth``
+    (inside kernels)."""
+    if not (0.0 <= tau <= duration):
         return 1.0
-    ramp, depth = cfg.lift_ramp, cfg.lift_depth
-    to_end = cfg.lift_duration - tau
+    to_end = duration - tau
     if tau < ramp:
         w = 0.5 * (1.0 - math.cos(math.pi * tau / ramp))
     elif to_end < ramp:

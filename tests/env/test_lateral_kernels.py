@@ -85,3 +85,16 @@ def test_hard_band_is_its_formula_on_the_sampled_widths(band):
         reach = band.half_width * abs(math.cos(heading)) + band.half_length * abs(math.sin(heading)) + bend + 0.05
         lo, hi = reach - w_r, w_l - reach
         assert band.hard(s, heading) == ((lo, hi) if lo <= hi else (0.5 * (lo + hi),) * 2)
+
+
+def test_room_is_the_narrowest_soft_width_on_numpys_sample_points(band):
+    """The band's room is the smallest ``hi - lo`` of :meth:`EdgeBand.soft` at ``s + np.linspace(0, d, k)``."""
+    track = band.track
+    rng = np.random.default_rng(4)
+    cases = list(zip(rng.uniform(-track.length, 2.0 * track.length, 3000).tolist(),
+                     rng.uniform(-50.0, 2500.0, 3000).tolist()))
+    cases += [(0.0, 0.0), (track.length, 5.0), (-1e-13, 1e-300), (100.0, 1e-320), (3.0, 1999.9999)]
+    for s, d in cases:
+        k = min(math.ceil(max(d, 0.0) / 5.0) + 1, 400)
+        lo, hi = band.soft(s + np.linspace(0.0, max(d, 0.0), k))
+        assert band.room(s, d) == float(np.min(hi - lo))
