@@ -2,7 +2,7 @@
 
 Usage::
 
-    python eval/bench_train.py --compare REV [--rounds 3] [--json PATH]
+    python eval/bench_train.py --compare REV [--backend B [--scenario S]] [--rounds 3] [--json PATH]
     python eval/bench_train.py --backends one-process local processes [ray] [--scenario S] [--multi-agent CARS]
                                [--rounds 3] [--json PATH]
 
@@ -12,9 +12,13 @@ round runs, in a fresh process per side and in alternating order, the side's own
     python train/pasta.py --n-envs 2 --total-steps 4096 --n-steps 512 --seed 1 \\
         --env-kwargs '{"race": {"duration": 20.0}}' --no-progress --force --out <temporary dir>
 
-and records its wall time (start-up, environment workers and PPO updates included). Reported:
+and records its wall time (start-up, environment workers and PPO updates included); before its first timed
+run, each side makes one short untimed run (:data:`WARM_UP_ARGS`), so that the exported revision's numba
+kernels are compiled and cached outside the timing, as the working tree's already are. Reported:
 the median and range of the wall times per side, the env steps per second they imply
-(4096 / wall time) and the ratio of the medians.
+(4096 / wall time) and the ratio of the medians. With ``--backend B`` (and optionally ``--scenario S``)
+each side runs instead the longer command of the set-up ``B`` of ``--backends`` below, and the collection
+throughput of each side (see below) is reported with its per-round ratio.
 
 With ``--backends`` the working tree's training runs with each named set-up in turn (the order rotates
 every round), on episodes of the default length (200 s) and longer rollouts::
@@ -63,6 +67,24 @@ def run_training(tree: Path, options: list[str], out: Path) -> float:
     if proc.returncode != 0:
         raise RuntimeError(f"training with {' '.join(options)} in {tree} failed:\n{proc.stderr[-4000:]}")
     return wall
+
+
+WARM_UP_ARGS = ["--n-envs", "2", "--total-steps", "256", "--n-steps", "128", "--seed", "1", "--no-progress", "--force"]
+"""A short run made once per side before its first timed run, untimed: an exported revision starts without
+numba's cache of compiled kernels, and compiling them would count against that side's first round."""
+
+
+def warmed(run):
+    """``run(side, tree, scratch, round)`` of :func:`bench_compare.interleave`, preceded once per side by an untimed
+    :data:`WARM_UP_ARGS` run."""
+    done: set[str] = set()
+
+    def call(side, tree, scratch, r):
+        if side not in done:
+            run_training(tree, WARM_UP_ARGS, scratch / f"warm_up_{side}")
+            done.add(side)
+        return run(side, tree, scratch, r)
+    return call
 
 
 def time_training(tree: Path, out: Path) -> float:
@@ -135,6 +157,32 @@ def compare_backends(backends: list[str], rounds: int, scenario: str | None = No
     return result
 
 
+def compare_revision_backend(rev: str, backend: str, rounds: int, scenario: str | None) -> dict:
+    """Interleaved rounds of the set-up ``backend`` of :data:`BACKENDS` on ``rev`` (old) and the working tree (new):
+    wall and collection times per side, and the per-round ratio of the collection rates (new / old)."""
+    repo = Path(_git(_HERE, "rev-parse", "--show-toplevel"))
+    extra = [] if scenario is None else ["--scenario", scenario]
+    old_commit, runs = interleave(
+        repo, rev, rounds, warmed(lambda side, tree, scratch, r: time_backend(tree, backend, scratch / f"run_{side}_{r}",
+                                                                              extra)),
+        lambda old, new: (f"old {BACKEND_STEPS / old['collect_s']:.0f}, new {BACKEND_STEPS / new['collect_s']:.0f} "
+                          f"env steps/s collecting ({old['wall_s']:.1f} / {new['wall_s']:.1f} s)"))
+    result = {"command": "python train/pasta.py " + " ".join(BACKEND_ARGS + BACKENDS[backend] + extra) + " --out DIR",
+              "rounds": rounds, "cpu_count": os.cpu_count(),
+              "old": {"rev": rev, "commit": old_commit}, "new": {"rev": "working tree", "commit": _git(repo, "rev-parse", "HEAD")}}
+    for side in ("old", "new"):
+        result[side].update(wall_s=_summary([x["wall_s"] for x in runs[side]]),
+                            collect_env_steps_per_s=_summary([BACKEND_STEPS / x["collect_s"] for x in runs[side]]))
+    result["per_round_collect_ratio"] = _summary([o["collect_s"] / n["collect_s"] for o, n in zip(runs["old"], runs["new"])])
+    for side in ("old", "new"):
+        c = result[side]["collect_env_steps_per_s"]
+        print(f"  {side} ({result[side]['commit'][:9]}): {c['median']:.0f} env steps/s collecting, median "
+              f"[{c['min']:.0f}, {c['max']:.0f}]; wall {result[side]['wall_s']['median']:.1f} s")
+    r = result["per_round_collect_ratio"]
+    print(f"  collection new/old per round: {r['median']:.2f}x [{r['min']:.2f}, {r['max']:.2f}]")
+    return result
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     mode = parser.add_mutually_exclusive_group(required=True)
@@ -142,8 +190,12 @@ def main(argv: list[str] | None = None) -> dict:
     mode.add_argument("--backends", nargs="+", metavar="B",
                       help="compare these set-ups instead: one-process, local, processes, ray (module docstring)")
     parser.add_argument("--rounds", type=int, default=3, help="rounds of one run per side, alternating (default 3)")
+    parser.add_argument("--backend", choices=tuple(BACKENDS), default=None,
+                        help="with --compare: time this set-up of --backends on both sides (8192 steps, the "
+                             "collection rate from TensorBoard) instead of the short default command")
     parser.add_argument("--scenario", choices=("paper", "interactive", "dynamic"), default=None,
-                        help="with --backends: the world trained in (train/pasta.py --scenario; default: its own)")
+                        help="with --backends, or --compare with --backend: the world trained in "
+                             "(train/pasta.py --scenario; default: its own)")
     parser.add_argument("--multi-agent", type=int, default=None, metavar="CARS",
                         help="with --backends: self-play on races of CARS cars (train/pasta.py --multi-agent --cars "
                              "CARS); --n-envs counts races, the steps car decisions")
@@ -155,6 +207,8 @@ def main(argv: list[str] | None = None) -> dict:
         unknown = [b for b in args.backends if b not in BACKENDS]
         if unknown or len(set(args.backends)) != len(args.backends) or len(args.backends) < 2:
             parser.error(f"--backends takes two or more distinct values of {', '.join(BACKENDS)}; got {args.backends}")
+        if args.backend is not None:
+            parser.error("--backend goes with --compare; with --backends every named set-up runs")
         if args.multi_agent is not None and args.multi_agent < 2:
             parser.error(f"--multi-agent takes a car count of at least 2, got {args.multi_agent}")
         result = compare_backends(args.backends, args.rounds, args.scenario, args.multi_agent)
@@ -162,9 +216,17 @@ def main(argv: list[str] | None = None) -> dict:
             with open(args.json, "w") as fh:
                 json.dump(result, fh, indent=2)
         return result
+    if args.scenario is not None and args.backend is None:
+        parser.error("--scenario with --compare needs --backend (the short default command trains in its own world)")
+    if args.backend is not None:
+        result = compare_revision_backend(args.compare, args.backend, args.rounds, args.scenario)
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(result, fh, indent=2)
+        return result
     repo = Path(_git(_HERE, "rev-parse", "--show-toplevel"))
     old_commit, walls = interleave(repo, args.compare, args.rounds,
-                                   lambda side, tree, scratch, r: time_training(tree, scratch / f"run_{side}_{r}"),
+                                   warmed(lambda side, tree, scratch, r: time_training(tree, scratch / f"run_{side}_{r}")),
                                    lambda old, new: f"old {old:.1f} s, new {new:.1f} s")
     result = {"command": "python train/pasta.py " + " ".join(TRAIN_ARGS) + " --out DIR", "rounds": args.rounds,
               "old": {"rev": args.compare, "commit": old_commit, "wall_s": _summary(walls["old"]),

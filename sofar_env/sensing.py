@@ -44,10 +44,11 @@ a detection error of a clustered point cloud typically persists.
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+
+from ._jit import kernel
 
 __all__ = ["SensorConfig", "Sensor"]
 
@@ -99,19 +100,6 @@ class SensorConfig:
         return np.array([self.sigma_s, self.sigma_n, self.sigma_v])
 
 
-class _Track:
-    """Sensor state of one identity: noise, delay line, tracker."""
-
-    __slots__ = ("noise", "delay", "n_hat", "n_dot_hat", "last_s")
-
-    def __init__(self, noise: tuple[float, float, float], latency: int, s: float):
-        self.noise = noise
-        self.delay: deque = deque(maxlen=latency + 1)
-        self.n_hat: float | None = None
-        self.n_dot_hat = 0.0
-        self.last_s = s
-
-
 class Sensor:
     """Sensor of the opponents on a track of length ``track_length`` [m], called once every ``dt`` [s]."""
 
@@ -124,11 +112,11 @@ class Sensor:
         self.phi = math.exp(-self.dt / config.correlation_time)
         """Step correlation of the noise, exp(-dt / tau)."""
         self._rng: np.random.Generator | None = None
-        self._tracks: dict[int, _Track] = {}
+        self._tracks = _empty_tracks(0, int(config.latency_steps) + 1)
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
         """Forget every track; when enabled, seed the sensor's own generator from ``rng`` (one draw)."""
-        self._tracks = {}
+        self._tracks = _empty_tracks(0, int(self.config.latency_steps) + 1)
         self._rng = None
         if self.config.enabled:
             if rng is None:
@@ -158,43 +146,89 @@ class Sensor:
         return self._measure(rows[:, :3], ids)
 
     def _measure(self, rows: np.ndarray, ids: list[int]) -> np.ndarray:
-        # on Python floats (the per-component numpy operations on 3-vectors, in the same order: the same bits)
-        cfg, L, phi, dt = self.config, self.length, self.phi, self.dt
-        sig = (cfg.sigma_s, cfg.sigma_n, cfg.sigma_v)
+        cfg = self.config
         m = rows.shape[0]
-        fresh = self._rng.standard_normal((m, 3)).tolist()  # one draw per row and component, in row order
-        gain = math.sqrt(max(1.0 - phi * phi, 0.0))
-        tracks, out = {}, []
-        for key, row, f in zip(ids, rows.tolist(), fresh):
-            s_true = row[0]
-            tr = self._tracks.get(key)
-            if tr is None or abs((s_true - tr.last_s + 0.5 * L) % L - 0.5 * L) > cfg.jump_distance:
-                tr = _Track(tuple(sj * fj for sj, fj in zip(sig, f)), cfg.latency_steps, s_true)  # stationary start
-            else:
-                tr.noise = tuple(phi * nj + gain * sj * fj for nj, sj, fj in zip(tr.noise, sig, f))
-            tr.last_s = s_true
-            s_z = (row[0] + tr.noise[0]) % L
-            tr.delay.append((0.0 if s_z >= L else s_z, row[1] + tr.noise[1], row[2] + tr.noise[2]))
-            s_seen, n_seen, v_seen = tr.delay[0]  # latency_steps old once the delay line is full, else the first
-            rate = self._track_rate(tr, n_seen)
-            age = (len(tr.delay) - 1) * dt
-            if cfg.latency_compensation and age > 0.0:
-                s_now = (s_seen + v_seen * age) % L
-                out.append((s_now if s_now < L else 0.0, n_seen + rate * age, v_seen, rate))
-            else:
-                out.append((s_seen, n_seen, v_seen, rate))
-            tracks[key] = tr
-        self._tracks = tracks
-        return np.array(out, dtype=float).reshape(m, 4)
+        fresh = self._rng.standard_normal((m, 3))  # one draw per row and component, in row order
+        gain = math.sqrt(max(1.0 - self.phi * self.phi, 0.0))
+        new = _empty_tracks(m, int(cfg.latency_steps) + 1)
+        out = np.empty((m, 4))
+        _measure_rows(np.ascontiguousarray(rows), np.array(ids, dtype=np.int64), fresh, *self._tracks,
+                      cfg.sigma_s, cfg.sigma_n, cfg.sigma_v, self.length, self.phi, gain, self.dt, cfg.jump_distance,
+                      cfg.tracker_alpha, cfg.tracker_beta, bool(cfg.latency_compensation), *new, out)
+        self._tracks = new
+        return out
 
-    def _track_rate(self, tr: _Track, n_meas: float) -> float:
-        """One alpha-beta step on the (delayed) lateral measurement; returns the rate estimate [m/s]."""
-        if tr.n_hat is None:
-            tr.n_hat, tr.n_dot_hat = n_meas, 0.0
-            return 0.0
-        a, b, dt = self.config.tracker_alpha, self.config.tracker_beta, self.dt
-        predicted = tr.n_hat + dt * tr.n_dot_hat
-        r = n_meas - predicted
-        tr.n_hat = predicted + a * r
-        tr.n_dot_hat += b / dt * r
-        return tr.n_dot_hat
+
+def _empty_tracks(m: int, depth: int) -> tuple:
+    """Track state of ``m`` identities with delay lines of ``depth`` entries, in the argument order of
+    :func:`_measure_rows`: identity, noise (3), delay line (depth, 3), its length and its oldest entry, whether
+    the tracker has started, its offset and rate estimates, the last true arc length."""
+    return (np.zeros(m, dtype=np.int64), np.zeros((m, 3)), np.zeros((m, depth, 3)), np.zeros(m, dtype=np.int64),
+            np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.bool_), np.zeros(m), np.zeros(m), np.zeros(m))
+
+
+@kernel
+def _measure_rows(rows, ids, fresh, old_ids, old_noise, old_delay, old_count, old_head, old_started, old_n_hat,
+                  old_rate, old_last_s, sigma_s, sigma_n, sigma_v, length, phi, gain, dt, jump_distance, alpha, beta,
+                  compensate, ids_out, noise, delay, count, head, started, n_hat, n_dot_hat, last_s, out):
+    """One measurement of the rows ``(s, n, v)`` of the identities ``ids`` (module docstring): the tracks of the
+    previous call (``old_*``, :func:`_empty_tracks`) carried over by identity, restarted for a new identity or
+    after a jump; writes the tracks of this call and the sensed rows ``out`` (M, 4). ``fresh`` (M, 3): the
+    standard normal draws. The operations of the Python-float form it replaced, in its order."""
+    depth = delay.shape[1]
+    sig = (sigma_s, sigma_n, sigma_v)
+    L = length
+    for k in range(rows.shape[0]):
+        s_true = rows[k, 0]
+        ids_out[k] = ids[k]
+        j = -1
+        for q in range(old_ids.shape[0]):
+            if old_ids[q] == ids[k]:
+                j = q
+                break
+        if j >= 0 and abs((s_true - old_last_s[j] + 0.5 * L) % L - 0.5 * L) > jump_distance:
+            j = -1
+        if j < 0:  # a new track, its noise drawn from the stationary distribution
+            for c in range(3):
+                noise[k, c] = sig[c] * fresh[k, c]
+            count[k] = head[k] = 0
+            started[k] = False
+            n_hat[k] = n_dot_hat[k] = 0.0
+        else:
+            for c in range(3):
+                noise[k, c] = phi * old_noise[j, c] + gain * sig[c] * fresh[k, c]
+            delay[k] = old_delay[j]
+            count[k], head[k] = old_count[j], old_head[j]
+            started[k], n_hat[k], n_dot_hat[k] = old_started[j], old_n_hat[j], old_rate[j]
+        last_s[k] = s_true
+        # the delay line: append the measurement, dropping the oldest once it holds `depth`
+        s_z = (rows[k, 0] + noise[k, 0]) % L
+        if count[k] < depth:
+            slot = (head[k] + count[k]) % depth
+            count[k] += 1
+        else:
+            slot = head[k]
+            head[k] = (head[k] + 1) % depth
+        delay[k, slot, 0] = 0.0 if s_z >= L else s_z
+        delay[k, slot, 1] = rows[k, 1] + noise[k, 1]
+        delay[k, slot, 2] = rows[k, 2] + noise[k, 2]
+        oldest = head[k]
+        s_seen, n_seen, v_seen = delay[k, oldest, 0], delay[k, oldest, 1], delay[k, oldest, 2]
+        # one alpha-beta step on the delayed lateral measurement
+        if not started[k]:
+            started[k] = True
+            n_hat[k], n_dot_hat[k] = n_seen, 0.0
+            rate = 0.0
+        else:
+            predicted = n_hat[k] + dt * n_dot_hat[k]
+            r = n_seen - predicted
+            n_hat[k] = predicted + alpha * r
+            n_dot_hat[k] = n_dot_hat[k] + beta / dt * r
+            rate = n_dot_hat[k]
+        age = (count[k] - 1) * dt
+        if compensate and age > 0.0:
+            s_now = (s_seen + v_seen * age) % L
+            out[k, 0], out[k, 1] = (s_now if s_now < L else 0.0), n_seen + rate * age
+        else:
+            out[k, 0], out[k, 1] = s_seen, n_seen
+        out[k, 2], out[k, 3] = v_seen, rate

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from .._interp import interp, interp_at, interp_located, locate, wrap_at
-from .._jit import kernel
+from .._jit import kernel, maximum, minimum
 from ..vehicle import VehicleParams
 from ._lookup import wrap_mod
 
@@ -94,15 +94,44 @@ def lateral_motion(track, ego_s: float, opp_rel: np.ndarray, horizon: float, dea
     Each car keeps moving at its sensed rate shrunk by ``deadband`` [m/s] (a soft threshold:
     ``sign(r) max(|r| - deadband, 0)``), and stops at the edge: its centre stays ``half_width`` [m]
     inside the track at its current arc length (and where it already is, if it is closer to an edge).
+    One compiled call (:func:`_lateral_motion`).
     """
-    n = opp_rel[:, 1]
-    rate = opp_rel[:, 3]
-    rate = np.sign(rate) * np.maximum(np.abs(rate) - deadband, 0.0)
-    s_abs = track.wrap(ego_s + opp_rel[:, 0])
-    hi = np.maximum(np.asarray(track.width_left(s_abs), float) - half_width, n)
-    lo = np.minimum(half_width - np.asarray(track.width_right(s_abs), float), n)
-    n_end = np.clip(n + rate * horizon, lo, hi)
-    return n_end, (n_end - n) / horizon
+    rows = np.ascontiguousarray(opp_rel, dtype=float)
+    n_end, rate = np.empty(rows.shape[0]), np.empty(rows.shape[0])
+    knots, wl = track.table("wl")
+    _lateral_motion(float(ego_s), rows, float(horizon), float(deadband), float(half_width), float(track.length),
+                    knots, wl, track.table("wr")[1], n_end, rate)
+    return n_end, rate
+
+
+@kernel
+def _lateral_motion(ego_s, opp_rel, horizon, deadband, half_width, length, knots, wl, wr, n_end, rate_out):
+    """:func:`lateral_motion` into ``n_end`` and ``rate_out``, with the operations of its numpy form::
+
+        rate = np.sign(r) * np.maximum(np.abs(r) - deadband, 0.0)
+        s = track.wrap(ego_s + gap)          # np.mod, 0 where rounding gives L
+        hi = np.maximum(width_left(s) - half_width, n); lo = np.minimum(half_width - width_right(s), n)
+        n_end = np.clip(n + rate * horizon, lo, hi); rate_out = (n_end - n) / horizon
+
+    (the widths as ``np.interp`` of the closed tables at ``s`` wrapped again; ``np.clip`` as numpy computes
+    it: ``x`` if nan, else the larger of ``x`` and ``lo`` (``lo`` on a tie), then the same with ``hi``)."""
+    for i in range(opp_rel.shape[0]):
+        n = opp_rel[i, 1]
+        r = opp_rel[i, 3]
+        sign = 1.0 if r > 0.0 else (-1.0 if r < 0.0 else (0.0 if r == 0.0 else r))
+        rate = sign * maximum(abs(r) - deadband, 0.0)
+        w = wrap_at(ego_s + opp_rel[i, 0], length)
+        p = w % length
+        j = locate(p, knots, -1)
+        hi = maximum(interp_located(j, p, knots, wl) - half_width, n)
+        lo = minimum(half_width - interp_located(j, p, knots, wr), n)
+        x = n + rate * horizon
+        if x == x:
+            x = x if x > lo else lo
+        if x == x:
+            x = x if x < hi else hi
+        n_end[i] = x
+        rate_out[i] = (x - n) / horizon
 
 
 class TravelTime:

@@ -4,6 +4,7 @@ poses), the opponent field's motion and overtake bookkeeping, the race's distanc
 the observation's scaling and mean curvature, and the sensor."""
 
 import math
+from collections import deque
 
 import numpy as np
 import pytest
@@ -171,10 +172,33 @@ def test_mean_curvature_is_numpys_sum_of_the_interpolation(laguna, n):
         assert _curvature_sum(s, v, tau, L, knots, table) == float(np.add.reduce(track.curvature(s + v * tau)))
 
 
-def _reference_measure(sensor, rows, ids):
-    """The sensor's measurement written on numpy 3-vectors (the form it replaced)."""
-    from sofar_env.sensing import _Track
+class _Track:
+    """Per-identity state of the reference sensor: noise, delay line, tracker."""
 
+    def __init__(self, noise, latency, s):
+        self.noise = noise
+        self.delay = deque(maxlen=latency + 1)
+        self.n_hat = None
+        self.n_dot_hat = 0.0
+        self.last_s = s
+
+
+def _track_rate(sensor, tr, n_meas):
+    """One alpha-beta step of the reference sensor's tracker on the delayed lateral measurement."""
+    if tr.n_hat is None:
+        tr.n_hat, tr.n_dot_hat = n_meas, 0.0
+        return 0.0
+    a, b, dt = sensor.config.tracker_alpha, sensor.config.tracker_beta, sensor.dt
+    predicted = tr.n_hat + dt * tr.n_dot_hat
+    r = n_meas - predicted
+    tr.n_hat = predicted + a * r
+    tr.n_dot_hat += b / dt * r
+    return tr.n_dot_hat
+
+
+def _reference_measure(sensor, rows, ids):
+    """The sensor's measurement written on numpy 3-vectors with a dict of tracks (the form it replaced); its
+    state lives in ``sensor.reference_tracks``."""
     cfg, L = sensor.config, sensor.length
     sig = cfg.sigmas
     m = rows.shape[0]
@@ -183,7 +207,7 @@ def _reference_measure(sensor, rows, ids):
     tracks, out = {}, np.zeros((m, 4))
     for k, (key, row) in enumerate(zip(ids, rows)):
         s_true = float(row[0])
-        tr = sensor._tracks.get(key)
+        tr = sensor.reference_tracks.get(key)
         if tr is None or abs((s_true - tr.last_s + 0.5 * L) % L - 0.5 * L) > cfg.jump_distance:
             tr = _Track(sig * fresh[k], cfg.latency_steps, s_true)
         else:
@@ -196,26 +220,27 @@ def _reference_measure(sensor, rows, ids):
         tr.delay.append(z)
         seen = tr.delay[0]
         out[k, :3] = seen
-        out[k, 3] = rate = sensor._track_rate(tr, float(seen[1]))
+        out[k, 3] = rate = _track_rate(sensor, tr, float(seen[1]))
         age = (len(tr.delay) - 1) * sensor.dt
         if cfg.latency_compensation and age > 0.0:
             s_now = (seen[0] + seen[2] * age) % L
             out[k, 0] = s_now if s_now < L else 0.0
             out[k, 1] = seen[1] + rate * age
         tracks[key] = tr
-    sensor._tracks = tracks
+    sensor.reference_tracks = tracks
     return out
 
 
-@pytest.mark.parametrize("compensate", [True, False])
-def test_sensor_is_the_numpy_form(compensate):
+@pytest.mark.parametrize(("compensate", "latency"), [(True, 2), (False, 2), (True, 0), (True, 1), (False, 5)])
+def test_sensor_is_the_numpy_form(compensate, latency):
     from sofar_env.sensing import Sensor, SensorConfig
 
-    cfg = SensorConfig(enabled=True, latency_compensation=compensate)
+    cfg = SensorConfig(enabled=True, latency_compensation=compensate, latency_steps=latency)
     L = 3602.5
     new, ref = Sensor(cfg, L, 0.1), Sensor(cfg, L, 0.1)
     new.reset(np.random.default_rng(8))
     ref.reset(np.random.default_rng(8))
+    ref.reference_tracks = {}
     rng = np.random.default_rng(9)
     s = rng.uniform(0.0, L, 5)
     for step in range(400):

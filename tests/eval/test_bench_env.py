@@ -99,6 +99,9 @@ def test_bench_train_rejects_zero_rounds():
     ["--backends", "local", "processes", "--compare", "HEAD"],  # two modes at once
     [],                                                 # no mode
     ["--backends", "local", "processes", "--multi-agent", "1"],  # a race of one car
+    ["--backends", "local", "processes", "--backend", "local"],  # --backend is for --compare
+    ["--compare", "HEAD", "--scenario", "interactive"],  # the short default command has its own world
+    ["--compare", "HEAD", "--backend", "spark"],        # not a set-up
 ])
 def test_bench_train_rejects_bad_backend_lists(argv):
     proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_train.py"), *argv],

@@ -25,6 +25,10 @@ class _Straight:
     def width_right(self, s):
         return np.full(np.shape(s), 4.0)
 
+    def table(self, key):
+        """(knots, values) of a sampled column, as :meth:`~sofar_env.tracks.Track.table` gives them."""
+        return np.array([0.0, self.length]), np.full(2, {"wl": 5.0, "wr": 4.0}[key])
+
 
 def test_lateral_motion_dead_band_and_edges():
     rows = np.array([
@@ -37,6 +41,31 @@ def test_lateral_motion_dead_band_and_edges():
     n_end, rate = lateral_motion(_Straight(), 0.0, rows, 1.5, 0.3, 0.95)
     assert n_end == pytest.approx([0.0, 1.5, -1.5, 4.05, -3.5])
     assert rate == pytest.approx((n_end - rows[:, 1]) / 1.5)
+
+
+def test_lateral_motion_is_its_numpy_form_to_the_bit():
+    """The compiled form against the numpy expressions it replaced, on a real circuit, across the lap seam,
+    with rates at and around the dead band, zeros of both signs, and cars outside the edges."""
+    from sofar_env.tracks import Track
+
+    track = Track.load("LagunaSeca")
+    rng = np.random.default_rng(7)
+    horizon, deadband, half_width = 1.5, 0.3, 0.95
+    for trial in range(300):
+        m = int(rng.integers(1, 7))
+        rows = np.column_stack([rng.uniform(-60.0, 200.0, m), rng.uniform(-9.0, 9.0, m), rng.uniform(0.0, 60.0, m),
+                                rng.choice([0.0, -0.0, 0.3, -0.3, 0.30000000000000004, 5.0], m) if trial % 3 == 0
+                                else rng.normal(0.0, 1.5, m)])
+        ego_s = float(rng.choice([0.0, track.length - 1e-9, float(rng.uniform(0.0, track.length))]))
+        n, r = rows[:, 1], rows[:, 3]
+        rate = np.sign(r) * np.maximum(np.abs(r) - deadband, 0.0)
+        s_abs = track.wrap(ego_s + rows[:, 0])
+        hi = np.maximum(np.asarray(track.width_left(s_abs), float) - half_width, n)
+        lo = np.minimum(half_width - np.asarray(track.width_right(s_abs), float), n)
+        ref = np.clip(n + rate * horizon, lo, hi)
+        n_end, rate_out = lateral_motion(track, ego_s, rows, horizon, deadband, half_width)
+        assert n_end.tobytes() == ref.tobytes()
+        assert rate_out.tobytes() == ((ref - n) / horizon).tobytes()
 
 
 def test_mpc_prediction_moves_a_car_across_at_its_rate():
