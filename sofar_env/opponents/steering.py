@@ -54,7 +54,7 @@ bounds keep ``band_margin``)."""
 
 
 def steer(dt: float, ego, state: tuple, gap: np.ndarray, s_new, v_new,
-          episode, band: EdgeBand, cfg: OpponentConfig, vehicle) -> tuple[np.ndarray, np.ndarray, int, list[bool]]:
+          episode, band: EdgeBand, cfg: OpponentConfig, vehicle) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
     """New offsets and lateral rates of every car, the number of clamps, and which cars are squeezed
     (their envelope and keep-clear bounds conflict: they will not fit beside the car or ego next to them).
 
@@ -85,7 +85,7 @@ def steer(dt: float, ego, state: tuple, gap: np.ndarray, s_new, v_new,
         vehicle.width + dcfg.clearance,
         *band.envelope_data(), *band.hard_data(),
         n_out, nd_out, squeezed)
-    return n_out, nd_out, int(clamps), squeezed.tolist()
+    return n_out, nd_out, int(clamps), squeezed
 
 
 @kernel

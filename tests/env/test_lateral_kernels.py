@@ -98,3 +98,24 @@ def test_room_is_the_narrowest_soft_width_on_numpys_sample_points(band):
         k = min(math.ceil(max(d, 0.0) / 5.0) + 1, 400)
         lo, hi = band.soft(s + np.linspace(0.0, max(d, 0.0), k))
         assert band.room(s, d) == float(np.min(hi - lo))
+
+
+def test_the_interactive_step_calls_its_kernels_with_arrays_only():
+    """Python lists passed to a kernel are unboxed on every call (numba's deprecated reflected lists): the
+    per-step kernels of the interactive world must only ever see arrays and scalars."""
+    import gymnasium as gym
+
+    from sofar_env.opponents import field, steering
+    from sofar_env.stack import prediction
+
+    env = gym.make("SOfAR-LagunaSeca-Interactive-v0", n_opponents=4)
+    env.reset(seed=5)
+    for _ in range(40):
+        env.step(np.array([0.5], np.float32))
+    env.close()
+    from sofar_env import sensing
+
+    for kernel in (field._advance_along, steering._steer, sensing._measure_rows, prediction._lateral_motion):
+        assert kernel.signatures, kernel
+        for signature in kernel.signatures:
+            assert not any("list" in str(t) for t in signature), (kernel, signature)
