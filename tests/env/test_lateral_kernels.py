@@ -119,3 +119,28 @@ def test_the_interactive_step_calls_its_kernels_with_arrays_only():
         assert kernel.signatures, kernel
         for signature in kernel.signatures:
             assert not any("list" in str(t) for t in signature), (kernel, signature)
+
+
+@pytest.mark.parametrize("ds", [[1.0, 2.0], np.array([1, 2]), np.array([1.0, 2.0], dtype=np.float32)])
+def test_limit_advances_refuses_advances_it_cannot_change_in_place(band, ds):
+    from sofar_env.opponents import TrafficConfig
+    from sofar_env.opponents.traffic import limit_advances
+
+    kept = np.array(ds, copy=True)
+    with pytest.raises(TypeError, match="float64 numpy array"):
+        limit_advances(ds, [0.0, 30.0], [0.0, 0.0], [20.0, 20.0], np.array([[0.0, 30.0], [-30.0, 0.0]]), 0.1, band,
+                       TrafficConfig(), 2.9, 5.9)
+    assert np.array_equal(np.asarray(ds), kept)
+
+
+def test_limit_advances_caps_a_car_closing_on_the_one_ahead_in_its_band(band):
+    from sofar_env.opponents import TrafficConfig
+    from sofar_env.opponents.traffic import limit_advances
+
+    cfg = TrafficConfig()
+    gap = cfg.follow_gap + 1.0  # car 0 is this far behind car 1, in the same band
+    ds = np.array([3.0, 1.0])
+    capped = limit_advances(ds, [0.0, gap], [0.0, 0.0], [30.0, 10.0], np.array([[0.0, gap], [-gap, 0.0]]), 0.1,
+                            band, cfg, 2.9, 5.9)
+    assert capped.tolist() == [True, False]
+    assert ds.tolist() == [1.0 + (gap - cfg.follow_gap), 1.0]  # it keeps the follow gap after the step
