@@ -123,17 +123,20 @@ class EdgeBand:
         wr = minimum_filter1d(np.asarray(track.width_right(samples), float), size, mode="wrap")
         self._knots = np.append(samples, track.length)
         wl, wr = np.append(wl, wl[0]), np.append(wr, wr[0])
-        self._widths = (wl, wr)
-        self._kappa = track.table("kappa")
-        self._half_length_sq = self.half_length ** 2
+        self._width_tables = (wl, wr)
         lo, hi = self.inner - wr, wl - self.inner
         mid = 0.5 * (lo + hi)
         self._soft = (np.minimum(lo, mid), np.maximum(hi, mid))  # an empty band collapses to its middle
+        length = float(track.length)
+        # the trailing arguments of the kernels, built once (the opponents' step passes them every step)
+        self._envelope_data = (self._knots, *self._soft, _LOOKAHEAD, _LOOKAHEAD_TIME, length)
+        self._hard_data = (self.half_width, self.half_length, self.half_length ** 2, self._knots, wl, wr, length,
+                           *track.table("kappa"))
 
     def widths(self, s: float) -> tuple[float, float]:
         """Smallest left and right widths within the corner window around ``s`` [m] (Python floats;
         :func:`_widths`)."""
-        return _widths(float(s), self._knots, *self._widths, float(self.track.length))
+        return _widths(float(s), self._knots, *self._width_tables, float(self.track.length))
 
     def soft(self, s) -> tuple[np.ndarray, np.ndarray]:
         """The soft band ``(lo, hi)`` at ``s`` (an array): the footprint ``inner`` inside both edges."""
@@ -159,13 +162,12 @@ class EdgeBand:
     def envelope_data(self) -> tuple:
         """The trailing arguments of :func:`envelope_at` (for kernels): ``knots, soft lo, soft hi, look-ahead
         fractions, look-ahead time, length``."""
-        return (self._knots, self._soft[0], self._soft[1], _LOOKAHEAD, _LOOKAHEAD_TIME, float(self.track.length))
+        return self._envelope_data
 
     def hard_data(self) -> tuple:
         """The trailing arguments of :func:`hard_at` (for kernels): ``half_width, half_length,
         half_length ** 2, knots, width_left, width_right, length, curvature knots, curvature``."""
-        return (self.half_width, self.half_length, self._half_length_sq, self._knots, *self._widths,
-                float(self.track.length), *self._kappa)
+        return self._hard_data
 
 
 @kernel

@@ -122,7 +122,7 @@ def _steer(dt, s, n, n_dot, v, gap, s_new, v_new, egos,
     half = 0.5 * length
     for i in range(m):
         if n_egos > 0:
-            best, best_key, best_behind = -1, 0.0, False
+            best, best_key, best_behind, best_gap, best_closing = -1, 0.0, False, 0.0, 0.0
             for e in range(n_egos):
                 r = floor_mod(s[i] - egos[e, 0] + half, length)
                 g = (0.0 if r >= length else r) - half
@@ -131,12 +131,10 @@ def _steer(dt, s, n, n_dot, v, gap, s_new, v_new, egos,
                 # the nearest ego behind the car, else the nearest one (the first of equals)
                 key = g if behind else abs(g)
                 if best < 0 or (behind and not best_behind) or (behind == best_behind and key < best_key):
-                    best, best_key, best_behind = e, key, behind
+                    best, best_key, best_behind, best_gap, best_closing = e, key, behind, g, closing
                 ego_soft[i, e] = guarded(g, closing, along, guard_time, BRAKE_LEAD)
                 ego_hard[i, e] = guarded(g, closing, along, guard_time, 0.0)
-            r = floor_mod(s[i] - egos[best, 0] + half, length)
-            g = (0.0 if r >= length else r) - half
-            defence_step(i, g, egos[best, 2] - v[i], n[i], n_dot[i], egos[best, 1], aggressiveness, approach, used,
+            defence_step(i, best_gap, best_closing, n[i], n_dot[i], egos[best, 1], aggressiveness, approach, used,
                          mode, d_target, moves, along, min_gap, max_gap, release, min_closing, trigger)
         if mode[i] != IDLE:
             target[i], rate[i] = d_target[i], 0.0

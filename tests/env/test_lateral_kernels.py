@@ -71,7 +71,7 @@ def test_ego_guard_window_grows_with_the_closing_speed():
 def test_hard_band_is_its_formula_on_the_sampled_widths(band):
     """The widths by bisection on the knots (the piece of the last knot <= s), the curvature the track's."""
     track = band.track
-    knots, (wl, wr) = band._knots.tolist(), (w.tolist() for w in band._widths)
+    knots, (wl, wr) = band._knots.tolist(), (w.tolist() for w in band._width_tables)
     rng = np.random.default_rng(3)
     values = rng.uniform(-track.length, 2.0 * track.length, 3000).tolist() + [0.0, track.length, -1e-13]
     for s in values:
