@@ -195,27 +195,50 @@ def side_clusters(pos: np.ndarray, act_rel: np.ndarray, cluster_gap: float,
     R = pos.shape[0]
     if R == 1:
         return 1, np.zeros(1, dtype=int)
-    close = np.abs(pos[:, None, :] - pos[None, :, :]) < cluster_gap
-    either = act_rel[:, None, :] | act_rel[None, :, :]
-    linked = (close & either).any(axis=2)
-    if apart is not None:
-        linked &= ~apart
-    linked = linked.tolist()
-    labels = [-1] * R
+    apart = _NOT_APART if apart is None else np.asarray(apart, dtype=np.bool_)
+    n, labels = _side_clusters(np.asarray(pos, dtype=float), np.asarray(act_rel, dtype=np.bool_), float(cluster_gap),
+                               apart)
+    return int(n), labels
+
+
+_NOT_APART = np.zeros((0, 0), dtype=np.bool_)
+
+
+@kernel
+def _side_clusters(pos, act, gap, apart):
+    """:func:`side_clusters` in one compiled call (:mod:`sofar_env._jit`): the links (``|pos_i - pos_j| < gap``
+    at a node where either car is active, unless marked in ``apart``; an empty ``apart``: none marked), then
+    the components labelled by the same depth-first search as the Python form (its stack in an array), so the
+    labels are the same."""
+    R, N = pos.shape
+    linked = np.zeros((R, R), dtype=np.bool_)
+    for i in range(R):
+        for j in range(R):
+            hit = False
+            for k in range(N):
+                if abs(pos[i, k] - pos[j, k]) < gap and (act[i, k] or act[j, k]):
+                    hit = True
+                    break
+            linked[i, j] = hit and not (apart.shape[0] > 0 and apart[i, j])
+    labels = np.full(R, -1, dtype=np.int64)
+    stack = np.empty(R, dtype=np.int64)  # a car is pushed once: when it gets its label
     n = 0
     for i in range(R):
         if labels[i] >= 0:
             continue
         labels[i] = n
-        stack = [i]
-        while stack:
-            j = stack.pop()
+        stack[0] = i
+        top = 1
+        while top > 0:
+            top -= 1
+            j = stack[top]
             for k in range(R):
-                if labels[k] < 0 and linked[j][k]:
+                if labels[k] < 0 and linked[j, k]:
                     labels[k] = n
-                    stack.append(k)
+                    stack[top] = k
+                    top += 1
         n += 1
-    return n, np.asarray(labels, dtype=int)
+    return n, labels
 
 
 def ellipse_violation(t: np.ndarray, s_nodes: np.ndarray, d: np.ndarray, opp_s: np.ndarray, opp_n: np.ndarray,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._jit import kernel, py_max
 from .config import MIQPConfig
 
 __all__ = ["match_previous_sides", "prior_sides"]
@@ -37,32 +38,42 @@ def match_previous_sides(config: MIQPConfig, s_nodes: np.ndarray, progress: floa
     may therefore change between calls, and a respawned car (far away) does not
     inherit a stale decision.
     """
-    out = np.full(opp_rel.shape[0], -1)
     if prev_sides is None or prev_opp is None:
+        return np.full(opp_rel.shape[0], -1)
+    return _match(np.asarray(s_nodes, dtype=float), float(progress), np.asarray(opp_rel, dtype=float),
+                  np.asarray(prev_opp, dtype=float), np.asarray(prev_sides, dtype=np.int64), float(config.node_dt),
+                  float(config.cluster_gap), float(config.safe_lat))
+
+
+@kernel
+def _match(s_nodes, progress, opp_rel, prev_opp, prev_sides, node_dt, gap_scale, safe_lat):
+    """:func:`match_previous_sides` in one compiled call (:mod:`sofar_env._jit`), the arithmetic of its Python
+    form element by element (Python's ``max`` for the lateral scale)."""
+    out = np.full(opp_rel.shape[0], -1, dtype=np.int64)
+    n_prev = 0
+    for j in range(prev_sides.shape[0]):
+        if prev_sides[j] != 0:
+            n_prev += 1
+    if n_prev == 0:
         return out
-    had_side = prev_sides != 0
-    if not had_side.any():
-        return out
-    prev = prev_opp[had_side].tolist()
-    prev_side = prev_sides[had_side].tolist()
-    v_ego = float(s_nodes[1] - s_nodes[0]) / config.node_dt
-    progress = float(progress)
+    v_ego = (s_nodes[1] - s_nodes[0]) / node_dt
     dt = progress / v_ego if v_ego > 0.1 and progress > 0.0 else 0.0
-    s_pred = [row[0] + row[2] * dt - progress for row in prev]
-    gap_scale = config.cluster_gap
     if not gap_scale > 0.0:  # no longitudinal match possible (x / 0 is inf or nan)
         return out
-    lat_scale = max(config.safe_lat, 1e-9)
-    # the same arithmetic as the array form, element by element (R, Mp <= a few)
-    for r, (s_r, n_r) in enumerate(opp_rel[:, :2].tolist()):
+    lat_scale = py_max(safe_lat, 1e-9)
+    for r in range(opp_rel.shape[0]):
+        s_r, n_r = opp_rel[r, 0], opp_rel[r, 1]
         best, best_j = np.inf, -1
-        for j, row in enumerate(prev):
-            ds = abs(s_r - s_pred[j]) / gap_scale
-            dn = abs(n_r - row[1]) / lat_scale
+        for j in range(prev_sides.shape[0]):
+            if prev_sides[j] == 0:  # only the opponents that had a side
+                continue
+            s_pred = prev_opp[j, 0] + prev_opp[j, 2] * dt - progress
+            ds = abs(s_r - s_pred) / gap_scale
+            dn = abs(n_r - prev_opp[j, 1]) / lat_scale
             if ds < 1.0 and dn < 1.0 and ds + dn < best:
                 best, best_j = ds + dn, j
         if best_j >= 0:
-            out[r] = 1 if prev_side[best_j] > 0 else 0
+            out[r] = 1 if prev_sides[best_j] > 0 else 0
     return out
 
 

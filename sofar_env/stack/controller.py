@@ -23,6 +23,7 @@ from .config import StackConfig
 from .edges import TrackEdges
 from .follow import PassOrFollow
 from .prediction import OpponentPredictor, ego_node_positions, lateral_motion, relative_opponents
+from .stage import StageLookup
 
 __all__ = ["StackOutput", "OvertakingStack"]
 
@@ -67,6 +68,7 @@ class OvertakingStack:
         self.planner = PassingSidePlanner(cfg.miqp)
         self.predict = OpponentPredictor(track, pace_ratio=cfg.pace_prediction)
         self.edges = TrackEdges(track, vehicle, footprint_aware=cfg.footprint_edges)
+        self._stage = StageLookup(track, self.edges, cfg.speed_factor)
         self.pass_or_follow = PassOrFollow(cfg, self.planner, track, self.predict, self.edges)
         self._node_t = np.arange(cfg.miqp.nodes) * cfg.miqp.node_dt
         self._mpc_t = cfg.mpc.time_grid()
@@ -115,16 +117,15 @@ class OvertakingStack:
         return elapsed
 
     def stage_data(self, ego_s: float) -> MPCStageData:
-        """Per-stage data of the MPC at the s of its warm start."""
+        """Per-stage data of the MPC at the s of its warm start (:class:`~sofar_env.stack.stage.StageLookup`)."""
         cfg = self.config
-        s_rel = np.asarray(self.mpc.predicted_s(), float)
-        s_abs = ego_s + s_rel
+        s_rel = self.mpc.predicted_s()
+        s_abs, kappa, v_ref, n_min, n_max = self._stage(ego_s, s_rel)
         if self._plan is not None and cfg.use_miqp:
             shift = float(self.track.gap(ego_s, self._plan_s))
             n_ref = np.asarray(self._plan.lateral_at(s_rel + shift), float)
         else:
             n_ref = np.zeros_like(s_rel)
-        v_ref = cfg.speed_factor * np.asarray(self.track.speed(s_abs), float)
         if cfg.use_miqp:
             cap = self.pass_or_follow.speed_cap(ego_s, s_rel, self._mpc_t, self._step)
             if cap is not None:
@@ -132,14 +133,9 @@ class OvertakingStack:
         # an MPC that bounds the car's ends itself gets the edges without the frozen-heading tightening
         x_prev = self._last_pred if cfg.mpc.track_rows == "reference" else None
         n_min, n_max = self.edges.for_mpc(s_abs, x_prev, self._mpc_t, cfg.mpc.control_dt,
-                                          edge_relative=cfg.use_miqp and self.pass_or_follow.parked_plan)
-        return MPCStageData(
-            kappa=np.asarray(self.track.curvature(s_abs), float),
-            n_ref=n_ref,
-            v_ref=v_ref,
-            n_min=n_min,
-            n_max=n_max,
-        )
+                                          edge_relative=cfg.use_miqp and self.pass_or_follow.parked_plan,
+                                          edges=(n_min, n_max))
+        return MPCStageData(kappa=kappa, n_ref=n_ref, v_ref=v_ref, n_min=n_min, n_max=n_max)
 
     def step(self, ego_frenet, opponents, gamma: float) -> StackOutput:
         """One control step.

@@ -54,8 +54,15 @@ class TrackEdges:
         return _narrowest_edges(s_abs.reshape(-1), self._offsets, self._knots, self._wl, self._wr, self._slope_l,
                                 self._slope_r, self._inv_spacing, self._length)
 
+    def kernel_data(self) -> tuple:
+        """What a compiled caller needs to compute :meth:`__call__` itself (:mod:`~sofar_env.stack.stage`):
+        ``(footprint_aware, offsets, knots, wl, wr, slope_l, slope_r, inv_spacing)``."""
+        return (self.footprint_aware, self._offsets, self._knots, self._wl, self._wr, self._slope_l, self._slope_r,
+                self._inv_spacing)
+
     def for_mpc(self, s_abs: np.ndarray, x_prev: np.ndarray | None, t: np.ndarray,
-                shift: float, edge_relative: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                shift: float, edge_relative: bool = False,
+                edges: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The MPC's bounds at ``s_abs`` [m]: :meth:`__call__`, with ``footprint_aware`` tightened on
         both sides by how far the car's ends swing out at the heading error along the horizon.
 
@@ -71,8 +78,10 @@ class TrackEdges:
         off it: the same as ``l |sin e|`` along parallel edges, less for a car that follows an edge
         converging on the reference line (a chicane, where the raceline crosses the track) and has a
         heading error to the reference line while its ends stay clear of that edge.
+
+        ``edges``: ``self(s_abs)`` when the caller has computed it already.
         """
-        n_min, n_max = self(s_abs)
+        n_min, n_max = self(s_abs) if edges is None else edges
         if self.footprint_aware and x_prev is not None:
             e = interp(t + shift, t, x_prev[:, 2])  # np.interp
             if edge_relative:

@@ -221,8 +221,7 @@ def select_opponents(opp: np.ndarray, xg: np.ndarray, t: np.ndarray, cfg: MPCCon
     ones with the smallest barrier along the guess ``xg`` at times ``t``."""
     if len(opp) == 0 or cfg.max_opponents == 0:
         return opp[:0]
-    mask = (opp[:, 0] >= -cfg.opponent_range_behind) & (opp[:, 0] <= cfg.opponent_range_ahead)
-    cand = opp[mask]
+    cand = _in_window(opp, -cfg.opponent_range_behind, cfg.opponent_range_ahead)
     if len(cand) > cfg.max_opponents:
         hmin = barrier_table(xg, predict_opponents(cand, t), cfg.barrier)[1]
         cand = cand[np.argsort(hmin, kind="stable")[: cfg.max_opponents]]
@@ -239,8 +238,42 @@ def relevant_slots(h: np.ndarray, gamma: float, cfg: MPCConfig) -> np.ndarray:
     so the first transition still satisfies the DCBF for it, and it is reconsidered at
     the next solve.
     """
-    if h.shape[1] == 0:
-        return np.zeros(0, dtype=np.intp)
-    resid = (1.0 - gamma) * h[:-1] - h[1:]
-    keep = (h.min(axis=0) < cfg.opponent_h_keep) | (resid.max(axis=0) > -cfg.opponent_dcbf_keep)
-    return keep.nonzero()[0]
+    return _relevant(h, float(gamma), float(cfg.opponent_h_keep), -float(cfg.opponent_dcbf_keep))
+
+
+@kernel
+def _in_window(opp, lo, hi):
+    """The rows of ``opp`` whose first column is in ``[lo, hi]``, in order (a copy): ``opp[(s >= lo) & (s <= hi)]``
+    in one compiled call (:mod:`sofar_env._jit`)."""
+    count = 0
+    for i in range(opp.shape[0]):
+        if opp[i, 0] >= lo and opp[i, 0] <= hi:
+            count += 1
+    out = np.empty((count, opp.shape[1]))
+    r = 0
+    for i in range(opp.shape[0]):
+        if opp[i, 0] >= lo and opp[i, 0] <= hi:
+            out[r] = opp[i]
+            r += 1
+    return out
+
+
+@kernel
+def _relevant(h, gamma, h_keep, dcbf_low):
+    """:func:`relevant_slots` in one compiled call (:mod:`sofar_env._jit`): per column of ``h`` (K >= 2 rows),
+    ``min(h) < h_keep`` or ``max((1 - gamma) h_k - h_{k+1}) > dcbf_low``, the residuals formed as in the numpy
+    form; a nan in a column fails both tests, as numpy's nan-propagating ``min``/``max`` do."""
+    K, M = h.shape
+    keep = np.empty(M, dtype=np.intp)
+    n = 0
+    for i in range(M):
+        low = h[0, i]
+        high = (1.0 - gamma) * h[0, i] - h[1, i]
+        for k in range(1, K):
+            low = minimum(low, h[k, i])
+            if k < K - 1:
+                high = maximum(high, (1.0 - gamma) * h[k, i] - h[k + 1, i])
+        if low < h_keep or high > dcbf_low:
+            keep[n] = i
+            n += 1
+    return keep[:n].copy()

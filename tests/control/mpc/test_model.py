@@ -162,3 +162,28 @@ def test_the_compiled_prediction_is_the_numpy_form():
         predict_into(rows, t, o, np.asarray(DUMMY_OPPONENT))
         assert o[:, :m].tobytes() == want.tobytes()
         assert np.all(o[:, m:] == DUMMY_OPPONENT)
+
+
+def test_the_compiled_slot_choice_and_window_are_the_numpy_forms():
+    rng = np.random.default_rng(5)
+    cfg = MPCConfig()
+    for case in range(200):
+        m = int(rng.integers(0, 5))
+        h = rng.uniform(-1.0, 30.0, (cfg.horizon + 1, m)) - rng.uniform(0.0, 3.0, m) * np.arange(cfg.horizon + 1)[:, None]
+        if m and case % 4 == 0:
+            h[rng.integers(cfg.horizon + 1), rng.integers(m)] = np.nan
+        gamma = float(rng.choice([0.0, 0.05, 0.5, 1.0]))
+        resid = (1.0 - gamma) * h[:-1] - h[1:]
+        keep = (h.min(axis=0, initial=np.inf) < cfg.opponent_h_keep) | (
+            resid.max(axis=0, initial=-np.inf) > -cfg.opponent_dcbf_keep)
+        got = relevant_slots(h, gamma, cfg)
+        np.testing.assert_array_equal(got, keep.nonzero()[0])
+        assert got.dtype == np.intp
+        opp = np.column_stack([rng.uniform(-80, 200, m), rng.uniform(-3, 3, m), rng.uniform(20, 60, m)])
+        if m and case % 3 == 0:
+            opp[0, 0] = np.nan
+        t = cfg.time_grid()
+        xg = np.column_stack([40.0 * t, np.zeros((len(t), 4))])
+        mask = (opp[:, 0] >= -cfg.opponent_range_behind) & (opp[:, 0] <= cfg.opponent_range_ahead)
+        if mask.sum() <= cfg.max_opponents:
+            np.testing.assert_array_equal(select_opponents(opp, xg, t, cfg), opp[mask])
