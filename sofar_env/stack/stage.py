@@ -25,15 +25,12 @@ from .edges import TrackEdges, _narrowest_edges
 __all__ = ["StageLookup"]
 
 
-
 class StageLookup:
     """Curvature, speed reference and edges at the points of the MPC's warm start (module docstring)."""
 
     def __init__(self, track, edges: TrackEdges, speed_factor: float):
-        self._knots, self._kappa = track.table("kappa")
+        self._kappa = track.table("kappa")[1]  # every column shares the knots of the edges' tables
         self._v = track.table("v")[1]
-        self._wl = track.table("wl")[1]
-        self._wr = track.table("wr")[1]
         self._length = float(track.length)
         self._speed_factor = float(speed_factor)
         self._edges = edges.kernel_data()
@@ -42,21 +39,22 @@ class StageLookup:
         """``(s_abs, kappa, v_ref, n_min, n_max)`` at ``s_abs = ego_s + s_rel`` [m]: the raceline's curvature
         [1/m], ``speed_factor`` times the speed profile [m/s], and the edges of
         :class:`~sofar_env.stack.edges.TrackEdges` [m]."""
-        e = self._edges
-        return _stage_rows(float(ego_s), np.asarray(s_rel, dtype=float), self._speed_factor, self._knots, self._kappa,
-                           self._v, self._wl, self._wr, self._length, e[0], e[1], e[2], e[3], e[4], e[5], e[6], e[7])
+        return _stage_rows(float(ego_s), np.asarray(s_rel, dtype=float), self._speed_factor, self._kappa, self._v,
+                           self._length, *self._edges)
 
 
 @kernel
-def _stage_rows(ego_s, s_rel, speed_factor, knots, kappa, v, wl, wr, length, footprint, offsets, edge_knots, edge_wl,
-                edge_wr, slope_l, slope_r, inv_spacing):
+def _stage_rows(ego_s, s_rel, speed_factor, kappa, v, length, footprint, offsets, knots, wl, wr, slope_l, slope_r,
+                inv_spacing):
     """:meth:`StageLookup.__call__`: the track's columns (closed tables on ``knots``) at ``s_abs % length`` with
     numpy's interpolation (:func:`~sofar_env._interp.interp_located`), and the edges (``footprint``:
-    :func:`~sofar_env.stack.edges._narrowest_edges` on the ``edge_*`` tables, else the widths there)."""
+    :func:`~sofar_env.stack.edges._narrowest_edges`, else the widths ``wl``, ``wr`` there)."""
     n = s_rel.shape[0]
     s_abs = np.empty(n)
     kap = np.empty(n)
     v_ref = np.empty(n)
+    n_min = np.empty(n)
+    n_max = np.empty(n)
     for k in range(n):
         s = ego_s + s_rel[k]
         s_abs[k] = s
@@ -64,15 +62,9 @@ def _stage_rows(ego_s, s_rel, speed_factor, knots, kappa, v, wl, wr, length, foo
         j = locate(x, knots, -1)
         kap[k] = interp_located(j, x, knots, kappa)
         v_ref[k] = speed_factor * interp_located(j, x, knots, v)
-    if footprint:
-        n_min, n_max = _narrowest_edges(s_abs, offsets, edge_knots, edge_wl, edge_wr, slope_l, slope_r, inv_spacing,
-                                        length)
-    else:
-        n_min = np.empty(n)
-        n_max = np.empty(n)
-        for k in range(n):
-            x = s_abs[k] % length
-            j = locate(x, knots, -1)
+        if not footprint:
             n_min[k] = -interp_located(j, x, knots, wr)
             n_max[k] = interp_located(j, x, knots, wl)
+    if footprint:
+        n_min, n_max = _narrowest_edges(s_abs, offsets, knots, wl, wr, slope_l, slope_r, inv_spacing, length)
     return s_abs, kap, v_ref, n_min, n_max
