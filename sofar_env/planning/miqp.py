@@ -313,7 +313,8 @@ class PassingSidePlanner:
                            pair_c=labels[rows], pair_n=opp_rel[rows, 1],
                            pair_w=clear[relevant[rows], ks], pair_r=rows, n_clusters=n_clusters,
                            f_b=f_b, n_ref=n_ref, d_prev=d_prev, b_prev=b_prev, rel_cluster=labels,
-                           b_fixed=b_fixed)
+                           b_fixed=b_fixed,
+                           w_diag=cfg.w_dev + (cfg.w_prev if d_prev is not None else 0.0), w_smooth=cfg.w_smooth)
 
     # ------------------------------------------------------------- solvers
     def _solve_bnb(self, prob: SideProblem) -> tuple[np.ndarray, np.ndarray] | None:

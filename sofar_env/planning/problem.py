@@ -50,6 +50,8 @@ class SideProblem:
     b_prev: np.ndarray       # (R,) previous side (1 left, 0 right, -1 unknown) per relevant opponent
     rel_cluster: np.ndarray  # (R,) cluster of each relevant opponent
     b_fixed: np.ndarray | None = None  # (C,) side a cluster is locked to (1 left, 0 right), -1 free; None: all free
+    w_diag: float | None = None    # H_d = 2 (w_diag I + w_smooth D'D): w_dev [+ w_prev] [1/m^2]; None: no incumbent
+    w_smooth: float = 0.0          # smoothness weight of H_d [1/m^2] (with w_diag)
 
 
 def cost_factors(config: MIQPConfig) -> dict[bool, tuple[np.ndarray, np.ndarray]]:

@@ -129,3 +129,115 @@ def test_the_compiled_branch_and_bound_data_are_the_numpy_form():
     for (prob, w_slack), (_, got) in zip(problems, captured):
         for name, g, w in zip(("f", "A", "bupper", "blower"), got, numpy_bnb_data(prob, w_slack)):
             np.testing.assert_array_equal(g, w, err_msg=name)
+
+
+def _closed_loop_problems(seed: int, alongside_gap: float = 0.0, calls: int = 6):
+    """The problems the planner hands to the branch-and-bound on random closed-loop-like sequences (the
+    previous plan and sides known from the second call on), with the solver's own result for each."""
+    from sofar_env.planning import miqp, solvers
+
+    rng = np.random.default_rng(seed)
+    planner = PassingSidePlanner(MIQPConfig(alongside_gap=alongside_gap))
+    seen = []
+    original = solvers.solve_branch_and_bound
+
+    def keep(prob, w_slack, cache):
+        out = original(prob, w_slack, cache)
+        seen.append((prob, w_slack, out))
+        return out
+
+    kept = miqp.solve_branch_and_bound
+    miqp.solve_branch_and_bound = keep
+    try:
+        for _ in range(calls):
+            s, n_ref, n_min, n_max, ego_n, opp = random_instance(rng, min_gap=5.0)
+            planner.reset()
+            for _ in range(5):
+                plan = planner.plan(s, n_ref, n_min, n_max, ego_n, opp, progress=6.0)
+                ego_n = float(plan.lateral_at(6.0))
+                opp = opp.copy()
+                opp[:, 0] -= 4.0
+    finally:
+        miqp.solve_branch_and_bound = kept
+    return seen
+
+
+def _daqp_objective(prob, w_slack, d, b):
+    """DAQP's objective 0.5 x'Hx + f'x of x = [b, xi, u = R d], xi the minimal slacks at (d, b), in numpy."""
+    from sofar_env.planning.solvers import _Q_BIN, _Q_SLACK
+
+    C = prob.n_clusters
+    f, A, bupper, blower = numpy_bnb_data(prob, w_slack)
+    u = np.linalg.solve(prob.Rinv, d)
+    lo_k, hi_k = prob.lo[prob.pair_k], prob.hi[prob.pair_k]
+    Ma = np.maximum(0.0, hi_k - prob.pair_n + prob.pair_w)
+    Mb = np.maximum(0.0, prob.pair_n + prob.pair_w - lo_k)
+    bc = b[prob.pair_c]
+    xi = np.maximum.reduce([np.zeros(len(bc)), d[prob.pair_k] - Ma * bc - (prob.pair_n - prob.pair_w),
+                            prob.pair_n + prob.pair_w - Mb + Mb * bc - d[prob.pair_k]])
+    x = np.concatenate([b, xi, u])
+    h = np.concatenate([np.full(C, _Q_BIN), np.full(len(xi), _Q_SLACK), np.ones(len(u))])
+    return 0.5 * float(x @ (h * x)) + float(f @ x)
+
+
+def test_the_incumbent_bound_is_a_feasible_objective_above_the_optimum():
+    """The bound handed to DAQP is the objective of a feasible point (evaluated in d, it equals DAQP's
+    objective in x = [b, xi, u]): it is never below the optimum, and close to it in closed loop."""
+    from sofar_env.planning.solvers import _INF, _incumbent_bound
+
+    seen = _closed_loop_problems(seed=5, alongside_gap=8.0)
+    gaps = []
+    for prob, w_slack, out in seen:
+        assert out is not None
+        d_opt, b_opt = out
+        C = prob.n_clusters
+        b_fixed = prob.b_fixed if prob.b_fixed is not None else np.zeros(0, dtype=np.int64)
+        f = numpy_bnb_data(prob, w_slack)[0]
+        start = prob.d_prev if prob.d_prev is not None else prob.n_ref
+        bound = _incumbent_bound(C, f, prob.f_d, prob.w_diag, prob.w_smooth, prob.lo, prob.hi, start,
+                                 prob.pair_k, prob.pair_c, prob.pair_n, prob.pair_w, b_fixed)
+        assert bound < _INF
+        optimum = _daqp_objective(prob, w_slack, d_opt, b_opt)
+        assert bound >= optimum - 1e-9 * (abs(optimum) + 1.0)
+        gaps.append((bound - optimum) / (abs(optimum) + 1.0))
+        # its lateral part, evaluated in d, is DAQP's objective in u = R d: compare on the problem without pairs
+        empty = replace_w_diag(prob, prob.w_diag)
+        empty.pair_k, empty.pair_c = np.zeros(0, np.int64), np.zeros(0, np.int64)
+        empty.pair_n, empty.pair_w, empty.n_clusters, empty.f_b = np.zeros(0), np.zeros(0), 0, np.zeros(0)
+        empty.b_fixed = None
+        f0 = numpy_bnb_data(empty, w_slack)[0]
+        lateral = _incumbent_bound(0, f0, prob.f_d, prob.w_diag, prob.w_smooth, prob.lo, prob.hi, start,
+                                   empty.pair_k, empty.pair_c, empty.pair_n, empty.pair_w, b_fixed[:0])
+        point = np.clip(start, prob.lo, prob.hi)
+        expected = _daqp_objective(empty, w_slack, point, np.zeros(0))
+        assert lateral == pytest.approx(expected + 1e-6 * (abs(expected) + 1.0), rel=1e-9, abs=1e-7)
+    assert len(gaps) > 15
+    assert np.median(gaps) < 0.1  # the previous plan, moved to each side, is nearly optimal
+
+
+def test_the_incumbent_does_not_change_the_solution():
+    """With and without DAQP's fval_bound, the branch-and-bound returns the same values to the bit; a bound
+    below the optimum (every node pruned) falls back to the search without it."""
+    from sofar_env.planning import solvers
+
+    seen = _closed_loop_problems(seed=9, alongside_gap=8.0)
+    assert len(seen) > 15
+    real = solvers._incumbent_bound
+    try:
+        for prob, w_slack, out in seen:
+            plain = solvers.solve_branch_and_bound(replace_w_diag(prob, None), w_slack, {})
+            for d_ref, d in zip(out, plain):
+                np.testing.assert_array_equal(d, d_ref)
+            solvers._incumbent_bound = lambda *args: -1e6  # below any objective of these problems
+            low = solvers.solve_branch_and_bound(prob, w_slack, {})
+            solvers._incumbent_bound = real
+            for d_ref, d in zip(out, low):
+                np.testing.assert_array_equal(d, d_ref)
+    finally:
+        solvers._incumbent_bound = real
+
+
+def replace_w_diag(prob, w_diag):
+    import dataclasses
+
+    return dataclasses.replace(prob, w_diag=w_diag)
