@@ -308,13 +308,15 @@ class PassingSidePlanner:
             b_fixed[(count > 0) & (n_left == count)] = 1
             b_fixed[(count > 0) & (n_left == 0)] = 0
 
+        # the lateral Hessian's weights let the solver bound the optimum from the previous plan (cfg.incumbent)
+        w_diag = cfg.w_dev + (cfg.w_prev if d_prev is not None else 0.0) if cfg.incumbent else None
         rows, ks = act_rel.nonzero()
         return SideProblem(lo=lo, hi=hi, f_d=f_d, Rinv=Rinv, RinvT=RinvT, pair_k=ks,
                            pair_c=labels[rows], pair_n=opp_rel[rows, 1],
                            pair_w=clear[relevant[rows], ks], pair_r=rows, n_clusters=n_clusters,
                            f_b=f_b, n_ref=n_ref, d_prev=d_prev, b_prev=b_prev, rel_cluster=labels,
                            b_fixed=b_fixed,
-                           w_diag=cfg.w_dev + (cfg.w_prev if d_prev is not None else 0.0), w_smooth=cfg.w_smooth)
+                           w_diag=w_diag, w_smooth=cfg.w_smooth)
 
     # ------------------------------------------------------------- solvers
     def _solve_bnb(self, prob: SideProblem) -> tuple[np.ndarray, np.ndarray] | None:

@@ -241,3 +241,28 @@ def replace_w_diag(prob, w_diag):
     import dataclasses
 
     return dataclasses.replace(prob, w_diag=w_diag)
+
+
+def test_plans_with_and_without_the_incumbent_are_identical():
+    """Closed-loop-like sequences (cars alongside locking sides among them): the planner with the incumbent
+    returns the same plans, sides and objectives, to the bit, as the planner without it."""
+    rng = np.random.default_rng(21)
+    with_bound = PassingSidePlanner(MIQPConfig(alongside_gap=8.0))
+    plain = PassingSidePlanner(MIQPConfig(alongside_gap=8.0, incumbent=False))
+    optimal = 0
+    for _ in range(6):
+        s, n_ref, n_min, n_max, ego_n, opp = random_instance(rng, min_gap=4.0)
+        with_bound.reset()
+        plain.reset()
+        for _ in range(6):
+            a = with_bound.plan(s, n_ref, n_min, n_max, ego_n, opp, progress=6.0)
+            b = plain.plan(s, n_ref, n_min, n_max, ego_n, opp, progress=6.0)
+            assert a.status == b.status
+            np.testing.assert_array_equal(a.d, b.d)
+            np.testing.assert_array_equal(a.sides, b.sides)
+            assert a.objective == b.objective or (np.isnan(a.objective) and np.isnan(b.objective))
+            optimal += a.status == "optimal"
+            ego_n = float(a.lateral_at(6.0))
+            opp = opp.copy()
+            opp[:, 0] -= 4.0
+    assert optimal > 15
