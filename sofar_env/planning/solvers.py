@@ -67,6 +67,7 @@ _Q_SLACK = 1e-2      # curvature added to each slack [1/m^2] (DAQP needs H > 0)
 _DAQP_OK = (1, 2)    # DAQP exit flags that mean "optimal" (2: optimal with soft constraints)
 _DAQP_INFEASIBLE = -1  # DAQP's exit flag when no node beats fval_bound (or the problem is infeasible)
 _BOUND_MARGIN = 1e-6  # relative (and absolute) margin on the incumbent's objective [-]
+_BOUND_MAX_CLUSTERS = 8  # the incumbent tries every side pattern: up to 2^8 of them, else no incumbent
 _SENSE_BINARY = 16
 _SENSE_ACTIVE_LOWER = 3   # DAQP: ACTIVE (1) | LOWER (2): start with this bound in the working set
 _NO_FIXED = np.zeros(0, dtype=np.int64)
@@ -214,7 +215,10 @@ def _incumbent_bound(C, f, f_d, w_diag, w_smooth, lo, hi, start, pair_k, pair_c,
     of the clearance (within the corridor), with the minimal slacks of the Big-M rows. The lateral part is
     evaluated in d (``0.5 u'u + f_u'u = w_diag |d|^2 + w_smooth |diff d|^2 + f_d'd``, ``H_d = 2 (w_diag I +
     w_smooth D'D)``). DAQP drops every node whose relaxation is above the bound; the node that holds the
-    optimum is reached as before. ``_INF`` (no bound) when no point is finite."""
+    optimum is reached as before. ``_INF`` (no bound) when no point is finite, or with more than
+    ``_BOUND_MAX_CLUSTERS`` side decisions (their patterns would cost more than the search they prune)."""
+    if C > _BOUND_MAX_CLUSTERS:
+        return _INF
     N = lo.shape[0]
     P = pair_k.shape[0]
     d0 = np.empty(N)

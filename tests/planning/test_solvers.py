@@ -167,7 +167,7 @@ def _daqp_objective(prob, w_slack, d, b):
     from sofar_env.planning.solvers import _Q_BIN, _Q_SLACK
 
     C = prob.n_clusters
-    f, A, bupper, blower = numpy_bnb_data(prob, w_slack)
+    f = numpy_bnb_data(prob, w_slack)[0]
     u = np.linalg.solve(prob.Rinv, d)
     lo_k, hi_k = prob.lo[prob.pair_k], prob.hi[prob.pair_k]
     Ma = np.maximum(0.0, hi_k - prob.pair_n + prob.pair_w)
@@ -266,3 +266,24 @@ def test_plans_with_and_without_the_incumbent_are_identical():
             opp = opp.copy()
             opp[:, 0] -= 4.0
     assert optimal > 15
+
+
+def test_the_incumbent_bound_gives_up_on_many_side_decisions_and_non_finite_plans():
+    """No bound (DAQP's infinity) with more side decisions than the patterns it tries, or when the previous plan
+    is not finite; a finite bound otherwise."""
+    from sofar_env.planning.solvers import _BOUND_MAX_CLUSTERS, _INF, _incumbent_bound
+
+    n = 8
+    no_pairs = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
+    not_fixed = np.zeros(0, np.int64)
+
+    def bound(C, start):  # C free side decisions, no active pairs, a corridor of +-1 m
+        return _incumbent_bound(C, np.zeros(C + n), np.zeros(n), 1.0, 100.0, -np.ones(n), np.ones(n), start,
+                                *no_pairs, not_fixed)
+
+    assert bound(2, np.zeros(n)) < _INF
+    assert bound(_BOUND_MAX_CLUSTERS, np.zeros(n)) < _INF
+    assert bound(_BOUND_MAX_CLUSTERS + 1, np.zeros(n)) == _INF
+    start = np.zeros(n)
+    start[3] = np.nan
+    assert bound(2, start) == _INF
