@@ -315,8 +315,7 @@ class PassingSidePlanner:
                            pair_c=labels[rows], pair_n=opp_rel[rows, 1],
                            pair_w=clear[relevant[rows], ks], pair_r=rows, n_clusters=n_clusters,
                            f_b=f_b, n_ref=n_ref, d_prev=d_prev, b_prev=b_prev, rel_cluster=labels,
-                           b_fixed=b_fixed,
-                           w_diag=w_diag, w_smooth=cfg.w_smooth)
+                           b_fixed=b_fixed, w_diag=w_diag, w_smooth=cfg.w_smooth)
 
     # ------------------------------------------------------------- solvers
     def _solve_bnb(self, prob: SideProblem) -> tuple[np.ndarray, np.ndarray] | None:

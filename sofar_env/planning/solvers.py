@@ -227,15 +227,12 @@ def _incumbent_bound(C, f, f_d, w_diag, w_smooth, lo, hi, start, pair_k, pair_c,
     d = np.empty(N)
     best = _INF
     for pattern in range(1 << C):
+        if _locked_out(pattern, C, b_fixed):
+            continue
         val = 0.0
-        ok = True
         for c in range(C):
             b = (pattern >> c) & 1
-            if b_fixed.shape[0] > 0 and b_fixed[c] >= 0 and b_fixed[c] != b:
-                ok = False
             val += 0.5 * _Q_BIN * b * b + f[c] * b
-        if not ok:
-            continue
         d[:] = d0
         for r in range(P):
             k = pair_k[r]
@@ -244,12 +241,12 @@ def _incumbent_bound(C, f, f_d, w_diag, w_smooth, lo, hi, start, pair_k, pair_c,
             else:
                 d[k] = py_max(py_min(d[k], pair_n[r] - pair_w[r]), lo[k])
         for r in range(P):
+            # inside the corridor the Big-M row of the other side holds by itself: the pattern's side decides
             k = pair_k[r]
-            sl, n = pair_w[r], pair_n[r]
-            b = (pattern >> pair_c[r]) & 1
-            ma = py_max(0.0, hi[k] - n + sl)
-            mb = py_max(0.0, n + sl - lo[k])
-            xi = py_max(py_max(0.0, d[k] - ma * b - (n - sl)), (n + sl - mb) + mb * b - d[k])
+            if (pattern >> pair_c[r]) & 1:
+                xi = py_max(0.0, pair_n[r] + pair_w[r] - d[k])
+            else:
+                xi = py_max(0.0, d[k] - (pair_n[r] - pair_w[r]))
             val += 0.5 * _Q_SLACK * xi * xi + f[C + r] * xi
         for k in range(N):
             val += w_diag * d[k] * d[k] + f_d[k] * d[k]
@@ -260,3 +257,15 @@ def _incumbent_bound(C, f, f_d, w_diag, w_smooth, lo, hi, start, pair_k, pair_c,
     if not (abs(best) < _INF):
         return _INF
     return best + _BOUND_MARGIN * (abs(best) + 1.0)
+
+
+@kernel
+def _locked_out(pattern, C, b_fixed):
+    """Whether the side pattern (bit c: cluster c passed on the left) contradicts a locked side of ``b_fixed``
+    (empty: none locked)."""
+    if b_fixed.shape[0] == 0:
+        return False
+    for c in range(C):
+        if b_fixed[c] >= 0 and b_fixed[c] != (pattern >> c) & 1:
+            return True
+    return False
