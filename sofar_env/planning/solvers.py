@@ -35,8 +35,8 @@ is dropped, and since DAQP's solver is a dual active-set method, whose objective
 solve, it is dropped as soon as its objective passes the bound. The nodes on the way to the optimum are
 below the bound and are solved exactly as without it (tests/planning/test_solvers.py compares the returned
 values bit for bit). If the bound is below the optimum (the margin missed, or the point was the optimum
-itself), DAQP reports infeasible and the call is repeated without it. On closed-loop instances this cuts
-DAQP's time by about 1.4x.
+itself), DAQP reports infeasible and the call is repeated without it. On the calls of a closed loop of the
+env this cuts the branch and bound's time by about 1.25x (rho 0.5) to 1.35x (rho 0.3).
 
 Per-call cost. The diagonal Hessian, the constraint types, the index arrays and the
 constant parts of the bounds of the branch-and-bound depend only on ``(C, P)`` and
