@@ -7,8 +7,7 @@ Usage (from the repository root, with the package installed)::
     python train/pasta.py --scenario interactive            # in the interactive world
     python train/pasta.py --quick                           # a few-minute run that finishes episodes
     python train/pasta.py --n-envs 2 --total-steps 800000 --out runs/pasta_ls   # 2 worker processes
-    python train/pasta.py --resume runs/pasta_ls/pasta_final.json --total-steps 1200000 \
-        --out runs/pasta_ls --force                         # continue in place
+    python train/pasta.py --resume runs/pasta_ls/pasta_final.json --total-steps 1200000   # continue in place
     python train/pasta.py --n-envs 2 --backend local         # gymnasium's AsyncVectorEnv (lock-step) instead
     python train/pasta.py --backend ray --num-workers 4     # envs in Ray actors (pip install "sofar[ray]")
     python train/pasta.py --backend ray --address auto --num-workers 16 --n-envs 16   # on a Ray cluster
@@ -22,8 +21,9 @@ Per episode the opponent pace ratio rho is drawn uniformly from ``[--rho-min,
 --rho-max]`` (the paper evaluates at 0.1, 0.3, 0.5, 0.65, 0.8), or from
 ``--rho-values`` when given. Outputs in ``--out``: ``tb/`` (TensorBoard),
 ``checkpoints/pasta_<steps>.{json,pt}`` every ``--save-every`` updates and
-``pasta_final.{json,pt}``. An ``--out`` that already holds a run (a ``pasta_final.json``)
-is refused unless ``--force`` is given. After every update one console line reports the
+``pasta_final.{json,pt}``. ``--resume`` continues a run in its own folder (the default ``--out``
+with ``--resume``); another ``--out`` that already holds a run (a ``pasta_final.json``) is refused
+unless ``--force`` is given, which starts over there. After every update one console line reports the
 mean returns of the last finished episodes per objective, by name.
 
 ``--quick`` is a preset for a first look (1 to 2 minutes on one core): 16384 steps
@@ -73,7 +73,7 @@ from sofar_agents.pasta import PASTA, PASTAConfig
 from sofar_agents.pasta.rollout import make_training_env
 from sofar_agents.pasta.self_play import make_self_play_race
 from sofar_agents.pasta.training_log import (check_out, code_commit, console_line, log_update, n_objectives,
-                                             objective_names)
+                                             objective_names, run_folder)
 from sofar_env.vector import async_vector_env, available_cpus
 
 logger = logging.getLogger("train.pasta")
@@ -136,11 +136,12 @@ class Args:
     """Preset for a first look (1 to 2 minutes): 16384 steps, rollouts of 512, 30 s
     episodes, 4 epochs, ``--out runs/pasta_quick``; explicit options win."""
     force: bool = False
-    """Allow writing into an ``--out`` that already holds a run (overwrites its final checkpoint)."""
+    """Start over in an ``--out`` that already holds a run (its checkpoints are replaced); not needed to
+    ``--resume`` a run in its own folder."""
     seed: int = 1
     """Seed of the agent and of the environments (env i is seeded with seed + i)."""
     out: str = "runs/pasta"
-    """Output directory for TensorBoard logs and checkpoints."""
+    """Output directory for TensorBoard logs and checkpoints (with ``--resume``: the resumed run's folder)."""
     resume: str | None = None
     """Checkpoint (``.json`` or ``.pt``) to continue training from."""
     save_every: int = 10
@@ -187,6 +188,8 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
         for key, value in {**QUICK_RUN, **QUICK_PASTA}.items():
             if ns[key] is None:
                 ns[key] = value
+    if ns["out"] is None and ns["resume"] is not None:
+        ns["out"] = str(run_folder(ns["resume"]))  # a resumed run continues in its own folder
     run_names = {f.name for f in dataclasses.fields(Args)}
     args = Args(**{k: v for k, v in ns.items() if k in run_names and v is not None})
     overrides = {k: v for k, v in ns.items() if k not in run_names and v is not None}
@@ -320,7 +323,7 @@ def main(argv: list[str] | None = None) -> Path:
             raise SystemExit(2) from err
     torch.set_num_threads(args.torch_threads)
     out = Path(args.out)
-    check_out(out, args.force)
+    check_out(out, args.force, args.resume)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.time()
 

@@ -4,7 +4,7 @@ Usage (from the repository root, with the package installed)::
 
     python train/ppo.py                                   # Laguna Seca, defaults
     python train/ppo.py --n-envs 2 --total-steps 800000 --out runs/ppo_ls
-    python train/ppo.py --resume runs/ppo_ls/ppo_final.zip --total-steps 1200000 --out runs/ppo_ls --force
+    python train/ppo.py --resume runs/ppo_ls/ppo_final.zip --total-steps 1200000   # continue in place
     tensorboard --logdir runs
 
 The environment is made with ``mo_gymnasium.make`` and returns its reward vector;
@@ -14,8 +14,9 @@ gamma_smoothness), and :class:`sofar_agents.wrappers.RescaleGammaAction` maps th
 policy's ``[-1, 1]`` output onto gamma in ``[0.05, 1]``. rho is drawn per episode as in
 ``train/pasta.py``. The network matches PASTA's (2 x 256, tanh). Outputs in ``--out``:
 ``tb/``, ``checkpoints/ppo_<steps>_steps.zip`` and ``ppo_final.zip`` (load it for
-deployment with :class:`sofar_agents.policies.SB3Policy`). An ``--out`` that already
-holds a ``ppo_final.zip`` is refused unless ``--force`` is given.
+deployment with :class:`sofar_agents.policies.SB3Policy`). ``--resume`` continues a run in its own
+folder (the default ``--out`` with ``--resume``); another ``--out`` that already holds a
+``ppo_final.zip`` is refused unless ``--force`` is given, which starts over there.
 
 ``--resume PATH.zip`` continues a run: ``PPO.load`` restores the policy, the optimiser and
 the hyper-parameters stored in the checkpoint (the PPO options on the command line are
@@ -86,11 +87,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--rho-max", type=float, default=0.8, help="upper bound of the per-episode rho")
     p.add_argument("--rho-values", type=float, nargs="+", default=None, help="draw rho from these values instead")
     p.add_argument("--seed", type=int, default=1, help="seed")
-    p.add_argument("--out", default="runs/ppo", help="output directory")
+    p.add_argument("--out", default=None, help="output directory (default: runs/ppo; with --resume, the resumed "
+                                               "run's folder)")
     p.add_argument("--save-every", type=int, default=100_000, help="checkpoint every this many steps (0: off)")
     p.add_argument("--resume", default=None,
                    help="checkpoint (.zip) to continue from; its stored hyper-parameters are used")
-    p.add_argument("--force", action="store_true", help="allow writing into an --out that already holds a run")
+    p.add_argument("--force", action="store_true",
+                   help="start over in an --out that already holds a run (not needed to --resume it in its own folder)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True, help="show a progress bar")
     p.add_argument("--torch-threads", type=int, default=1, help="torch intra-op threads")
     p.add_argument("--log-level", default="INFO", help="Python logging level")
@@ -148,6 +151,12 @@ class ProgressBar(BaseCallback):
             self.bar.close()
 
 
+def run_folder(checkpoint: Path) -> Path:
+    """The run folder of a checkpoint: the folder of ``ppo_final.zip``, or the one above ``checkpoints/``."""
+    parent = checkpoint.resolve().parent
+    return parent.parent if parent.name == "checkpoints" else parent
+
+
 def vecnormalize_path(checkpoint: Path) -> Path:
     """The reward-normaliser file written with ``checkpoint`` (final or ``CheckpointCallback``)."""
     name = checkpoint.name
@@ -160,11 +169,12 @@ def main(argv: list[str] | None = None) -> Path:
     args = parse_args(argv)
     logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="%(asctime)s %(name)s: %(message)s")
     torch.set_num_threads(args.torch_threads)
-    out = Path(args.out)
-    if (out / "ppo_final.zip").exists() and not args.force:
-        raise SystemExit(f"--out {out} already holds a run ({out / 'ppo_final.zip'}); pass --force to overwrite it "
-                         "or choose another --out")
     resume = Path(args.resume) if args.resume else None
+    out = Path(args.out) if args.out is not None else run_folder(resume) if resume is not None else Path("runs/ppo")
+    own_run = resume is not None and run_folder(resume) == out.resolve()
+    if (out / "ppo_final.zip").exists() and not args.force and not own_run:
+        raise SystemExit(f"--out {out} already holds a run ({out / 'ppo_final.zip'}): continue it with --resume "
+                         f"{out / 'ppo_final.zip'}, start over there with --force, or choose another --out")
     if resume is not None and not resume.is_file():
         raise SystemExit(f"--resume {resume}: no such checkpoint")
     norm_path = vecnormalize_path(resume) if resume is not None else None

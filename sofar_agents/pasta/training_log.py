@@ -3,7 +3,7 @@
 Kept out of ``train/pasta.py`` so the script stays a thin command line: the
 per-update TensorBoard scalars (losses, attention, regret and returns per objective,
 by name), the one console line per update, the objective names and count of a vector
-env, the refusal to overwrite a finished run, and the git commit of the source tree.
+env, the refusal to write into another run's folder, and the git commit of the source tree.
 """
 
 from __future__ import annotations
@@ -97,16 +97,26 @@ def console_line(agent: PASTA, stats: dict[str, Any], total_steps: int) -> str:
     return line
 
 
-def check_out(out: Path, force: bool) -> None:
-    """Refuse an ``--out`` that already holds a run unless ``force``."""
+def run_folder(checkpoint: str | Path) -> Path:
+    """The run folder of a checkpoint: the folder of ``pasta_final``, or the one above ``checkpoints/``."""
+    parent = Path(checkpoint).resolve().parent
+    return parent.parent if parent.name == "checkpoints" else parent
+
+
+def check_out(out: Path, force: bool, resume: str | Path | None = None) -> None:
+    """Refuse an ``--out`` that already holds a run, unless ``force`` (start over there) or ``resume`` is a
+    checkpoint of that run (continue it in its own folder, the normal case of ``--resume``)."""
     final = out / "pasta_final.json"
-    if final.exists() and not force:
-        try:
-            steps = f", {int(json.loads(final.read_text())['state']['num_timesteps'])} steps"
-        except (OSError, ValueError, KeyError, TypeError):
-            steps = ""
-        raise SystemExit(f"--out {out} already holds a run ({final}{steps}); pass --force to overwrite it "
-                         "or choose another --out")
+    if not final.exists() or force:
+        return
+    if resume is not None and run_folder(resume) == out.resolve():
+        return
+    try:
+        steps = f", {int(json.loads(final.read_text())['state']['num_timesteps'])} steps"
+    except (OSError, ValueError, KeyError, TypeError):
+        steps = ""
+    raise SystemExit(f"--out {out} already holds a run ({final}{steps}): continue it with --resume {final}, "
+                     "start over there with --force (its checkpoints are replaced), or choose another --out")
 
 
 def code_commit(root: Path) -> str | None:

@@ -90,11 +90,13 @@ def test_pasta_script_trains_logs_checkpoints_and_resumes(tmp_path: Path) -> Non
     assert gamma.shape == (1,) and 0.05 <= gamma[0] <= 1.0
 
     before = final.read_bytes()
-    refused = _run("pasta.py", "--total-steps", "384", "--resume", str(final), *common, returncode=1)
-    assert "already holds a run" in refused.stderr and "--force" in refused.stderr
+    refused = _run("pasta.py", "--total-steps", "384", *common, returncode=1)  # a new run into the folder
+    assert "already holds a run" in refused.stderr and f"--resume {final}" in refused.stderr
+    assert "--force" in refused.stderr and "overwrite" not in refused.stderr
     assert final.read_bytes() == before  # nothing overwritten
 
-    _run("pasta.py", "--total-steps", "384", "--resume", str(final), "--save-every", "0", "--force", *common)
+    # resuming a run in its own folder needs no --force
+    _run("pasta.py", "--total-steps", "384", "--resume", str(final), "--save-every", "0", *common)
     resumed = PASTA.load(final)
     assert resumed.num_timesteps == 384 and resumed.num_updates == 3
     assert json.loads(final.read_text())["training"]["resumed_from"] == str(final)
@@ -112,6 +114,8 @@ def test_quick_preset_and_mu_decay_help() -> None:
     assert script.env_kwargs_of(args)["race"] == {"duration": 12.0}
     args, overrides = script.parse_args([])
     assert not args.quick and overrides == {} and args.n_envs == 1 and "race" not in script.env_kwargs_of(args)
+    args, _ = script.parse_args(["--resume", "runs/old/checkpoints/pasta_0000000128.json"])
+    assert Path(args.out) == Path("runs/old").resolve()  # a resumed run continues in its own folder
 
     help_text = subprocess.run([sys.executable, "train/pasta.py", "--help"], cwd=ROOT, capture_output=True,
                                text=True, timeout=120, check=True, env={**os.environ, "COLUMNS": "2000"}).stdout
@@ -139,10 +143,10 @@ def test_ppo_script_trains_saves_and_resumes(tmp_path: Path) -> None:
     assert gamma.shape == (1,) and 0.05 <= gamma[0] <= 1.0
     first_params = PPO.load(final, device="cpu").policy.state_dict()
 
-    refused = _run("ppo.py", "--total-steps", "256", "--resume", str(final), *common, returncode=1)
-    assert "already holds a run" in refused.stderr
-    _run("ppo.py", "--total-steps", "256", "--resume", str(final), "--force", "--no-progress", "--save-every", "64",
-         *common)
+    refused = _run("ppo.py", "--total-steps", "256", *common, returncode=1)  # a new run into the folder
+    assert "already holds a run" in refused.stderr and "--resume" in refused.stderr
+    _run("ppo.py", "--total-steps", "256", "--resume", str(final), "--no-progress", "--save-every", "64",
+         *common)  # its own folder: no --force
     resumed = PPO.load(final, device="cpu")
     assert resumed.num_timesteps == 256
     assert sorted(p.name for p in (out / "checkpoints").glob("*.zip")) == ["ppo_192_steps.zip", "ppo_256_steps.zip"]

@@ -50,3 +50,29 @@ def test_without_a_collection_time_only_the_update_time_is_logged():
     log_update(writer, _agent(), stats)
     assert "charts/collect_sps" not in writer.scalars and "time/update_s" in writer.scalars
     assert console_line(_agent(), stats, 8192).endswith("sps 1000")
+
+
+def test_resuming_a_run_in_its_own_folder_needs_no_force(tmp_path):
+    """``--resume`` into the run's own folder is the normal case; ``--force`` is for starting over."""
+    import json
+
+    import pytest
+
+    from sofar_agents.pasta.training_log import check_out, run_folder
+
+    out = tmp_path / "run"
+    (out / "checkpoints").mkdir(parents=True)
+    final = out / "pasta_final.json"
+    final.write_text(json.dumps({"state": {"num_timesteps": 256}}))
+    assert run_folder(final) == out.resolve()
+    assert run_folder(out / "checkpoints" / "pasta_0000000128.json") == out.resolve()
+    check_out(out, force=False, resume=final)  # its own run
+    check_out(out, force=False, resume=out / "checkpoints" / "pasta_0000000128.json")
+    check_out(out, force=True)  # starting over
+    check_out(tmp_path / "empty", force=False)  # nothing there
+    for resume in (None, tmp_path / "other" / "pasta_final.json"):
+        with pytest.raises(SystemExit) as refused:
+            check_out(out, force=False, resume=resume)
+        message = str(refused.value)
+        assert "256 steps" in message and f"--resume {final}" in message and "--force" in message
+        assert "overwrite" not in message
