@@ -14,7 +14,10 @@ Each :class:`~.layout.QPStructure` keeps its own solver instance, set up once an
 refreshed with ``update()`` (the pattern is fixed; a left-out bound is an infinite entry
 of the bound vectors, not a change of pattern). :func:`solve_qp` never raises for
 numerical trouble: it returns ``None`` and a message, and drops the instance so that
-the next call sets the solver up afresh.
+the next call sets the solver up afresh. A copied structure (no solver, but the data of the
+original's set-up in ``QPStructure.solver_setup`` and its number of updates in ``solver_updates``)
+gets a PIQP instance set up on those data, updated as often without data and then to the current
+data: the state of the original's, to the bit (:class:`~.layout.QPStructure`).
 """
 
 from __future__ import annotations
@@ -41,10 +44,10 @@ def solve_qp(qs: QPStructure, data: tuple, cfg: MPCConfig) -> tuple[np.ndarray |
         else:
             z, iters, status = _solve_osqp(qs, data)
     except (RuntimeError, ValueError, ArithmeticError) as exc:
-        qs.solver = None  # set up afresh next time
+        qs.drop_solver()  # set up afresh next time
         return None, 0, f"{qs.backend} raised {exc}"
     if z is None:
-        qs.solver = None  # a fresh set-up (and scaling) next time
+        qs.drop_solver()  # a fresh set-up (and scaling) next time
         return None, iters, status
     if not all_finite(z):
         return None, iters, f"{qs.backend} returned non-finite values"
@@ -61,31 +64,48 @@ def dcbf_margin(qs: QPStructure, z: np.ndarray, hu: np.ndarray) -> np.ndarray:
 
 def _solve_piqp(qs: QPStructure, data: tuple, cfg: MPCConfig):
     c, b, hl, hu, xl, xu = data
-    if qs.solver is None:
-        solver = piqp.SparseSolver()
-        st = solver.settings
-        st.verbose = False
-        st.eps_abs = cfg.qp_eps_abs
-        st.eps_rel = cfg.qp_eps_rel
-        st.check_duality_gap = False
-        st.preconditioner_scale_cost = True  # without it some cold-start QPs stall
-        # The QP is feasible and bounded by construction (soft constraints, consistent boxes,
-        # R > 0, Z > 0; checked before the call); PIQP's infeasibility tests misfire on it.
-        st.eps_primal_inf = 1e-12
-        st.eps_dual_inf = 1e-12
-        # the data change little from step to step: keeping the first scaling saves ~130 us per update
-        st.preconditioner_reuse_on_update = True
-        st.max_iter = cfg.qp_max_iter
-        solver.setup(qs.P, c, qs.A, b, qs.G, hl, hu, xl, xu)
-        qs.solver = solver
+    if qs.solver is None and qs.solver_setup is None:  # a fresh set-up on these data
+        qs.solver_setup = (c.copy(), qs.A.data.copy(), b.copy(), qs.G.data.copy(), hl.copy(), hu.copy(),
+                           xl.copy(), xu.copy())
+        qs.solver_updates = 0
+        qs.solver = _setup_piqp(qs, qs.solver_setup, cfg)
     else:
+        if qs.solver is None:  # a copied structure: the original's set-up and as many updates
+            qs.solver = _setup_piqp(qs, qs.solver_setup, cfg)
+            for _ in range(qs.solver_updates):
+                qs.solver.update()
         qs.solver.update(c=c, A=qs.A, b=b, G=qs.G, h_l=hl, h_u=hu, x_l=xl, x_u=xu)
+        qs.solver_updates += 1
     status = qs.solver.solve()
     res = qs.solver.result
     iters = int(res.info.iter)
     if status != piqp.PIQP_SOLVED:
         return None, iters, f"piqp status {status}"
     return np.array(res.x), iters, "solved"
+
+
+def _setup_piqp(qs: QPStructure, setup: tuple, cfg: MPCConfig) -> piqp.SparseSolver:
+    """A PIQP instance set up on ``setup`` (``QPStructure.solver_setup``: c, A values, b, G values, h_l, h_u,
+    x_l, x_u) in the pattern of ``qs``."""
+    c, a_values, b, g_values, hl, hu, xl, xu = setup
+    solver = piqp.SparseSolver()
+    st = solver.settings
+    st.verbose = False
+    st.eps_abs = cfg.qp_eps_abs
+    st.eps_rel = cfg.qp_eps_rel
+    st.check_duality_gap = False
+    st.preconditioner_scale_cost = True  # without it some cold-start QPs stall
+    # The QP is feasible and bounded by construction (soft constraints, consistent boxes,
+    # R > 0, Z > 0; checked before the call); PIQP's infeasibility tests misfire on it.
+    st.eps_primal_inf = 1e-12
+    st.eps_dual_inf = 1e-12
+    # the data change little from step to step: keeping the first scaling saves ~130 us per update
+    st.preconditioner_reuse_on_update = True
+    st.max_iter = cfg.qp_max_iter
+    a_mat = sp.csc_matrix((a_values, qs.A.indices, qs.A.indptr), shape=qs.A.shape)
+    g_mat = sp.csc_matrix((g_values, qs.G.indices, qs.G.indptr), shape=qs.G.shape)
+    solver.setup(qs.P, c, a_mat, b, g_mat, hl, hu, xl, xu)
+    return solver
 
 
 def _solve_osqp(qs: QPStructure, data: tuple):

@@ -247,8 +247,32 @@ class QPStructure:
         self.cbf_rows = (np.arange(n_h)[:, None] * nr + self.row_cbf + np.arange(m)[None, :]).ravel()
         self.backend = cfg.qp_solver
         self.solver: Any = None
-        """The backend's solver instance, set up on first use (see :mod:`.backends`)."""
+        """The backend's solver instance, set up on first use (see :mod:`.backends`); never copied or pickled."""
+        self.solver_setup: tuple | None = None
+        """PIQP: copies of the data its solver was set up with, (c, A values, b, G values, h_l, h_u, x_l, x_u);
+        None when there is no solver. A copy of the structure (``copy.deepcopy``, pickle) has no solver: its
+        next solve sets one up on these data, repeats ``solver_updates`` empty updates and then updates it to
+        its own data, which leaves it in the state of the original's and gives that solve the original's
+        result to the bit (PIQP keeps the set-up's scaling across updates, ``preconditioner_reuse_on_update``,
+        and each update unscales and rescales the stored cost matrix, whose rounding depends on how many
+        updates there were). OSQP's solver is not carried: a copy sets it up afresh (not bit-identical)."""
+        self.solver_updates = 0
+        """PIQP: the updates of its solver since its set-up."""
         self.osqp_mat: Any = None
+
+    def drop_solver(self) -> None:
+        """Forget the solver: the next solve sets one up afresh on its own data."""
+        self.solver = None
+        self.solver_setup = None
+        self.solver_updates = 0
+
+    def __getstate__(self) -> dict:
+        """Everything but the solver (a C handle; see ``solver_setup``)."""
+        state = self.__dict__.copy()
+        state["solver"] = None
+        if self.backend != "piqp":
+            state["solver_setup"] = state["osqp_mat"] = None
+        return state
 
     def data(self) -> tuple:
         """Flat views (c, b, h_l, h_u, x_l, x_u) of the QP vectors."""

@@ -32,9 +32,18 @@ class StageLinearisation:
     ``o`` (N+1, slots, 3). Outputs: ``f`` (N+1, 5), ``alat`` (N+1,), ``h`` (N+1, slots) and,
     views of the flat buffer ``flat``, ``a`` (N+1, nnz A), ``b`` (N+1, nnz B), ``dalat``
     (N+1, 2), ``dh`` (N+1, slots, 3).
+
+    Copies (``copy.deepcopy``, pickle) carry the configuration and the contents of these arrays, not
+    the compiled function and its buffer (C handles): :meth:`__setstate__` builds them again from the
+    configuration, loading the library from the disk cache (:mod:`sofar_env.control.codegen`) without
+    compiling it.
     """
 
+    _STATE = ("x", "u", "kappa", "o", "f", "flat", "alat", "h")
+    """The arrays a copy carries (``a``, ``b``, ``dalat`` and ``dh`` are views of ``flat``)."""
+
     def __init__(self, cfg: MPCConfig, vehicle: VehicleParams, dts: np.ndarray):
+        self._args = (cfg, vehicle, np.array(dts, dtype=float))
         self.slots = slots = max(cfg.max_opponents, 1)  # the stage function has at least one slot
         name = definition_name(vehicle, cfg.barrier, slots, cfg.integrator_substeps)
         self.stage = stage_function(vehicle, cfg.barrier, slots, cfg.integrator_substeps, name + "_stage")
@@ -79,6 +88,16 @@ class StageLinearisation:
         for i, arr in enumerate((self.f, self.a, self.b, self.alat, self.dalat, self.h, self.dh)):
             buf.set_res(i, memoryview(arr))
         self._buf = buf  # keeps the buffer (and its pointers into the arrays above) alive
+
+    def __getstate__(self) -> dict:
+        """The constructor's arguments and the contents of the input and output arrays."""
+        return {"args": self._args, "arrays": {name: getattr(self, name) for name in self._STATE}}
+
+    def __setstate__(self, state: dict) -> None:
+        """Build the linearisation again from ``state["args"]`` and fill its arrays with the saved contents."""
+        self.__init__(*state["args"])
+        for name, values in state["arrays"].items():
+            getattr(self, name)[...] = values
 
     def set_opponents(self, rows: np.ndarray, t: np.ndarray) -> None:
         """Slots 0..M-1: the (M, 3 or 4) ``rows`` predicted at the times ``t``; the others: the dummy."""

@@ -233,7 +233,7 @@ class MPCDCBF:
         self._act = act
         if cold:  # new situation: set the QP solvers up afresh (their scaling is reused until then)
             for qs in self._qp.values():
-                qs.solver = None
+                qs.drop_solver()
 
         n_iter = cfg.cold_start_iterations if cold else 1
         qp_iters = 0
