@@ -274,10 +274,9 @@ def main(argv: list[str] | None = None) -> dict:
                         help="with --vector: leave the workers to the operating system instead of one CPU each "
                              "(sofar_env.vector, as train/pasta.py does by default)")
     parser.add_argument("--scenario", default="paper", choices=SCENARIOS,
-                        help="the world: paper (default, SOfAR-<Track>-v0) or interactive "
-                             "(SOfAR-<Track>-Interactive-v0)")
+                        help=f"the world, one of {', '.join(SCENARIOS)} (default paper)")
     parser.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
-                        help="the controller preset (default sofar)")
+                        help=f"the controller preset, one of {', '.join(STACK_PRESETS)} (default sofar)")
     parser.add_argument("--compare", default=None, metavar="REV",
                         help="interleaved A/B against the git revision REV instead of a plain run "
                              "(each pass in a fresh subprocess; see eval/bench_compare.py)")

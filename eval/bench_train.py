@@ -52,6 +52,8 @@ import numpy as np
 
 from bench_compare import _git, _summary, interleave
 
+from sofar_env.scenarios import SCENARIOS
+
 _HERE = Path(__file__).resolve().parent
 TOTAL_STEPS = 4096
 TRAIN_ARGS = ["--n-envs", "2", "--total-steps", str(TOTAL_STEPS), "--n-steps", "512", "--seed", "1",
@@ -193,9 +195,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--backend", choices=tuple(BACKENDS), default=None,
                         help="with --compare: time this set-up of --backends on both sides (8192 steps, the "
                              "collection rate from TensorBoard) instead of the short default command")
-    parser.add_argument("--scenario", choices=("paper", "interactive", "dynamic"), default=None,
-                        help="with --backends, or --compare with --backend: the world trained in "
-                             "(train/pasta.py --scenario; default: its own)")
+    parser.add_argument("--scenario", choices=SCENARIOS, default=None,
+                        help=f"with --backends, or --compare with --backend: the world trained in, one of "
+                             f"{', '.join(SCENARIOS)} (train/pasta.py --scenario; default: its own)")
     parser.add_argument("--multi-agent", type=int, default=None, metavar="CARS",
                         help="with --backends: self-play on races of CARS cars (train/pasta.py --multi-agent --cars "
                              "CARS); --n-envs counts races, the steps car decisions")

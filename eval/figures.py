@@ -34,9 +34,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--policy", default=None, help="policy checkpoint (default: the shipped one)")
     p.add_argument("--track", default="LagunaSeca")
     p.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
-                   help="controller preset (and which shipped policy is the default)")
+                   help=f"controller preset, one of {', '.join(STACK_PRESETS)} (default sofar; also picks the "
+                        "shipped policy)")
     p.add_argument("--scenario", default="paper", choices=SCENARIOS,
-                   help="world (the shipped policy of --stack and --scenario is the default)")
+                   help=f"world, one of {', '.join(SCENARIOS)} (default paper; the shipped policy of --stack and "
+                        "--scenario is the default)")
     p.add_argument("--opponents", type=int, default=None,
                    help="opponents per episode (default: the environment's 4)")
     p.add_argument("--episodes", type=int, default=3, help="episodes per rho")

@@ -47,8 +47,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--episodes", type=int, default=None, help="episodes per (track, rho) (default 5)")
     p.add_argument("--duration", type=float, default=None,
                    help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
-    p.add_argument("--scenario", default="paper", choices=SCENARIOS, help="world (default paper)")
-    p.add_argument("--stack", default="sofar", choices=STACK_PRESETS, help="controller preset (default sofar)")
+    p.add_argument("--scenario", default="paper", choices=SCENARIOS,
+                   help=f"world, one of {', '.join(SCENARIOS)} (default paper)")
+    p.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
+                   help=f"controller preset, one of {', '.join(STACK_PRESETS)} (default sofar)")
     p.add_argument("--opponents", type=int, default=None,
                    help="opponents per episode (default: the environment's 4; part of the resume key)")
     p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")

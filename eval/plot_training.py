@@ -18,11 +18,12 @@ import argparse
 import sys
 from pathlib import Path
 
+from sofar_agents.cli import plain_text
 from sofar_agents.evaluation.training_curves import DEFAULT_GROUPS, find_event_dirs, plot_training_curves, read_scalars
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 2)[2],
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=plain_text(__doc__.split("\n\n", 2)[2]),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("runs", nargs="+", help="run folders (or event files); each is one colour in every panel")
     p.add_argument("--out", default=None, help="PNG to write (default: training_curves.png in the first run folder)")

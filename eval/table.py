@@ -61,10 +61,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--duration", type=float, default=None,
                    help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
     p.add_argument("--scenario", default="paper", choices=SCENARIOS,
-                   help="world: paper (default) or interactive (opponents that race back, noisy sensing)")
+                   help=f"world, one of {', '.join(SCENARIOS)} (default paper; sofar_env.scenarios)")
     p.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
-                   help="controller preset: sofar (default), paper (the paper's Algorithm 1 as written) or "
-                        "sofar-ends (sofar with the MPC bounding both ends of the car)")
+                   help=f"controller preset, one of {', '.join(STACK_PRESETS)} (default sofar; paper is the paper's "
+                        "Algorithm 1 as written; sofar_env.stack.stack_preset)")
     p.add_argument("--opponents", type=int, default=None,
                    help="Table I: opponents per episode (default: the environment's 4); with --multi-agent: scripted "
                         "opponents besides the controlled cars (default 0); part of the resume key")

@@ -2,7 +2,8 @@
 
 A dataclass whose fields carry attribute docstrings (a string literal under each
 field, as in :class:`sofar_agents.PASTAConfig`) becomes an ``argparse`` group with one
-``--field-name`` option per field and the docstring as its help.
+``--field-name`` option per field and the docstring as its help, in plain text
+(:func:`plain_text` drops the reStructuredText markup the docstrings use).
 """
 
 from __future__ import annotations
@@ -11,11 +12,34 @@ import argparse
 import ast
 import dataclasses
 import inspect
+import re
 import types
 import typing
+from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["dataclass_field_docs", "add_dataclass_options"]
+__all__ = ["dataclass_field_docs", "add_dataclass_options", "plain_text"]
+
+_ROLE = re.compile(r":[a-z]+(?::[a-z]+)?:`(~?)([^`<]*?)\s*(?:<([^`>]*)>)?`")
+_LITERAL = re.compile(r"``(.+?)``")
+_INTERPRETED = re.compile(r"(?<![\w`])`([^`]+)`(?![\w`])")
+
+
+def plain_text(text: str) -> str:
+    """``text`` without reStructuredText inline markup, for a terminal: ``:class:`~a.b.C``` becomes ``C``,
+    ``:func:`a.f``` ``a.f``, a role with an explicit title its title, and literals in double or single
+    backticks lose the backticks."""
+
+    def role(m: re.Match) -> str:
+        tilde, title, target = m.group(1), m.group(2), m.group(3)
+        if target is not None and title:
+            return title
+        name = (target or title).lstrip(".~")
+        return name.rsplit(".", 1)[-1] if tilde else name
+
+    text = _ROLE.sub(role, text)
+    text = _LITERAL.sub(r"\1", text)
+    return _INTERPRETED.sub(r"\1", text)
 
 
 def dataclass_field_docs(cls: type) -> dict[str, str]:
@@ -50,19 +74,26 @@ def _unwrap_optional(tp: Any) -> Any:
     return tp
 
 
-def add_dataclass_options(parser: argparse.ArgumentParser, cls: type, title: str) -> None:
-    """One ``--field-name`` option per dataclass field, help from the field docstring.
+def add_dataclass_options(parser: argparse.ArgumentParser, cls: type, title: str,
+                          choices: dict[str, Sequence[str]] | None = None) -> None:
+    """One ``--field-name`` option per dataclass field, help from the field docstring (as plain text).
 
-    Defaults are ``None`` so that only the options actually given are applied.
+    Defaults are ``None`` so that only the options actually given are applied. ``choices`` maps a
+    field name to its valid values (taken from a registry, e.g. the stack presets), listed in the help.
     """
     group = parser.add_argument_group(title)
     docs = dataclass_field_docs(cls)
     hints = typing.get_type_hints(cls)
+    choices = choices or {}
     for f in dataclasses.fields(cls):
         tp = _unwrap_optional(hints[f.name])
         default = f.default if f.default is not dataclasses.MISSING else None
-        kw: dict[str, Any] = {"default": None, "dest": f.name,
-                              "help": f"{docs.get(f.name, '')} (default: {default})"}
+        text = plain_text(docs.get(f.name, ""))
+        if f.name in choices:
+            text += f" One of: {', '.join(choices[f.name])}."
+        kw: dict[str, Any] = {"default": None, "dest": f.name, "help": f"{text} (default: {default})"}
+        if f.name in choices:
+            kw["choices"] = tuple(choices[f.name])
         origin = typing.get_origin(tp)
         if tp is bool:
             kw["action"] = argparse.BooleanOptionalAction

@@ -74,6 +74,8 @@ from sofar_agents.pasta.rollout import make_training_env
 from sofar_agents.pasta.self_play import make_self_play_race
 from sofar_agents.pasta.training_log import (check_out, code_commit, console_line, log_update, n_objectives,
                                              objective_names, run_folder)
+from sofar_env.scenarios import SCENARIOS
+from sofar_env.stack.config import STACK_PRESETS
 from sofar_env.vector import async_vector_env, available_cpus
 
 logger = logging.getLogger("train.pasta")
@@ -101,9 +103,11 @@ class Args:
     env_kwargs: str = "{}"
     """Extra keyword arguments of ``gymnasium.make`` as a JSON object."""
     stack: str | None = None
-    """Controller preset, ``sofar`` or ``paper`` (the paper's Algorithm 1); passed as the ``stack`` key."""
+    """Controller preset (``sofar_env.stack.STACK_PRESETS``; ``paper`` is the paper's Algorithm 1); passed as
+    the ``stack`` key (default: the environment's, ``sofar``)."""
     scenario: str | None = None
-    """World, ``paper``, ``interactive`` or ``dynamic``; passed as the ``scenario`` key."""
+    """World (``sofar_env.scenarios.SCENARIOS``); passed as the ``scenario`` key (default: the world of
+    ``--env-id``)."""
     decision_interval: int | None = None
     """If set, passed to the environment as ``decision_interval`` (simulator steps per action)."""
     total_steps: int = 1_000_000
@@ -175,7 +179,7 @@ class Args:
 def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
     """Parse the command line into run options and PASTA config overrides (``--quick`` applied, checked)."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    add_dataclass_options(parser, Args, "run")
+    add_dataclass_options(parser, Args, "run", choices={"stack": STACK_PRESETS, "scenario": SCENARIOS})
     add_dataclass_options(parser, PASTAConfig, "PASTA hyper-parameters")
     parser._option_string_actions["--mu-decay-steps"].help = (
         "Length of the linear decay of the target mu from --mu-max to --mu-min, in environment steps over "
