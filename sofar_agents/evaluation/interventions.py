@@ -37,7 +37,7 @@ from typing import Any
 
 from sofar_agents.evaluation.episode import make_env, run_episode
 from sofar_agents.evaluation.paired import PairedComparison, format_paired, paired_comparison
-from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
+from sofar_agents.evaluation.protocol import EpisodeTask, Strategy, exact_text, gamma_text
 
 __all__ = ["Intervention", "InterventionResult", "INTERVENTION_COLUMNS", "default_interventions",
            "failed_episodes", "intervene", "run_interventions", "summarize_interventions", "placebo_comparisons",
@@ -89,9 +89,11 @@ class Intervention:
 
     @property
     def label(self) -> str:
-        s = f"γ {self.gamma:.2f}, {self.window_s:g} s before"
+        """Its name in the reports and paired comparisons: holds the exact gamma and times, so two
+        interventions share a label only if they are the same."""
+        s = f"γ {gamma_text(self.gamma)}, {exact_text(self.window_s)} s before"
         if self.lead_s:
-            s += f", {self.lead_s:g} s earlier"
+            s += f", {exact_text(self.lead_s)} s earlier"
         return s
 
     def steps(self, failure_step: int, dt: float = _CONTROL_DT) -> tuple[int, int]:
@@ -310,7 +312,7 @@ def format_interventions(summary: Mapping[str, Any], base_gamma: float,
     """The summary as a Markdown table (share of the reproduced failures rescued / delayed), then the
     :func:`placebo_comparisons` if given."""
     kinds = ", ".join(f"{v} {k.replace('_', '-')}" for k, v in sorted(summary["failure_kinds"].items()))
-    head = (f"Base gamma {base_gamma:.2f}: {summary['replayed']} failed episodes replayed, {summary['failed']} "
+    head = (f"Base gamma {gamma_text(base_gamma)}: {summary['replayed']} failed episodes replayed, {summary['failed']} "
             f"failed again on this machine ({kinds or 'none'}), {summary['not_reproduced']} did not.")
     lines = [head, "",
              "| intervention | kind | episodes | rescued | rescued [%] | got past the base failure |",

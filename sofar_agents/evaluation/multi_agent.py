@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 import os
 import time
 from collections.abc import Sequence
@@ -33,10 +34,13 @@ from typing import Any
 
 import numpy as np
 
-from sofar_agents.evaluation.protocol import DEFAULT_DURATION, TRACKS, Strategy, _fmt_float, episode_seed
+from sofar_agents.evaluation.protocol import DEFAULT_DURATION, TRACKS, Strategy, _fmt_float, episode_seed, exact_text
+from sofar_agents.evaluation.results import read_csv_rows
 
 __all__ = ["RACE_COLUMNS", "race_seed", "RaceTask", "RaceResult", "multi_agent_tasks", "run_race", "run_multi_agent_table",
            "read_race_csv", "format_multi_agent_table", "format_per_circuit"]
+
+logger = logging.getLogger(__name__)
 
 
 def race_seed(base_seed: int, track: str, race: int) -> int:
@@ -179,22 +183,20 @@ def _run_in_worker(task: RaceTask) -> RaceResult:
 
 
 def read_race_csv(path: str | os.PathLike) -> list[RaceResult]:
-    """The complete rows of a per-race CSV (a last line without its newline, torn by a killed run, is ignored)."""
-    p = Path(path)
-    if not p.exists():
-        return []
-    text = p.read_text()
-    if text and not text.endswith("\n"):
-        text = text[: text.rfind("\n") + 1]
+    """The complete rows of a per-race CSV, read by :func:`~sofar_agents.evaluation.results.read_csv_rows` (the
+    Table I reader): a torn last line and incomplete rows anywhere are dropped, a file of another kind raises
+    ``ValueError`` naming it, a row whose values do not parse is skipped with a warning. A CSV from before the
+    ``opponents`` column stands for races without scripted opponents."""
     out = []
     types = {f.name: f.type for f in fields(RaceResult)}
-    for row in csv.DictReader(io.StringIO(text)):
-        values: dict[str, Any] = {}
-        for name, kind in types.items():
-            raw = row.get(name)
-            if raw is None and name == "opponents":  # a CSV from before the column: no scripted opponents
-                raw = "0"
-            values[name] = int(raw) if kind == "int" else float(raw) if kind == "float" else raw
+    text = [name for name, kind in types.items() if kind == "str"]  # may be empty (policy_id of a fixed gamma)
+    for row in read_csv_rows(path, RACE_COLUMNS, added={"opponents": "0"}, may_be_empty=text, kind="per-race CSV"):
+        try:
+            values = {name: int(row[name]) if kind == "int" else float(row[name]) if kind == "float" else row[name]
+                      for name, kind in types.items()}
+        except ValueError:
+            logger.warning("skipping an unreadable row of %s: %s", path, row)
+            continue
         out.append(RaceResult(**values))
     return out
 
@@ -213,7 +215,8 @@ def _append(path: Path, result: RaceResult) -> None:
     if new:
         writer.writeheader()
     for row in rows:
-        writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in asdict(row).items()})
+        writer.writerow({k: ((exact_text(v) if k == "duration" else f"{v:.6g}") if isinstance(v, float) else v)
+                         for k, v in asdict(row).items()})  # the duration, a key column, exactly
     with open(path, mode) as f:
         f.write(buf.getvalue())
         f.flush()

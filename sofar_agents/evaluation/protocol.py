@@ -50,7 +50,8 @@ class Strategy:
     """How gamma is chosen: ``kind`` is ``"fixed"`` (``gamma``), ``"policy"`` or ``"sb3"`` (``path``)."""
 
     name: str
-    """Label in the CSV, e.g. ``adaptive``, ``gamma=0.05``, ``sb3``."""
+    """Label in the CSV, e.g. ``adaptive``, ``gamma=0.05``, ``sb3``; part of the resume key, so it must tell apart
+    every setting that changes an episode (a fixed gamma's name holds :func:`gamma_text` of its gamma)."""
     kind: str
     gamma: float | None = None
     path: str | None = None
@@ -72,7 +73,9 @@ class Strategy:
 
     @classmethod
     def fixed(cls, gamma: float) -> Strategy:
-        return cls(name=f"gamma={gamma:.2f}", kind="fixed", gamma=float(gamma))
+        """The fixed ``gamma``, named ``gamma=<gamma_text(gamma)>``: two fixed strategies share a name (and so
+        their resume key and CSV rows) only if their gammas are the same float."""
+        return cls(name=f"gamma={gamma_text(gamma)}", kind="fixed", gamma=float(gamma))
 
     @classmethod
     def adaptive(cls, path: str | os.PathLike, name: str = "adaptive",
@@ -96,7 +99,7 @@ class Strategy:
     def label(self) -> str:
         """Display name in the Markdown tables."""
         if self.kind == "fixed":
-            return f"γ = {self.gamma:.2f}"
+            return f"γ = {gamma_text(self.gamma)}"
         if self.kind == "sb3":
             return "PPO (SB3)"
         return "Adaptive" if self.name == "adaptive" else self.name
@@ -115,6 +118,15 @@ class Strategy:
         from sofar_agents import load_policy
 
         return load_policy(self.path, preference=self.preference)
+
+
+def gamma_text(gamma: float) -> str:
+    """``gamma`` as text that reads back to the same float: two decimals when they hold it exactly (``0.05``,
+    ``0.30``: the names of the rows already in the result files), else the shortest text that does (``0.054``,
+    ``0.075``; Python's ``repr``). Two gammas give the same text only if they are the same float."""
+    g = float(gamma)
+    two = f"{g:.2f}"
+    return two if float(two) == g else repr(g)
 
 
 def _file_id(*paths: str | os.PathLike) -> str:
@@ -137,8 +149,16 @@ def _limit_torch_threads() -> None:
         pass
 
 
-def _fmt_float(x: float) -> str:
-    return f"{float(x):g}"
+def exact_text(x: float) -> str:
+    """``x`` as short text that reads back to the same float: ``{x:g}`` when it does (``0.3``, ``200``: the
+    values in the result files), else the shortest text that does (Python's ``repr``). The resume keys hold
+    their floats in this form, so two settings share a key only if they are the same float."""
+    x = float(x)
+    short = f"{x:g}"
+    return short if float(short) == x else repr(x)
+
+
+_fmt_float = exact_text
 
 
 @dataclass(frozen=True)

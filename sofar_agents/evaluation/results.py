@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from sofar_agents.evaluation.protocol import DEFAULT_DURATION, EpisodeTask, _key
+from sofar_agents.evaluation.protocol import DEFAULT_DURATION, EpisodeTask, _key, exact_text
 
 logger = logging.getLogger(__name__)
 
@@ -113,10 +113,16 @@ def _parse_row(row: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _csv_value(v: Any) -> Any:
+_EXACT_COLUMNS = {"rho", "duration"}
+"""Float columns of the resume key: written so that they read back to the same float (:func:`exact_text`)."""
+
+
+def _csv_value(v: Any, exact: bool = False) -> Any:
     if isinstance(v, bool):
         return int(v)
     if isinstance(v, float):
+        if exact:
+            return exact_text(v)
         return f"{v:.6g}" if abs(v) < 1e5 else f"{v:.1f}"
     return v
 
@@ -131,31 +137,49 @@ def _complete_lines(path: Path) -> str:
     return text[:end]
 
 
-def read_episode_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
-    """The rows of a per-episode CSV, typed.
+def read_csv_rows(path: str | os.PathLike, columns: Sequence[str], *, added: Mapping[str, str] | None = None,
+                  may_be_empty: Iterable[str] = (), kind: str = "SOfAR episode CSV") -> list[dict[str, str]]:
+    """The complete rows of a CSV written with ``columns``, as strings; the one reader of the result CSVs.
 
-    Incomplete rows (a run killed mid-write) are dropped: a last line without its
-    newline, and rows with missing values.
+    ``added``: columns that files of an older format lack, with the value their rows stand for. A header
+    without one of the other ``columns`` raises ``ValueError`` naming the file (``kind``: what it should
+    be). Incomplete rows are dropped: a last line without its newline (a run killed mid-write, logged), and
+    rows anywhere in the file with a missing value, an empty value in a column not in ``may_be_empty`` or
+    more values than the header. A missing or empty file has no rows.
     """
     p = Path(path)
     if not p.exists() or p.stat().st_size == 0:
         return []
+    added = dict(added or {})
+    may_be_empty = set(may_be_empty)
     rows = []
     with io.StringIO(_complete_lines(p), newline="") as f:
         reader = csv.DictReader(f)
-        missing = [c for c in EPISODE_COLUMNS if c not in (reader.fieldnames or []) and c not in _ADDED_COLUMNS]
+        header = reader.fieldnames or []
+        missing = [c for c in columns if c not in header and c not in added]
         if missing:
-            raise ValueError(f"{p} is not a SOfAR episode CSV (missing columns {missing}); use another --out")
-        present = [c for c in EPISODE_COLUMNS if c in (reader.fieldnames or [])]
+            raise ValueError(f"{p} is not a {kind} (missing columns {missing}); use another --out")
+        present = [c for c in columns if c in header]
         for row in reader:
-            if any(row.get(c) in (None, "") for c in present if c not in _MAY_BE_EMPTY):
+            if None in row or any(row.get(c) is None or (row[c] == "" and c not in may_be_empty)
+                                  for c in present):
+                logger.warning("skipping an incomplete row of %s: %s", p, row)
                 continue
-            for c, default in _ADDED_COLUMNS.items():  # rows of an older format
+            for c, default in added.items():  # rows of an older format
                 row.setdefault(c, default)
-            try:
-                rows.append(_parse_row(row))
-            except ValueError:
-                logger.warning("skipping an unreadable row of %s: %s", p, row)
+            rows.append(row)
+    return rows
+
+
+def read_episode_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
+    """The rows of a per-episode CSV, typed (:func:`read_csv_rows`: incomplete rows dropped, a file of
+    another kind raises ``ValueError`` naming it; a row whose values do not parse is skipped with a warning)."""
+    rows = []
+    for row in read_csv_rows(path, EPISODE_COLUMNS, added=_ADDED_COLUMNS, may_be_empty=_MAY_BE_EMPTY):
+        try:
+            rows.append(_parse_row(row))
+        except ValueError:
+            logger.warning("skipping an unreadable row of %s: %s", path, row)
     return rows
 
 
@@ -245,7 +269,8 @@ class _AppendingCSV:
 
     def write(self, row: Mapping[str, Any] | Sequence[Any]) -> None:
         values = [row[c] for c in self.columns] if isinstance(row, Mapping) else list(row)
-        self._w.writerow([_csv_value(v) for v in values])
+        exact = [c in _EXACT_COLUMNS for c in self.columns]
+        self._w.writerow([_csv_value(v, i < len(exact) and exact[i]) for i, v in enumerate(values)])
         self._f.flush()
 
     def write_many(self, rows: Iterable[Sequence[Any]]) -> None:

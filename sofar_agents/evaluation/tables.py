@@ -228,7 +228,7 @@ def paper_comparison(rows: Iterable[Mapping[str, Any]], strategies: Sequence[Str
     lines = ["| Track | Strategy | Success [%] (this run) | Success [%] (paper) |", "|---|---|---:|---:|"]
     for t in TRACKS:
         for s in strategies:
-            key = "adaptive" if s.kind == "policy" else round(s.gamma, 2) if s.kind == "fixed" else None
+            key = "adaptive" if s.kind == "policy" else s.gamma if s.kind == "fixed" else None  # the exact gamma
             paper = PAPER_TABLE1_SUCCESS.get(t, {}).get(key)
             if (t, s.name) in per and paper is not None:
                 lines.append(f"| {t} | {s.label} | {per[(t, s.name)].success_rate:.1f} | {paper:.1f} |")
