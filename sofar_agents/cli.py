@@ -15,10 +15,12 @@ import inspect
 import re
 import types
 import typing
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
-__all__ = ["dataclass_field_docs", "add_dataclass_options", "plain_text"]
+from sofar_agents.cli_types import finite_float, nonneg_int
+
+__all__ = ["dataclass_field_docs", "add_dataclass_options", "check_dataclass_options", "plain_text", "DEFAULT_TYPES"]
 
 _ROLE = re.compile(r":[a-z]+(?::[a-z]+)?:`(~?)([^`<]*?)\s*(?:<([^`>]*)>)?`")
 _LITERAL = re.compile(r"``(.+?)``")
@@ -74,19 +76,39 @@ def _unwrap_optional(tp: Any) -> Any:
     return tp
 
 
+DEFAULT_TYPES: dict[type, Callable[[str], Any]] = {int: nonneg_int, float: finite_float}
+"""Argument type of an ``int`` or ``float`` field without its own (``Annotated[int, positive_int]``):
+whole numbers >= 0 (counts, sizes, seeds) and finite numbers."""
+
+
+def _field_type(hint: Any) -> tuple[Any, Callable[[str], Any] | None]:
+    """``(type, argument type)`` of a field's annotation: ``X | None`` is ``X``, and
+    ``Annotated[X, check]`` is ``X`` with the callable ``check`` (which, for a tuple or list, checks each item)."""
+    tp = _unwrap_optional(hint)
+    check = None
+    if typing.get_origin(tp) is typing.Annotated:
+        tp, *extras = typing.get_args(tp)
+        check = next((e for e in extras if callable(e)), None)
+        tp = _unwrap_optional(tp)
+    return tp, check
+
+
 def add_dataclass_options(parser: argparse.ArgumentParser, cls: type, title: str,
                           choices: dict[str, Sequence[str]] | None = None) -> None:
     """One ``--field-name`` option per dataclass field, help from the field docstring (as plain text).
 
     Defaults are ``None`` so that only the options actually given are applied. ``choices`` maps a
     field name to its valid values (taken from a registry, e.g. the stack presets), listed in the help.
+    Numbers are checked by their argument type (:mod:`sofar_agents.cli_types`): the one a field names
+    with ``Annotated[int, positive_int]``, else :data:`DEFAULT_TYPES`; a value outside it is a usage
+    error (exit status 2), so a 0 or a negative count never reaches the script.
     """
     group = parser.add_argument_group(title)
     docs = dataclass_field_docs(cls)
-    hints = typing.get_type_hints(cls)
+    hints = typing.get_type_hints(cls, include_extras=True)
     choices = choices or {}
     for f in dataclasses.fields(cls):
-        tp = _unwrap_optional(hints[f.name])
+        tp, check = _field_type(hints[f.name])
         default = f.default if f.default is not dataclasses.MISSING else None
         text = plain_text(docs.get(f.name, ""))
         if f.name in choices:
@@ -98,8 +120,22 @@ def add_dataclass_options(parser: argparse.ArgumentParser, cls: type, title: str
         if tp is bool:
             kw["action"] = argparse.BooleanOptionalAction
         elif origin in (tuple, list):
+            item = typing.get_args(tp)[0]
             kw["nargs"] = "+"
-            kw["type"] = typing.get_args(tp)[0]
+            kw["type"] = check or DEFAULT_TYPES.get(item, item)
         else:
-            kw["type"] = tp
+            kw["type"] = check or DEFAULT_TYPES.get(tp, tp)
         group.add_argument("--" + f.name.replace("_", "-"), **kw)
+
+
+def check_dataclass_options(parser: argparse.ArgumentParser, cls: type, values: dict[str, Any]) -> Any:
+    """``cls(**values)``, built to check the options of :func:`add_dataclass_options` together.
+
+    The argument types check each value alone; the dataclass's own validation (``__post_init__``) checks
+    how they fit together (e.g. ``mu_min <= mu_max``). A ``ValueError`` or ``TypeError`` from it becomes a
+    usage error of ``parser`` (message on stderr, exit status 2) instead of a traceback later on.
+    """
+    try:
+        return cls(**values)
+    except (TypeError, ValueError) as exc:
+        parser.error(str(exc))

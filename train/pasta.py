@@ -59,7 +59,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import gymnasium as gym
 import numpy as np
@@ -68,7 +68,8 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 from tqdm.contrib.logging import logging_redirect_tqdm
 
-from sofar_agents.cli import add_dataclass_options
+from sofar_agents.cli import add_dataclass_options, check_dataclass_options
+from sofar_agents.cli_types import int_at_least, nonneg_float, positive_int
 from sofar_agents.pasta import PASTA, PASTAConfig
 from sofar_agents.pasta.rollout import make_training_env
 from sofar_agents.pasta.self_play import make_self_play_race
@@ -108,11 +109,11 @@ class Args:
     scenario: str | None = None
     """World (``sofar_env.scenarios.SCENARIOS``); passed as the ``scenario`` key (default: the world of
     ``--env-id``)."""
-    decision_interval: int | None = None
+    decision_interval: Annotated[int, positive_int] | None = None
     """If set, passed to the environment as ``decision_interval`` (simulator steps per action)."""
-    total_steps: int = 1_000_000
+    total_steps: Annotated[int, positive_int] = 1_000_000
     """Environment steps to train for, counted over all envs (including resumed steps)."""
-    n_envs: int | None = None
+    n_envs: Annotated[int, positive_int] | None = None
     """Parallel environments (with ``--multi-agent``: races), in worker processes when > 1 (``--backend``);
     default 1, or ``--num-workers``."""
     pin_workers: bool = True
@@ -126,7 +127,7 @@ class Args:
     without a per-step barrier) or ``ray`` (the same in Ray actors, on this machine or a cluster); the learner
     stays here. Every backend gives the same checkpoints; default: ``processes`` with more than one env (with
     ``--multi-agent``: race) or with ``--num-workers``, else ``local``."""
-    num_workers: int | None = None
+    num_workers: Annotated[int, positive_int] | None = None
     """Workers with ``--backend processes`` or ``ray`` (one CPU each; default: one per env, with ``processes``
     at most one per CPU this process may use)."""
     address: str | None = None
@@ -134,7 +135,7 @@ class Args:
     start a private local Ray instance with ``--num-workers`` CPUs)."""
     multi_agent: bool = False
     """Self-play on the PettingZoo race of ``--env-id``'s circuit and world: one shared policy drives every car."""
-    cars: int = 4
+    cars: Annotated[int, int_at_least(2)] = 4
     """Controlled cars per race with ``--multi-agent``."""
     quick: bool = False
     """Preset for a first look (1 to 2 minutes): 16384 steps, rollouts of 512, 30 s
@@ -150,16 +151,16 @@ class Args:
     """Checkpoint (``.json`` or ``.pt``) to continue training from."""
     save_every: int = 10
     """Write a checkpoint every this many updates (0: only at the end)."""
-    preference: list[float] | None = None
+    preference: Annotated[list[float], nonneg_float] | None = None
     """Deployment preference w over the objectives (default: the reference's
     0.31 0.45 0.05 0.04 0.15 for the five SOfAR objectives, else uniform)."""
-    rho_min: float = 0.1
+    rho_min: Annotated[float, nonneg_float] = 0.1
     """Lower bound of the per-episode opponent pace ratio."""
-    rho_max: float = 0.8
+    rho_max: Annotated[float, nonneg_float] = 0.8
     """Upper bound of the per-episode opponent pace ratio."""
-    rho_values: list[float] | None = None
+    rho_values: Annotated[list[float], nonneg_float] | None = None
     """If given, draw rho uniformly from these values instead of the interval."""
-    torch_threads: int = 1
+    torch_threads: Annotated[int, positive_int] = 1
     """Torch intra-op threads of the learner."""
     progress: bool = True
     """Show a tqdm progress bar."""
@@ -177,7 +178,11 @@ class Args:
 
 
 def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
-    """Parse the command line into run options and PASTA config overrides (``--quick`` applied, checked)."""
+    """Parse the command line into run options and PASTA config overrides (``--quick`` applied, checked).
+
+    A value outside its option's argument type (a count below 1, a non-finite or out-of-range number),
+    or hyper-parameters that do not fit together, is a usage error: message on stderr, exit status 2.
+    """
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_dataclass_options(parser, Args, "run", choices={"stack": STACK_PRESETS, "scenario": SCENARIOS})
     add_dataclass_options(parser, PASTAConfig, "PASTA hyper-parameters")
@@ -208,14 +213,10 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
         parser.error("--num-workers needs --backend processes or ray")
     if args.backend != "ray" and args.address is not None:
         parser.error("--address needs --backend ray")
-    if args.num_workers is not None and args.num_workers < 1:
-        parser.error(f"--num-workers must be positive, got {args.num_workers}")
-    if args.cars < 2:
-        parser.error(f"--cars must be at least 2, got {args.cars}")
     if args.n_envs is None:
         args.n_envs = args.num_workers if args.num_workers is not None else 1
-    if args.n_envs < 1:
-        parser.error(f"--n-envs must be positive, got {args.n_envs}")
+    if args.resume is None:  # the hyper-parameters together (a resumed run checks them against its own)
+        check_dataclass_options(parser, PASTAConfig, overrides)
     if args.num_workers is None and args.backend == "processes":
         args.num_workers = min(args.n_envs, available_cpus())  # more workers than CPUs only add switching
     elif args.num_workers is None and args.backend == "ray":

@@ -1,13 +1,24 @@
-"""Hyper-parameters of PASTA (:class:`PASTAConfig`), validated on construction."""
+"""Hyper-parameters of PASTA (:class:`PASTAConfig`), validated on construction.
+
+A field's annotation may carry the argument type of its command-line option
+(``Annotated[float, positive_float]``, :mod:`sofar_agents.cli_types`), which ``train/pasta.py``
+generates with :func:`sofar_agents.cli.add_dataclass_options`.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
+
+from sofar_agents.cli_types import float_in, nonneg_float, positive_float, positive_int
 
 __all__ = ["SQUASHINGS", "PASTAConfig"]
 
+_UNIT = float_in(0.0, 1.0)
+_DISCOUNT = float_in(0.0, 1.0, low_open=True)
+_QUANTILE = float_in(0.5, 1.0)
+_KAPPA = float_in(0.0, 1.0, high_open=True)
 
 SQUASHINGS = ("sigmoid", "clip")
 """Names of the action squashings (``PASTAConfig.action_squashing``, the checkpoint JSON)."""
@@ -22,31 +33,31 @@ class PASTAConfig:
     in units of the running return scale of their objective (see ``normalize_returns``).
     """
 
-    learning_rate: float = 3e-4
+    learning_rate: Annotated[float, positive_float] = 3e-4
     """Adam learning rate shared by the actor and the critic."""
-    adam_eps: float = 1e-5
+    adam_eps: Annotated[float, positive_float] = 1e-5
     """Adam epsilon."""
-    n_steps: int = 2048
+    n_steps: Annotated[int, positive_int] = 2048
     """Environment steps collected **per environment** per rollout; one update
     consumes ``n_steps * n_envs`` transitions."""
-    batch_size: int = 64
+    batch_size: Annotated[int, positive_int] = 64
     """Minibatch size (transitions) for the PPO epochs."""
-    n_epochs: int = 10
+    n_epochs: Annotated[int, positive_int] = 10
     """Passes over the rollout per update."""
-    clip_range: float = 0.2
+    clip_range: Annotated[float, positive_float] = 0.2
     """PPO clipping parameter epsilon of the probability ratio."""
-    discount: float = 0.99
+    discount: Annotated[float, _DISCOUNT] = 0.99
     """Discount factor of the returns (the RL gamma, not the barrier gamma)."""
-    gae_lambda: float = 0.95
+    gae_lambda: Annotated[float, _UNIT] = 0.95
     """GAE lambda."""
-    vf_coef: float = 0.5
+    vf_coef: Annotated[float, nonneg_float] = 0.5
     """Weight c1 of the value loss (sum over the heads of squared errors of the
     normalised per-objective returns)."""
     ent_coef: float = 0.01
     """Weight c2 of the entropy bonus (entropy of the squashed action distribution)."""
-    max_grad_norm: float = 0.5
+    max_grad_norm: Annotated[float, positive_float] = 0.5
     """Global gradient-norm clip, applied separately to the actor and the critic."""
-    target_kl: float | None = None
+    target_kl: Annotated[float, positive_float] | None = None
     """If set, stop the epochs of an update early once the approximate KL of a
     minibatch exceeds ``1.5 * target_kl``."""
     normalize_advantage: bool = True
@@ -57,34 +68,34 @@ class PASTAConfig:
     normalize_returns: bool = True
     """Divide each objective's rewards by a running standard deviation of its
     discounted return (Welford / Chan parallel update over all transitions seen)."""
-    reward_clip: float | None = 10.0
+    reward_clip: Annotated[float, positive_float] | None = 10.0
     """Clip of the normalised rewards (in return standard deviations); None disables."""
     scalarization: str = "stch"
     """``"stch"``: smooth-Tchebycheff attention weights; ``"linear"``: the
     preference itself (alpha = w), i.e. linear scalarisation, for ablations."""
-    maintenance: float = 0.15
+    maintenance: Annotated[float, _UNIT] = 0.15
     """Maintenance rate: share of the attention mixed uniformly over the objectives,
     so that no objective's weight drops below ``maintenance / K``."""
-    utopia_margin: float = 0.1
+    utopia_margin: Annotated[float, nonneg_float] = 0.1
     """Margin added to every regret (in return standard deviations), i.e. the utopia
     lies slightly beyond the best performance seen. It lets the preference w shape
     the attention even when every objective is at its utopia."""
-    utopia_quantile: float = 0.9
+    utopia_quantile: Annotated[float, _QUANTILE] = 0.9
     """Quantile of the rollout's per-state lambda-returns (per objective) taken as that
     rollout's estimate of the best achievable return. The running utopia is the
     (slowly decaying) maximum of these estimates; 0.5 to 1."""
-    utopia_decay: float = 0.01
+    utopia_decay: Annotated[float, _UNIT] = 0.01
     """Per-update rate at which the running utopia relaxes towards the current
     estimate when the latter is below it (0 = plain running maximum)."""
-    regret_clip: float = 10.0
+    regret_clip: Annotated[float, positive_float] = 10.0
     """Upper clip of the normalised regret (return standard deviations)."""
-    mu_max: float = 10.0
+    mu_max: Annotated[float, positive_float] = 10.0
     """Upper bound and initial value of the smoothing temperature mu."""
-    mu_min: float = 0.05
+    mu_min: Annotated[float, positive_float] = 0.05
     """Lower bound of mu, reached at the end of the linear decay."""
-    mu_ema: float = 0.05
+    mu_ema: Annotated[float, _UNIT] = 0.05
     """EMA rate with which mu follows its target each update."""
-    kappa: float = 0.4
+    kappa: Annotated[float, _KAPPA] = 0.4
     """Conflict threshold: above this gradient-conflict ratio the target mu is pushed
     back towards ``mu_max`` in proportion to ``(conflict - kappa) / (1 - kappa)``."""
     mu_decay_steps: int = 1_000_000
@@ -96,14 +107,14 @@ class PASTAConfig:
     """Enable the linear decay of the target mu."""
     conflict_boost: bool = True
     """Enable the conflict-driven push of the target mu towards ``mu_max``."""
-    fixed_mu: float | None = None
+    fixed_mu: Annotated[float, positive_float] | None = None
     """If set, use this constant mu and disable the controller."""
     pcgrad: bool = False
     """De-conflict the per-objective actor gradients with PCGrad before summing."""
-    conflict_every: int = 1
+    conflict_every: Annotated[int, positive_int] = 1
     """Measure the gradient conflict on every n-th minibatch (PCGrad, when on, needs
     the per-objective gradients of every minibatch regardless)."""
-    hidden_sizes: tuple[int, ...] = (256, 256)
+    hidden_sizes: Annotated[tuple[int, ...], positive_int] = (256, 256)
     """Hidden widths of the actor and of the critic trunk (tanh activations)."""
     critic_head_hidden: int = 64
     """Hidden width of each per-objective value head (0 = a single linear layer)."""
@@ -122,7 +133,7 @@ class PASTAConfig:
     preference_sampling: str = "dirichlet"
     """``"dirichlet"``: draw a preference w per episode from a Dirichlet whose mean is
     the agent's preference; ``"fixed"``: always use the agent's preference."""
-    dirichlet_concentration: float = 1.0
+    dirichlet_concentration: Annotated[float, positive_float] = 1.0
     """Concentration c of the preference Dirichlet, ``Dir(c * K * w)``. With a uniform
     w and c = 1 this is the uniform distribution on the simplex."""
 
