@@ -16,13 +16,47 @@ each), not the arithmetic. :func:`kernel` compiles such a loop once with numba:
 Kernels written for this must avoid what differs between numpy and a loop: sums of
 more than two terms (numpy sums pairwise), matrix products (BLAS) and transcendental
 functions of arrays (numpy's SIMD versions); max, min, sqrt and the four operations are exact.
+
+The first kernel a process compiles (rather than loads from the cache) logs one INFO line
+(logger ``sofar_env.compile``), so that the long first step of a fresh install is explained;
+``python -m sofar_env.compile`` (:func:`sofar_env.compile.warm_up`) compiles ahead of time.
 """
 
 from __future__ import annotations
 
-import numba
+import logging
 
-__all__ = ["kernel", "maximum", "minimum", "py_max", "py_min"]
+import numba
+from numba.core import event as _event
+
+__all__ = ["kernel", "maximum", "minimum", "py_max", "py_min", "COMPILE_NOTICE"]
+
+COMPILE_NOTICE = ("compiling the per-step kernels with numba and caching them on disk: once after installing, "
+                  "tens of seconds per world on the first step (python -m sofar_env.compile does it ahead of time)")
+"""The one INFO line of the first kernel compiled in a process."""
+
+
+class _CompileNotice(_event.Listener):
+    """Logs :data:`COMPILE_NOTICE` when numba starts compiling the first kernel of this package (a kernel
+    loaded from the cache fires no event)."""
+
+    def __init__(self) -> None:
+        self.said = False
+
+    def on_start(self, event) -> None:
+        if self.said:
+            return
+        fn = getattr(event.data.get("dispatcher"), "py_func", None)
+        if str(getattr(fn, "__module__", "")).partition(".")[0] == "sofar_env":
+            self.said = True
+            logging.getLogger("sofar_env.compile").info(COMPILE_NOTICE)
+
+    def on_end(self, event) -> None:
+        pass
+
+
+_NOTICE = _CompileNotice()
+_event.register("numba:compile", _NOTICE)
 
 
 def kernel(fn):

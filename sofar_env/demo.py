@@ -12,13 +12,16 @@ demo falls back to a GIF next to it). The summary reports overtakes, the closest
 approach (distance between the cars' reference points and the gap between their
 footprints), the smallest barrier value, how often the MPC used barrier slack,
 collisions, off-tracks, laps, the median MPC / MIQP solve times and the solver failures.
-A progress bar (stderr) follows the race and the writing of the animation.
+A progress bar (stderr) follows the race and the writing of the animation; the per-step kernels are
+compiled (first run after installing) or loaded before it starts (:mod:`sofar_env.compile`), so that its
+estimate of the remaining time and the summary's wall time leave the compilation out.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import logging
 import math
 import os
 import time
@@ -32,6 +35,8 @@ from .geometry import footprint_corners, rectangles_intersect
 __all__ = ["DemoSummary", "footprint_gap", "run_demo", "main"]
 
 _SLACK_ACTIVE = 1e-3
+
+logger = logging.getLogger(__name__)
 
 
 def _point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -110,7 +115,7 @@ def _resolve_output(path: str) -> str:
     if path.lower().endswith(".gif") or importlib.util.find_spec("imageio_ffmpeg") is not None:
         return path
     fallback = os.path.splitext(path)[0] + ".gif"
-    print(f"imageio-ffmpeg is not installed: writing {fallback} instead of {path}")
+    logger.warning("imageio-ffmpeg is not installed: writing %s instead of %s", fallback, path)
     return fallback
 
 
@@ -123,6 +128,9 @@ def run_demo(track: str = "LagunaSeca", seconds: float = 60.0, gamma: float = 0.
     """
     from tqdm import tqdm
 
+    from .compile import warm_up
+
+    warm_up(["paper"], track=track, multi_agent=False)  # compile before the progress bar and the wall clock
     env = SOfARRaceEnv(track=track, rho=rho, n_opponents=n_opponents, race={"duration": float(seconds)},
                        timing_info=True, render_mode="rgb_array" if out else None)
     bar = tqdm(total=env.config.control_steps, desc="racing and rendering" if out else "racing", unit="step",
@@ -186,6 +194,7 @@ def main(argv: list[str] | None = None) -> DemoSummary:
     parser.add_argument("--no-video", action="store_true", help="skip rendering and the animation")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
     summary = run_demo(track=args.track, seconds=args.seconds, gamma=args.gamma, rho=args.rho,
                        n_opponents=args.opponents, seed=args.seed, out=None if args.no_video else args.out,
                        progress=not args.no_progress)

@@ -75,6 +75,7 @@ from sofar_agents.pasta.rollout import make_training_env
 from sofar_agents.pasta.self_play import make_self_play_race
 from sofar_agents.pasta.training_log import (check_out, code_commit, console_line, log_update, n_objectives,
                                              objective_names, run_folder)
+from sofar_env.compile import warm_up, world_of
 from sofar_env.scenarios import SCENARIOS
 from sofar_env.stack.config import STACK_PRESETS
 from sofar_env.vector import async_vector_env, available_cpus
@@ -333,6 +334,9 @@ def main(argv: list[str] | None = None) -> Path:
     t_start = time.time()
 
     ensure_registered(args.env_id)
+    world = world_of(args.env_id, env_kwargs_of(args))
+    if world is not None:  # compile the kernels here, before the workers start and outside the progress bar's ETA
+        warm_up([world], multi_agent=args.multi_agent)
     vec_env = make_vec_env(args)
     obs_space, act_space = vec_env.single_observation_space, vec_env.single_action_space
     obs_dim = int(np.prod(obs_space.shape))

@@ -47,7 +47,9 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 
 from tqdm import tqdm
 
+from sofar_agents.cli_types import finite_float, float_in, nonneg_float, nonneg_int, positive_float, positive_int
 from sofar_agents.wrappers import RandomRhoReset, RescaleGammaAction
+from sofar_env.compile import warm_up, world_of
 from sofar_env.vector import pinned_factories
 
 logger = logging.getLogger("train.ppo")
@@ -62,40 +64,40 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--env-id", default="SOfAR-LagunaSeca-v0", help="Gymnasium id of the training environment")
     p.add_argument("--env-kwargs", default="{}", help="extra gymnasium.make keyword arguments (JSON object)")
-    p.add_argument("--decision-interval", type=int, default=None, help="env decision_interval, if set")
-    p.add_argument("--weights", type=float, nargs="+", default=None,
+    p.add_argument("--decision-interval", type=positive_int, default=None, help="env decision_interval, if set")
+    p.add_argument("--weights", type=finite_float, nargs="+", default=None,
                    help="scalarisation weights (default: reference preference for 5 objectives, else ones)")
-    p.add_argument("--total-steps", type=int, default=1_000_000, help="environment steps over all envs")
-    p.add_argument("--n-envs", type=int, default=1, help="parallel envs (subprocesses when > 1)")
+    p.add_argument("--total-steps", type=positive_int, default=1_000_000, help="environment steps over all envs")
+    p.add_argument("--n-envs", type=positive_int, default=1, help="parallel envs (subprocesses when > 1)")
     p.add_argument("--pin-workers", action=argparse.BooleanOptionalAction, default=True,
                    help="pin each env subprocess to a CPU of its own (Linux, when there are at least as many CPUs "
                         "as envs; sofar_env.vector): same results, fewer stalls between lock-steps")
-    p.add_argument("--n-steps", type=int, default=2048, help="rollout length per env")
-    p.add_argument("--batch-size", type=int, default=64, help="minibatch size")
-    p.add_argument("--n-epochs", type=int, default=10, help="epochs per update")
-    p.add_argument("--learning-rate", type=float, default=3e-4, help="Adam learning rate")
-    p.add_argument("--discount", type=float, default=0.99, help="discount factor")
-    p.add_argument("--gae-lambda", type=float, default=0.95, help="GAE lambda")
-    p.add_argument("--clip-range", type=float, default=0.2, help="PPO clip range")
-    p.add_argument("--ent-coef", type=float, default=0.01, help="entropy coefficient")
-    p.add_argument("--vf-coef", type=float, default=0.5, help="value loss coefficient")
-    p.add_argument("--max-grad-norm", type=float, default=0.5, help="gradient-norm clip")
-    p.add_argument("--hidden-sizes", type=int, nargs="+", default=[256, 256], help="hidden widths (tanh)")
+    p.add_argument("--n-steps", type=positive_int, default=2048, help="rollout length per env")
+    p.add_argument("--batch-size", type=positive_int, default=64, help="minibatch size")
+    p.add_argument("--n-epochs", type=positive_int, default=10, help="epochs per update")
+    p.add_argument("--learning-rate", type=positive_float, default=3e-4, help="Adam learning rate")
+    p.add_argument("--discount", type=float_in(0.0, 1.0, low_open=True), default=0.99, help="discount factor")
+    p.add_argument("--gae-lambda", type=float_in(0.0, 1.0), default=0.95, help="GAE lambda")
+    p.add_argument("--clip-range", type=positive_float, default=0.2, help="PPO clip range")
+    p.add_argument("--ent-coef", type=finite_float, default=0.01, help="entropy coefficient")
+    p.add_argument("--vf-coef", type=nonneg_float, default=0.5, help="value loss coefficient")
+    p.add_argument("--max-grad-norm", type=positive_float, default=0.5, help="gradient-norm clip")
+    p.add_argument("--hidden-sizes", type=positive_int, nargs="+", default=[256, 256], help="hidden widths (tanh)")
     p.add_argument("--normalize-reward", action=argparse.BooleanOptionalAction, default=True,
                    help="scale rewards by a running std of the discounted return (VecNormalize)")
-    p.add_argument("--rho-min", type=float, default=0.1, help="lower bound of the per-episode rho")
-    p.add_argument("--rho-max", type=float, default=0.8, help="upper bound of the per-episode rho")
-    p.add_argument("--rho-values", type=float, nargs="+", default=None, help="draw rho from these values instead")
-    p.add_argument("--seed", type=int, default=1, help="seed")
+    p.add_argument("--rho-min", type=nonneg_float, default=0.1, help="lower bound of the per-episode rho")
+    p.add_argument("--rho-max", type=nonneg_float, default=0.8, help="upper bound of the per-episode rho")
+    p.add_argument("--rho-values", type=nonneg_float, nargs="+", default=None, help="draw rho from these values instead")
+    p.add_argument("--seed", type=nonneg_int, default=1, help="seed")
     p.add_argument("--out", default=None, help="output directory (default: runs/ppo; with --resume, the resumed "
                                                "run's folder)")
-    p.add_argument("--save-every", type=int, default=100_000, help="checkpoint every this many steps (0: off)")
+    p.add_argument("--save-every", type=nonneg_int, default=100_000, help="checkpoint every this many steps (0: off)")
     p.add_argument("--resume", default=None,
                    help="checkpoint (.zip) to continue from; its stored hyper-parameters are used")
     p.add_argument("--force", action="store_true",
                    help="start over in an --out that already holds a run (not needed to --resume it in its own folder)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True, help="show a progress bar")
-    p.add_argument("--torch-threads", type=int, default=1, help="torch intra-op threads")
+    p.add_argument("--torch-threads", type=positive_int, default=1, help="torch intra-op threads")
     p.add_argument("--log-level", default="INFO", help="Python logging level")
     return p.parse_args(argv)
 
@@ -186,6 +188,9 @@ def main(argv: list[str] | None = None) -> Path:
     if args.decision_interval is not None:
         env_kwargs["decision_interval"] = args.decision_interval
     _ensure_registered(args.env_id)
+    world = world_of(args.env_id, env_kwargs)
+    if world is not None:  # compile the kernels here, before the workers start and outside the progress bar's ETA
+        warm_up([world], multi_agent=False)
 
     fns = [make_env(args, env_kwargs) for _ in range(args.n_envs)]
     venv: VecEnv = SubprocVecEnv(pinned_factories(fns, args.pin_workers)) if args.n_envs > 1 else DummyVecEnv(fns)

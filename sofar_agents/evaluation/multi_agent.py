@@ -293,6 +293,10 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
     t0 = time.perf_counter()
     from tqdm import tqdm
 
+    from sofar_env.compile import warm_up
+
+    if todo:
+        warm_up([scenario])  # compile here, not inside the progress bar's estimate
     bar = tqdm(total=len(todo), unit="race", disable=not progress, dynamic_ncols=True, desc="races")
     n_workers = max(1, int(workers or os.cpu_count() or 1))
     if n_workers == 1:

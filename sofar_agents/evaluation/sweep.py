@@ -148,6 +148,9 @@ def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, work
     stats.workers = n_workers  # the Ray backend replaces it with its number of actors
     out = _AppendingCSV(csv_path, EPISODE_COLUMNS)
     trace_out = _AppendingCSV(trace_path, TRACE_COLUMNS) if trace_path is not None else None
+    from sofar_env.compile import warm_up
+
+    warm_up(sorted({t.scenario for t in pending}), multi_agent=False)  # compile here, not inside the bar's ETA
     bar = _progress_bar(len(pending), progress)
 
     def handle(msg) -> None:

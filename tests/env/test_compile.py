@@ -1,0 +1,55 @@
+"""Compiling the per-step kernels ahead of time (``sofar_env.compile``) and the one log line of a compilation."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numba
+import pytest
+
+import sofar_env  # noqa: F401  (registers the ids)
+from sofar_env import _jit
+from sofar_env.compile import main, warm_up, world_of
+from sofar_env.scenarios import SCENARIOS
+
+
+def test_warm_up_races_a_few_steps_of_every_world() -> None:
+    times = warm_up(SCENARIOS)
+    assert set(times) == {*SCENARIOS, "multi-agent"}
+    assert all(math.isfinite(t) and t > 0.0 for t in times.values())
+    assert set(warm_up(["paper"], multi_agent=False)) == {"paper"}
+    with pytest.raises(ValueError, match="valid worlds"):
+        warm_up(["moon"])
+
+
+def test_the_command_line_logs_each_world(caplog) -> None:
+    with caplog.at_level(logging.INFO, logger="sofar_env.compile"):
+        main(["--worlds", "paper", "--no-multi-agent"])
+    assert any("paper world: kernels ready in" in r.getMessage() for r in caplog.records)
+
+
+def test_the_first_compilation_in_a_process_logs_one_line(caplog, monkeypatch) -> None:
+    def fresh(x):
+        return x + 1.0
+
+    def other(x):
+        return 2.0 * x
+
+    for fn in (fresh, other):
+        fn.__module__ = "sofar_env._test_kernels"  # a kernel of the package (not cached: compiled on each call)
+    monkeypatch.setattr(_jit._NOTICE, "said", False)
+    with caplog.at_level(logging.INFO, logger="sofar_env.compile"):
+        assert numba.njit(fresh)(1.0) == 2.0
+        assert numba.njit(other)(1.0) == 2.0
+        numba.njit(lambda x: x)(1.0)  # not the package's: no line either way
+    notices = [r for r in caplog.records if r.getMessage() == _jit.COMPILE_NOTICE]
+    assert len(notices) == 1 and notices[0].levelno == logging.INFO
+
+
+def test_world_of_an_id() -> None:
+    assert world_of("SOfAR-LagunaSeca-v0") == "paper"
+    assert world_of("SOfAR-Monza-Interactive-v0") == "interactive"
+    assert world_of("SOfAR-Monza-v0", {"scenario": "dynamic"}) == "dynamic"
+    assert world_of("SOfAR-Monza-v0", {"config": {"scenario": "interactive"}}) == "interactive"
+    assert world_of("CartPole-v1") is None and world_of("NoSuchEnv-v0") is None
