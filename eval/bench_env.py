@@ -48,6 +48,7 @@ from collections import defaultdict
 
 import numpy as np
 
+from sofar_agents.cli_types import gamma_value, nonneg_float, nonneg_int, positive_int
 import sofar_env  # noqa: F401  (registers the ids)
 from sofar_env.env import SOfARRaceEnv
 from sofar_env.observation import observe
@@ -257,17 +258,17 @@ def _load_average() -> float | None:
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=1000, help="timed env steps per pass (default 1000)")
+    parser.add_argument("--steps", type=positive_int, default=1000, help="timed env steps per pass (default 1000)")
     parser.add_argument("--track", default="LagunaSeca")
-    parser.add_argument("--rho", type=float, default=0.5)
-    parser.add_argument("--opponents", type=int, default=4)
-    parser.add_argument("--gamma", type=float, default=0.5)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--repeats", type=int, default=3,
+    parser.add_argument("--rho", type=nonneg_float, default=0.5)
+    parser.add_argument("--opponents", type=nonneg_int, default=4)
+    parser.add_argument("--gamma", type=gamma_value, default=0.5)
+    parser.add_argument("--seed", type=nonneg_int, default=0)
+    parser.add_argument("--repeats", type=positive_int, default=3,
                         help="timed passes over the same seeded steps (default 3): the median and the best "
                              "pass are reported; on a shared machine other load only ever adds time, so the "
                              "best pass is the closest to the code's own cost (the timeit convention)")
-    parser.add_argument("--vector", type=int, default=0, metavar="N",
+    parser.add_argument("--vector", type=nonneg_int, default=0, metavar="N",
                         help="also time a gymnasium AsyncVectorEnv of N worker processes (the training set-up) "
                              "and report its total env steps/s; 0 (default) skips it")
     parser.add_argument("--no-pin", action="store_true",
@@ -280,7 +281,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--compare", default=None, metavar="REV",
                         help="interleaved A/B against the git revision REV instead of a plain run "
                              "(each pass in a fresh subprocess; see eval/bench_compare.py)")
-    parser.add_argument("--rounds", type=int, default=5,
+    parser.add_argument("--rounds", type=positive_int, default=5,
                         help="with --compare: rounds of one pass of each revision, alternating (default 5)")
     parser.add_argument("--no-breakdown", action="store_true",
                         help="skip the instrumented pass (per-component breakdown)")
@@ -299,10 +300,6 @@ def main(argv: list[str] | None = None) -> dict:
             env.step(np.array([args.gamma], np.float32))
         return env
 
-    if args.repeats < 1:
-        parser.error("--repeats must be >= 1")
-    if args.vector < 0:
-        parser.error("--vector must be >= 0")
     load_before = _load_average()
     ref_before = reference_workload_ms()
     env = make()

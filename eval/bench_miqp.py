@@ -30,6 +30,7 @@ import sys
 
 import numpy as np
 
+from sofar_agents.cli_types import nonneg_float, nonneg_int, positive_int
 from sofar_env.planning import MIQPConfig, PassingSidePlanner
 
 TRACK_WIDTH = 12.0   # m
@@ -173,7 +174,7 @@ def bench_from_env(args) -> int:
     t_with = np.full(len(problems), np.inf)
     t_plain = np.full(len(problems), np.inf)
     differ = 0
-    for rep in range(max(1, args.repeat)):
+    for rep in range(args.repeat):
         for i, (prob, w_slack) in enumerate(problems):
             plain_prob = dataclasses.replace(prob, w_diag=None)
             order = (True, False) if (i + rep) % 2 == 0 else (False, True)
@@ -212,22 +213,22 @@ def bench_from_env(args) -> int:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("-n", "--instances", type=int, default=300)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("-n", "--instances", type=positive_int, default=300)
+    parser.add_argument("--seed", type=nonneg_int, default=0)
     parser.add_argument("--mode", choices=("rollout", "snapshot"), default="rollout",
                         help="rollout: short closed-loop-like sequences (default); snapshot: "
                              "independent random states, opponents possibly alongside (stress)")
-    parser.add_argument("--calls", type=int, default=20, help="calls per rollout")
-    parser.add_argument("--repeat", type=int, default=3,
+    parser.add_argument("--calls", type=positive_int, default=20, help="calls per rollout")
+    parser.add_argument("--repeat", type=positive_int, default=3,
                         help="repeat the whole (deterministic) run, keep each call's minimum time")
-    parser.add_argument("--closing-decel", type=float, default=0.0,
+    parser.add_argument("--closing-decel", type=nonneg_float, default=0.0,
                         help="MIQPConfig.closing_decel [m/s^2] (the stack uses the barrier's a_brake; "
                              "default 0: plain box window)")
     parser.add_argument("--from-env", choices=("paper", "interactive"),
                         help="time the branch-and-bound calls of a closed loop of the env in this world, with "
                              "and without the incumbent (instead of the random instances)")
-    parser.add_argument("--steps", type=int, default=3000, help="env steps of --from-env")
-    parser.add_argument("--rho", type=float, default=0.5,
+    parser.add_argument("--steps", type=positive_int, default=3000, help="env steps of --from-env")
+    parser.add_argument("--rho", type=nonneg_float, default=0.5,
                         help="opponents' pace of --from-env (eval/bench_env.py's default; the env's is 0.3)")
     parser.add_argument("--json", metavar="PATH", help="also write the numbers as JSON")
     args = parser.parse_args(argv)
@@ -238,7 +239,7 @@ def main(argv=None) -> int:
     configs = {"daqp": cfg, "daqp-plain": dataclasses.replace(cfg, incumbent=False),
                "enumerate": dataclasses.replace(cfg, solver="enumerate")}
     solvers = tuple(configs)
-    runs = [collect(args, configs) for _ in range(max(1, args.repeat))]
+    runs = [collect(args, configs) for _ in range(args.repeat)]
     results = runs[0]
     # per-call minimum over identical repeats: filters out preemption by other processes
     times = {solver: np.min([[r.solve_time for r in run[solver]] for run in runs], axis=0)

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sofar_agents.cli_types import gamma_value, nonneg_int, positive_int
 from sofar_env.control import MPCConfig, MPCDCBF, MPCStageData, barrier
 from sofar_env.vehicle import AV21, frenet_rhs, rk4_step
 
@@ -167,9 +168,9 @@ def format_table(results: dict, steps: int) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=600, help="solves per variant (default 600)")
-    parser.add_argument("--gamma", type=float, default=0.3, help="DCBF decay (default 0.3)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--steps", type=positive_int, default=600, help="solves per variant (default 600)")
+    parser.add_argument("--gamma", type=gamma_value, default=0.3, help="DCBF decay (default 0.3)")
+    parser.add_argument("--seed", type=nonneg_int, default=0)
     parser.add_argument("--json", metavar="PATH", help="also write the results as JSON")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")

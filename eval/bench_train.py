@@ -52,6 +52,7 @@ import numpy as np
 
 from bench_compare import _git, _summary, interleave
 
+from sofar_agents.cli_types import int_at_least, positive_int
 from sofar_env.scenarios import SCENARIOS
 
 _HERE = Path(__file__).resolve().parent
@@ -191,28 +192,25 @@ def main(argv: list[str] | None = None) -> dict:
     mode.add_argument("--compare", metavar="REV", help="git revision to compare against")
     mode.add_argument("--backends", nargs="+", metavar="B",
                       help="compare these set-ups instead: one-process, local, processes, ray (module docstring)")
-    parser.add_argument("--rounds", type=int, default=3, help="rounds of one run per side, alternating (default 3)")
+    parser.add_argument("--rounds", type=positive_int, default=3,
+                        help="rounds of one run per side, alternating (default 3)")
     parser.add_argument("--backend", choices=tuple(BACKENDS), default=None,
                         help="with --compare: time this set-up of --backends on both sides (8192 steps, the "
                              "collection rate from TensorBoard) instead of the short default command")
     parser.add_argument("--scenario", choices=SCENARIOS, default=None,
                         help=f"with --backends, or --compare with --backend: the world trained in, one of "
                              f"{', '.join(SCENARIOS)} (train/pasta.py --scenario; default: its own)")
-    parser.add_argument("--multi-agent", type=int, default=None, metavar="CARS",
+    parser.add_argument("--multi-agent", type=int_at_least(2), default=None, metavar="CARS",
                         help="with --backends: self-play on races of CARS cars (train/pasta.py --multi-agent --cars "
                              "CARS); --n-envs counts races, the steps car decisions")
     parser.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = parser.parse_args(argv)
-    if args.rounds < 1:
-        parser.error("--rounds must be >= 1")
     if args.backends is not None:
         unknown = [b for b in args.backends if b not in BACKENDS]
         if unknown or len(set(args.backends)) != len(args.backends) or len(args.backends) < 2:
             parser.error(f"--backends takes two or more distinct values of {', '.join(BACKENDS)}; got {args.backends}")
         if args.backend is not None:
             parser.error("--backend goes with --compare; with --backends every named set-up runs")
-        if args.multi_agent is not None and args.multi_agent < 2:
-            parser.error(f"--multi-agent takes a car count of at least 2, got {args.multi_agent}")
         result = compare_backends(args.backends, args.rounds, args.scenario, args.multi_agent)
         if args.json:
             with open(args.json, "w") as fh:

@@ -46,6 +46,7 @@ import time
 import gymnasium as gym
 import numpy as np
 
+from sofar_agents.cli_types import nonneg_int, positive_float, positive_int
 from sofar_env.vector import async_vector_env, worker_cpus
 
 N_OBS = 12
@@ -293,23 +294,18 @@ def _median_split(rounds: list[dict]) -> dict:
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--workers", type=int, default=2, help="worker processes of the vector env (default 2)")
-    parser.add_argument("--steps", type=int, default=600, help="timed vector steps per measurement (default 600)")
-    parser.add_argument("--rounds", type=int, default=3, help="rounds of every measurement (default 3)")
-    parser.add_argument("--work-ms", type=float, default=1.0,
+    parser.add_argument("--workers", type=positive_int, default=2,
+                        help="worker processes of the vector env (default 2)")
+    parser.add_argument("--steps", type=positive_int, default=600,
+                        help="timed vector steps per measurement (default 600)")
+    parser.add_argument("--rounds", type=positive_int, default=3, help="rounds of every measurement (default 3)")
+    parser.add_argument("--work-ms", type=positive_float, default=1.0,
                         help="CPU time of one synthetic step [ms] (default 1.0, about one SOfAR step)")
-    parser.add_argument("--info-keys", type=int, default=18,
+    parser.add_argument("--info-keys", type=nonneg_int, default=18,
                         help="scalars in the synthetic info dict (default 18, as many as SOfAR's)")
     parser.add_argument("--no-sofar", action="store_true", help="only the synthetic env and the bare pipes")
     parser.add_argument("--json", default=None, help="also write the results to this JSON file")
     args = parser.parse_args(argv)
-    for name in ("workers", "steps", "rounds"):
-        if getattr(args, name) < 1:
-            parser.error(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
-    if not args.work_ms > 0:
-        parser.error(f"--work-ms must be > 0, got {args.work_ms}")
-    if args.info_keys < 0:
-        parser.error(f"--info-keys must be >= 0, got {args.info_keys}")
 
     synthetic = functools.partial(SyntheticEnv, work_ms=args.work_ms, info_keys=args.info_keys)
     envs = {"synthetic": synthetic} if args.no_sofar else {"synthetic": synthetic, "sofar": _sofar_env}

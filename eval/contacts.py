@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sofar_agents.cli_types import nonneg_float
 from sofar_agents.evaluation.multi_agent import RaceResult, RaceTask, race_env, read_race_csv
 from sofar_agents.evaluation.protocol import Strategy
 from sofar_env.control.barrier import barrier
@@ -115,11 +116,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--csv", default=str(DEFAULT_CSV), help="per-race CSV of eval/table.py --multi-agent")
     parser.add_argument("--out", default=None, help="also write the table to this Markdown file")
-    parser.add_argument("--heading-extent", type=float, default=None, metavar="M",
+    parser.add_argument("--heading-extent", type=nonneg_float, default=None, metavar="M",
                         help="race.heading_extent of the replays [m] (default: the environment's)")
     args = parser.parse_args(argv)
-    if args.heading_extent is not None and not (math.isfinite(args.heading_extent) and args.heading_extent >= 0):
-        parser.error(f"--heading-extent must be a finite number >= 0, got {args.heading_extent}")
     overrides = None if args.heading_extent is None else {"heading_extent": args.heading_extent}
     rows = [r for r in read_race_csv(args.csv) if r.collided > 0 and r.strategy.startswith("gamma=")]
     if not rows:

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from sofar_agents import evaluation as ev
+from sofar_agents.cli_types import nonneg_float, nonneg_int, positive_float, positive_int
 from sofar_env.scenarios import SCENARIOS
 from sofar_env.stack.config import STACK_PRESETS
 
@@ -39,19 +40,19 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--scenario", default="paper", choices=SCENARIOS,
                    help=f"world, one of {', '.join(SCENARIOS)} (default paper; the shipped policy of --stack and "
                         "--scenario is the default)")
-    p.add_argument("--opponents", type=int, default=None,
+    p.add_argument("--opponents", type=nonneg_int, default=None,
                    help="opponents per episode (default: the environment's 4)")
-    p.add_argument("--episodes", type=int, default=3, help="episodes per rho")
-    p.add_argument("--rhos", nargs="+", type=float, default=[0.3])
-    p.add_argument("--duration", type=float, default=ev.DEFAULT_DURATION, help="episode horizon [s]")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=None)
+    p.add_argument("--episodes", type=positive_int, default=3, help="episodes per rho")
+    p.add_argument("--rhos", nargs="+", type=nonneg_float, default=[0.3])
+    p.add_argument("--duration", type=positive_float, default=ev.DEFAULT_DURATION, help="episode horizon [s]")
+    p.add_argument("--seed", type=nonneg_int, default=0)
+    p.add_argument("--workers", type=positive_int, default=None)
     p.add_argument("--backend", default="local", choices=("local", "ray"),
                    help="local: a process pool on this machine; ray: Ray actors (pip install \"sofar[ray]\")")
     p.add_argument("--address", default=None,
                    help="with --backend ray: 'auto' or HOST:6379 joins a running Ray cluster (the package must be "
                         "installed on every node); default: start a local Ray instance with --workers CPUs")
-    p.add_argument("--max-distance", type=float, default=100.0, help="x range of the distance plot [m]")
+    p.add_argument("--max-distance", type=positive_float, default=100.0, help="x range of the distance plot [m]")
     p.add_argument("--log-level", default="WARNING")
     return p.parse_args(argv)
 
@@ -60,9 +61,6 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
     out = Path(args.out)
-    if args.opponents is not None and args.opponents < 0:
-        print(f"error: --opponents must be >= 0, got {args.opponents}", file=sys.stderr)
-        return 2
     if args.trace:
         trace_path = Path(args.trace)
     else:

@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from sofar_agents import evaluation as ev
+from sofar_agents.cli_types import finite_float, gamma_value, nonneg_float, positive_int
 from sofar_agents.evaluation import interventions as iv
 
 logger = logging.getLogger("interventions")
@@ -39,15 +40,16 @@ def parse_args(argv=None) -> argparse.Namespace:
                                           "one interventions.csv")
     p.add_argument("--report", action="store_true",
                    help="re-make the report of an interventions.csv (no episode is run)")
-    p.add_argument("--gamma", type=float, default=0.05, help="the fixed gamma whose failures are replayed")
-    p.add_argument("--gammas", type=float, nargs="+", default=[0.15, 0.3, 0.6], help="gammas inside the window")
-    p.add_argument("--windows", type=float, nargs="+", default=[1.0, 2.0, 4.0],
+    p.add_argument("--gamma", type=gamma_value, default=0.05, help="the fixed gamma whose failures are replayed")
+    p.add_argument("--gammas", type=gamma_value, nargs="+", default=[0.15, 0.3, 0.6], help="gammas inside the window")
+    p.add_argument("--windows", type=nonneg_float, nargs="+", default=[1.0, 2.0, 4.0],
                    help="how long before the failure the window opens [s]")
-    p.add_argument("--hold", type=float, default=2.0, help="how long after the failure the window stays open [s]")
-    p.add_argument("--placebo-delta", type=float, default=0.01, help="gamma change of the tiny-change placebo")
-    p.add_argument("--placebo-lead", type=float, default=20.0, help="shift of the displaced placebo [s]")
-    p.add_argument("--limit", type=int, default=None, help="at most this many failed episodes per CSV")
-    p.add_argument("--workers", type=int, default=1, help="worker processes")
+    p.add_argument("--hold", type=nonneg_float, default=2.0,
+                   help="how long after the failure the window stays open [s]")
+    p.add_argument("--placebo-delta", type=finite_float, default=0.01, help="gamma change of the tiny-change placebo")
+    p.add_argument("--placebo-lead", type=nonneg_float, default=20.0, help="shift of the displaced placebo [s]")
+    p.add_argument("--limit", type=positive_int, default=None, help="at most this many failed episodes per CSV")
+    p.add_argument("--workers", type=positive_int, default=1, help="worker processes")
     p.add_argument("--quick", action="store_true",
                    help="a first look: 2 failed episodes per CSV, gammas 0.6, windows 2 and 4 s (explicit options win)")
     p.add_argument("--out", default=None, help="output folder (default: results/interventions; with --report, the "
@@ -104,8 +106,6 @@ def main(argv=None) -> int:
     if args.out is None:
         args.out = "results/interventions"
     try:
-        if args.limit is not None and args.limit < 1:
-            raise ValueError(f"--limit must be >= 1, got {args.limit}")
         interventions = iv.default_interventions(args.gamma, args.gammas, args.windows, args.hold,
                                                  args.placebo_delta, args.placebo_lead)
         episodes = []

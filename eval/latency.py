@@ -15,6 +15,7 @@ import logging
 import sys
 
 from sofar_agents import evaluation as ev
+from sofar_agents.cli_types import gamma_value, nonneg_float, nonneg_int, positive_float
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -26,7 +27,7 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=_HelpFormatter)
-    p.add_argument("--seconds", type=float, default=60.0,
+    p.add_argument("--seconds", type=positive_float, default=60.0,
                    help="simulated time of the closed loop [s]; the race restarts after a collision or off-track")
     p.add_argument("--json", default=None, metavar="PATH",
                    help="also write the measurements (and the machine) to this JSON file (default: none)")
@@ -34,10 +35,10 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="PASTA checkpoint that chooses gamma and whose inference is timed (default: the shipped "
                         "policy; without one, gamma is fixed at --gamma and an untrained MLP is timed)")
     p.add_argument("--track", default="LagunaSeca", help="circuit (LagunaSeca, Monza, Indianapolis, Kentucky)")
-    p.add_argument("--rho", type=float, default=0.3, help="opponent pace ratio (fraction of the speed profile)")
-    p.add_argument("--opponents", type=int, default=4, help="number of opponents")
-    p.add_argument("--gamma", type=float, default=0.5, help="fixed gamma when there is no policy")
-    p.add_argument("--seed", type=int, default=0, help="seed of the episode start")
+    p.add_argument("--rho", type=nonneg_float, default=0.3, help="opponent pace ratio (fraction of the speed profile)")
+    p.add_argument("--opponents", type=nonneg_int, default=4, help="number of opponents")
+    p.add_argument("--gamma", type=gamma_value, default=0.5, help="fixed gamma when there is no policy")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the episode start")
     p.add_argument("--log-level", default="WARNING", help="logging level (DEBUG, INFO, WARNING, ERROR)")
     return p.parse_args(argv)
 

@@ -26,6 +26,7 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 
+from sofar_agents.cli_types import gamma_value, int_at_least, nonneg_float, nonneg_int, positive_float, positive_int
 from sofar_agents.evaluation.multi_agent import (
     RaceResult,
     RaceTask,
@@ -35,7 +36,7 @@ from sofar_agents.evaluation.multi_agent import (
     run_race,
 )
 from sofar_agents.evaluation.protocol import Strategy
-from sofar_env.constants import CIRCUITS, GAMMA_MAX, GAMMA_MIN
+from sofar_env.constants import CIRCUITS
 
 logger = logging.getLogger("multi_agent_races")
 
@@ -43,11 +44,11 @@ logger = logging.getLogger("multi_agent_races")
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", nargs="+", default=list(CIRCUITS), help="circuits (default: the four)")
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="reset seeds (default 0 1 2)")
-    parser.add_argument("--duration", type=float, default=100.0, help="race duration [s] (default 100)")
-    parser.add_argument("--gamma", type=float, default=0.5, help="fixed gamma of every car (default 0.5)")
-    parser.add_argument("--cars", type=int, default=4, help="controlled cars (default 4)")
-    parser.add_argument("--pace-range", nargs=2, type=float, default=None, metavar=("LO", "HI"),
+    parser.add_argument("--seeds", nargs="+", type=nonneg_int, default=[0, 1, 2], help="reset seeds (default 0 1 2)")
+    parser.add_argument("--duration", type=positive_float, default=100.0, help="race duration [s] (default 100)")
+    parser.add_argument("--gamma", type=gamma_value, default=0.5, help="fixed gamma of every car (default 0.5)")
+    parser.add_argument("--cars", type=int_at_least(2), default=4, help="controlled cars (default 4)")
+    parser.add_argument("--pace-range", nargs=2, type=positive_float, default=None, metavar=("LO", "HI"),
                         help="race.pace_range of the cars' speed factors (default: the environment's)")
     parser.add_argument("--v2v", action="store_true",
                         help="race.v2v: the cars predict each other from their published MPC plans")
@@ -56,26 +57,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lateral-rates", choices=("mpc", "all", "off"), default=None,
                         help="race.lateral_rates: what the controllers do with the other cars' lateral rates "
                              "(default: the environment's, mpc)")
-    parser.add_argument("--heading-extent", type=float, default=None, metavar="M",
+    parser.add_argument("--heading-extent", type=nonneg_float, default=None, metavar="M",
                         help="race.heading_extent [m]: widen each car's barrier's lateral semi-axis with its "
                              "heading error (default: the environment's, 2.45; 0: off)")
-    parser.add_argument("--alongside-gap", type=float, default=0.0, metavar="M",
+    parser.add_argument("--alongside-gap", type=nonneg_float, default=0.0, metavar="M",
                         help="the controllers' MIQP side lock for cars alongside (stack.miqp.alongside_gap "
                              "[m]; default 0: off)")
-    parser.add_argument("--table-races", type=int, default=None, metavar="N",
+    parser.add_argument("--table-races", type=positive_int, default=None, metavar="N",
                         help="instead of --seeds, the seeds of the first N races per circuit of "
                              "eval/table.py --multi-agent (base seed 0)")
-    parser.add_argument("--workers", type=int, default=1, help="races run in parallel processes (default 1)")
+    parser.add_argument("--workers", type=positive_int, default=1, help="races run in parallel processes (default 1)")
     parser.add_argument("--races", action="store_true", help="also print one line per race")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    if not GAMMA_MIN <= args.gamma <= GAMMA_MAX:
-        parser.error(f"--gamma must lie in [{GAMMA_MIN}, {GAMMA_MAX}], got {args.gamma}")
-    if args.duration <= 0 or args.cars < 2:
-        parser.error("--duration must be > 0 and --cars >= 2")
-    if (args.alongside_gap < 0 or (args.heading_extent is not None and args.heading_extent < 0) or (args.table_races is not None and args.table_races < 1)
-            or args.workers < 1):
-        parser.error("--alongside-gap and --heading-extent must be >= 0, --table-races and --workers >= 1")
     overrides = {"pace_range": tuple(args.pace_range)} if args.pace_range else {}
     if args.v2v:
         overrides["v2v"] = True

@@ -17,6 +17,7 @@ import logging
 import sys
 
 from sofar_agents import evaluation as ev
+from sofar_agents.cli_types import gamma_value, nonneg_float, nonneg_int, positive_float, positive_int
 from sofar_env.scenarios import SCENARIOS
 from sofar_env.stack.config import STACK_PRESETS
 
@@ -35,26 +36,26 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--policy", default=None,
                    help="PASTA checkpoint (default: the one shipped for --stack / --scenario, if any)")
     p.add_argument("--no-policy", action="store_true", help="only the fixed gammas")
-    p.add_argument("--safety-weights", nargs="+", type=float, default=None,
+    p.add_argument("--safety-weights", nargs="+", type=nonneg_float, default=None,
                    help="safety weights of the policy's preferences, each in [0, 0.9] "
                         f"(default {' '.join(f'{w:g}' for w in DEFAULT_SAFETY_WEIGHTS)}); the overtakes weight is "
                         "0.9 minus it and progress, barrier margin and gamma smoothness get 0.1 / 3 each")
-    p.add_argument("--gammas", nargs="+", type=float, default=None,
+    p.add_argument("--gammas", nargs="+", type=gamma_value, default=None,
                    help=f"fixed gammas (default {' '.join(f'{g:.2f}' for g in ev.FIXED_GAMMAS)})")
     p.add_argument("--tracks", nargs="+", default=None, help=f"circuits (default {' '.join(ev.TRACKS)})")
-    p.add_argument("--rhos", nargs="+", type=float, default=None,
+    p.add_argument("--rhos", nargs="+", type=nonneg_float, default=None,
                    help=f"opponent pace ratios (default {' '.join(f'{r:g}' for r in ev.RHOS)})")
-    p.add_argument("--episodes", type=int, default=None, help="episodes per (track, rho) (default 5)")
-    p.add_argument("--duration", type=float, default=None,
+    p.add_argument("--episodes", type=positive_int, default=None, help="episodes per (track, rho) (default 5)")
+    p.add_argument("--duration", type=positive_float, default=None,
                    help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
     p.add_argument("--scenario", default="paper", choices=SCENARIOS,
                    help=f"world, one of {', '.join(SCENARIOS)} (default paper)")
     p.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
                    help=f"controller preset, one of {', '.join(STACK_PRESETS)} (default sofar)")
-    p.add_argument("--opponents", type=int, default=None,
+    p.add_argument("--opponents", type=nonneg_int, default=None,
                    help="opponents per episode (default: the environment's 4; part of the resume key)")
-    p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")
-    p.add_argument("--workers", type=int, default=None, help="worker processes (default: os.cpu_count())")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="base seed of the paired episode seeds")
+    p.add_argument("--workers", type=positive_int, default=None, help="worker processes (default: os.cpu_count())")
     p.add_argument("--backend", default="local", choices=("local", "ray"), help="local process pool or Ray actors")
     p.add_argument("--address", default=None, help="with --backend ray: 'auto' or HOST:6379")
     p.add_argument("--quick", action="store_true",
@@ -67,9 +68,6 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.opponents is not None and args.opponents < 0:
-        print(f"error: --opponents must be >= 0, got {args.opponents}", file=sys.stderr)
-        return 2
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
     policy = None if args.no_policy else ev.resolve_policy_path(
         args.policy, fallback="only the fixed gammas are evaluated", stack=args.stack, scenario=args.scenario)

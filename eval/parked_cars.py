@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sofar_env.constants import CIRCUITS, GAMMA_MAX, GAMMA_MIN
+from sofar_agents.cli_types import gamma_value, nonneg_int, positive_float
+from sofar_env.constants import CIRCUITS
 
 
 @dataclass(frozen=True)
@@ -80,14 +81,10 @@ def run(track: str, seed: int, duration: float, gamma: float, stack: dict | None
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", nargs="+", default=list(CIRCUITS), choices=CIRCUITS)
-    parser.add_argument("--seeds", nargs="+", type=int, default=list(range(6)))
-    parser.add_argument("--duration", type=float, default=60.0, help="race duration [s]")
-    parser.add_argument("--gamma", type=float, default=0.5, help="fixed barrier decay")
+    parser.add_argument("--seeds", nargs="+", type=nonneg_int, default=list(range(6)))
+    parser.add_argument("--duration", type=positive_float, default=60.0, help="race duration [s]")
+    parser.add_argument("--gamma", type=gamma_value, default=0.5, help="fixed barrier decay")
     args = parser.parse_args(argv)
-    if not args.duration > 0.0:
-        parser.error(f"--duration must be > 0 [s], got {args.duration}")
-    if not GAMMA_MIN <= args.gamma <= GAMMA_MAX:
-        parser.error(f"--gamma must lie in [{GAMMA_MIN}, {GAMMA_MAX}], got {args.gamma}")
     print("| circuit | seed | end | time [s] | driven [m] | overtakes | parked checks | parked passes "
           "| standstill [s] | nearest [m] | min h within 10 m |")
     print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|")

@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 from sofar_agents.cli import plain_text
+from sofar_agents.cli_types import float_in, positive_int
 from sofar_agents.evaluation.training_curves import DEFAULT_GROUPS, find_event_dirs, plot_training_curves, read_scalars
 
 
@@ -31,9 +32,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--groups", nargs="+", default=list(DEFAULT_GROUPS),
                    help="tag groups (the prefix before '/') to draw, in this order; absent groups are skipped "
                         f"(default: {' '.join(DEFAULT_GROUPS)}; also regret, return_scale, explained_variance)")
-    p.add_argument("--smoothing", type=float, default=0.0,
+    p.add_argument("--smoothing", type=float_in(0.0, 1.0, high_open=True), default=0.0,
                    help="TensorBoard's exponential smoothing weight in [0, 1) (default: 0, the raw values)")
-    p.add_argument("--columns", type=int, default=4, help="panels per row (default: 4)")
+    p.add_argument("--columns", type=positive_int, default=4, help="panels per row (default: 4)")
     p.add_argument("--title", default="", help="figure title (default: none)")
     return p.parse_args(argv)
 

@@ -20,6 +20,7 @@ import logging
 import sys
 
 from sofar_agents import evaluation as ev
+from sofar_agents.cli_types import gamma_value, int_at_least, nonneg_float, nonneg_int, positive_float, positive_int
 from sofar_env.scenarios import SCENARIOS
 from sofar_env.stack.config import STACK_PRESETS
 
@@ -31,7 +32,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default=None, help="output folder (default results/, or results/quick with --quick)")
-    p.add_argument("--workers", type=int, default=None, help="worker processes (default: os.cpu_count())")
+    p.add_argument("--workers", type=positive_int, default=None, help="worker processes (default: os.cpu_count())")
     p.add_argument("--backend", default="local", choices=("local", "ray"),
                    help="local: a process pool on this machine; ray: Ray actors (pip install \"sofar[ray]\")")
     p.add_argument("--address", default=None,
@@ -46,29 +47,30 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="the multi-agent table: races of the PettingZoo environment (--cars cars, every car driven "
                         "by the same strategy; --episodes races per circuit, seeded from --seed and the circuit), "
                         "written to results/multi_agent")
-    p.add_argument("--cars", type=int, default=4, help="with --multi-agent: controlled cars per race (default 4)")
+    p.add_argument("--cars", type=int_at_least(2), default=4,
+                   help="with --multi-agent: controlled cars per race (default 4)")
     p.add_argument("--self-play", default=None,
                    help="with --multi-agent: also evaluate this PASTA checkpoint (e.g. from train/pasta.py "
                         "--multi-agent), as the strategy 'self-play'")
     p.add_argument("--tracks", nargs="+", default=None, help=f"circuits (default {' '.join(ev.TRACKS)})")
-    p.add_argument("--rhos", nargs="+", type=float, default=None,
+    p.add_argument("--rhos", nargs="+", type=nonneg_float, default=None,
                    help=f"opponent pace ratios (default {' '.join(f'{r:g}' for r in ev.RHOS)})")
-    p.add_argument("--episodes", type=int, default=None,
+    p.add_argument("--episodes", type=positive_int, default=None,
                    help="episodes per (track, rho) for Table I (default 5); per (setting, strategy) for Table II "
                         "(default 10, rho cycling)")
-    p.add_argument("--gammas", nargs="+", type=float, default=None,
+    p.add_argument("--gammas", nargs="+", type=gamma_value, default=None,
                    help=f"fixed gammas (default {' '.join(f'{g:.2f}' for g in ev.FIXED_GAMMAS)}; Table II: 0.5)")
-    p.add_argument("--duration", type=float, default=None,
+    p.add_argument("--duration", type=positive_float, default=None,
                    help=f"episode horizon [s] (default {ev.DEFAULT_DURATION:g})")
     p.add_argument("--scenario", default="paper", choices=SCENARIOS,
                    help=f"world, one of {', '.join(SCENARIOS)} (default paper; sofar_env.scenarios)")
     p.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
                    help=f"controller preset, one of {', '.join(STACK_PRESETS)} (default sofar; paper is the paper's "
                         "Algorithm 1 as written; sofar_env.stack.stack_preset)")
-    p.add_argument("--opponents", type=int, default=None,
+    p.add_argument("--opponents", type=nonneg_int, default=None,
                    help="Table I: opponents per episode (default: the environment's 4); with --multi-agent: scripted "
                         "opponents besides the controlled cars (default 0); part of the resume key")
-    p.add_argument("--seed", type=int, default=0, help="base seed of the paired episode seeds")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="base seed of the paired episode seeds")
     p.add_argument("--policy", default=None, help="adaptive policy checkpoint (default: the shipped one)")
     p.add_argument("--no-adaptive", action="store_true", help="leave out the adaptive policy")
     p.add_argument("--sb3", default=None, help="also evaluate a Stable-Baselines3 PPO policy (.zip)")
@@ -81,9 +83,6 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.opponents is not None and args.opponents < 0:
-        print(f"error: --opponents must be >= 0, got {args.opponents}", file=sys.stderr)
-        return 2
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
     if args.multi_agent:
         return multi_agent_main(args)
@@ -133,9 +132,6 @@ def multi_agent_main(args: argparse.Namespace) -> int:
     if args.miqp_ablation or args.backend != "local" or args.sb3 or args.trace or args.rhos:
         print("error: --multi-agent takes none of --miqp-ablation, --backend ray, --sb3, --trace, --rhos",
               file=sys.stderr)
-        return 2
-    if args.cars < 2:
-        print(f"error: --cars must be at least 2, got {args.cars}", file=sys.stderr)
         return 2
     policy = None if args.no_adaptive else ev.resolve_policy_path(args.policy, stack=args.stack, scenario=args.scenario)
     strategies = ev.build_strategies(args.gammas or list(ev.FIXED_GAMMAS), policy=policy,

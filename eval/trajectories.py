@@ -23,6 +23,8 @@ import time
 
 import numpy as np
 
+from sofar_agents.cli_types import positive_int
+
 logger = logging.getLogger("trajectories")
 
 # info values compared (numeric); timings are excluded by construction
@@ -133,8 +135,8 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     rec = sub.add_parser("record", help="record seeded episodes of every registered id")
     rec.add_argument("--out", required=True, help="output .npz file")
-    rec.add_argument("--episodes", type=int, default=3, help="episodes per id (default 3)")
-    rec.add_argument("--steps", type=int, default=300, help="control steps per episode (default 300)")
+    rec.add_argument("--episodes", type=positive_int, default=3, help="episodes per id (default 3)")
+    rec.add_argument("--steps", type=positive_int, default=300, help="control steps per episode (default 300)")
     rec.add_argument("--worlds", nargs="+", default=["paper"], choices=("paper", "interactive", "dynamic"),
                      help="record the ids of these worlds (default: paper; the PettingZoo race is always recorded)")
     rec.add_argument("--variant", nargs="*", default=[], metavar="KEY=VALUE",

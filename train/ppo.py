@@ -87,7 +87,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="scale rewards by a running std of the discounted return (VecNormalize)")
     p.add_argument("--rho-min", type=nonneg_float, default=0.1, help="lower bound of the per-episode rho")
     p.add_argument("--rho-max", type=nonneg_float, default=0.8, help="upper bound of the per-episode rho")
-    p.add_argument("--rho-values", type=nonneg_float, nargs="+", default=None, help="draw rho from these values instead")
+    p.add_argument("--rho-values", type=nonneg_float, nargs="+", default=None,
+                   help="draw rho from these values instead")
     p.add_argument("--seed", type=nonneg_int, default=1, help="seed")
     p.add_argument("--out", default=None, help="output directory (default: runs/ppo; with --resume, the resumed "
                                                "run's folder)")
