@@ -9,6 +9,7 @@ built with ``python -m sofar_env.tracks build`` and raced through the ``SOfAR-Cu
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import tempfile
@@ -18,7 +19,17 @@ import gymnasium as gym
 import numpy as np
 
 import sofar_env  # noqa: F401  (registers the SOfAR ids)
-from _common import max_steps, race_seconds
+
+# SOFAR_EXAMPLE_STEPS=N (the smoke tests set it) caps every loop at N steps and the race at 3 s
+SMOKE_STEPS = os.environ.get("SOFAR_EXAMPLE_STEPS")
+
+
+def max_steps(default: int) -> int:
+    return int(SMOKE_STEPS) if SMOKE_STEPS else default
+
+
+def race_seconds(default: float) -> float:
+    return 3.0 if SMOKE_STEPS else default
 
 
 def write_centerline(path: Path, n: int = 400) -> None:

@@ -5,10 +5,22 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
-from _common import max_steps, race_seconds
 from sofar_env.multi_agent import parallel_env
+
+# SOFAR_EXAMPLE_STEPS=N (the smoke tests set it) caps every loop at N steps and the race at 3 s
+SMOKE_STEPS = os.environ.get("SOFAR_EXAMPLE_STEPS")
+
+
+def max_steps(default: int) -> int:
+    return int(SMOKE_STEPS) if SMOKE_STEPS else default
+
+
+def race_seconds(default: float) -> float:
+    return 3.0 if SMOKE_STEPS else default
 
 
 def main() -> None:

@@ -7,12 +7,24 @@ For full training runs use ``train/ppo.py``.
 
 from __future__ import annotations
 
+import os
+
 import gymnasium as gym
 from stable_baselines3 import PPO
 
 import sofar_env  # noqa: F401  (registers the SOfAR ids)
-from _common import max_steps, race_seconds
 from sofar_agents.wrappers import RescaleGammaAction
+
+# SOFAR_EXAMPLE_STEPS=N (the smoke tests set it) caps every loop at N steps and the race at 3 s
+SMOKE_STEPS = os.environ.get("SOFAR_EXAMPLE_STEPS")
+
+
+def max_steps(default: int) -> int:
+    return int(SMOKE_STEPS) if SMOKE_STEPS else default
+
+
+def race_seconds(default: float) -> float:
+    return 3.0 if SMOKE_STEPS else default
 
 
 def main() -> None:
