@@ -56,4 +56,6 @@ def test_figures_script_records_the_interactive_policy_in_its_world(tmp_path):
     rows = ev.read_episode_csv(out / "episodes.csv")
     assert [(r["scenario"], int(r["n_opponents"]), r["strategy"]) for r in rows] == [("interactive", 2, "adaptive")]
     assert (out / "gamma_hist.png").exists() and (out / "distance_vs_gamma.png").exists()
-    assert script.main(["--out", str(tmp_path / "x"), "--opponents", "-1"]) == 2
+    with __import__("pytest").raises(SystemExit) as exc:  # a usage error of the argument type
+        script.main(["--out", str(tmp_path / "x"), "--opponents", "-1"])
+    assert exc.value.code == 2

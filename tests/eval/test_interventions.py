@@ -170,14 +170,18 @@ def test_cli_quick_run_writes_csv_and_markdown(tmp_path, capsys):
 
 @pytest.mark.parametrize("extra, message", [
     (["--gamma", "0.5"], "no failed episode of gamma 0.50"),
-    (["--limit", "0"], "--limit must be >= 1"),
-    (["--gammas", "2.0"], "gamma must lie in"),
+    (["--limit", "0"], "argument --limit: must be a whole number >= 1"),  # usage errors of the argument types
+    (["--gammas", "2.0"], "argument --gammas: must lie in"),
 ])
 def test_cli_bad_input(tmp_path, capsys, extra, message):
     csv_path = tmp_path / "set" / "table1_episodes.csv"
     write_episode_csv(csv_path, [{"track": "Monza", "rho": 0.1, "seed": 1, "strategy": "gamma=0.05",
                                   "success": False, "use_miqp": True}])
-    assert interventions_cli.main([str(csv_path), "--out", str(tmp_path / "o"), *extra]) == 2
+    try:
+        code = interventions_cli.main([str(csv_path), "--out", str(tmp_path / "o"), *extra])
+    except SystemExit as exc:
+        code = exc.code
+    assert code == 2
     assert message in capsys.readouterr().err
 
 

@@ -36,8 +36,9 @@ def test_table_script_multi_agent_refuses_single_car_options(capsys):
     table = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(table)
     assert table.main(["--multi-agent", "--rhos", "0.5"]) == 2
-    assert table.main(["--multi-agent", "--cars", "1"]) == 2
-    assert "--cars must be at least 2" in capsys.readouterr().err
+    with __import__("pytest").raises(SystemExit) as exc:  # a usage error of the argument type
+        table.main(["--multi-agent", "--cars", "1"])
+    assert exc.value.code == 2 and "argument --cars: must be a whole number >= 2" in capsys.readouterr().err
 
 
 def test_races_are_seeded_per_circuit_and_shared_by_the_strategies():

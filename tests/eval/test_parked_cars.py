@@ -23,8 +23,8 @@ def test_parked_cars_reports_a_row_per_run():
     assert "2 runs: 2 ok; 0 with a standstill of 5 s or more" in proc.stdout
 
 
-@pytest.mark.parametrize("args,words", [(["--duration", "0"], "--duration must be > 0"),
-                                        (["--gamma", "2"], "--gamma must lie in")])
+@pytest.mark.parametrize("args,words", [(["--duration", "0"], "argument --duration: must be a number > 0"),
+                                        (["--gamma", "2"], "argument --gamma: must lie in")])
 def test_parked_cars_refuses_bad_options(args, words):
     proc = subprocess.run([sys.executable, str(ROOT / "eval" / "parked_cars.py"), *args],
                           capture_output=True, text=True, timeout=120)
