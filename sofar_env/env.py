@@ -17,6 +17,7 @@ from .config import OBJECTIVE_NAMES, EnvConfig, make_env_config
 from .constants import GAMMA_MAX, GAMMA_MIN
 from .core import ControlledRace, parse_gamma
 from .observation import observation_size
+from .snapshot import Snapshots
 
 __all__ = ["SOfARRaceEnv", "GAMMA_MIN", "GAMMA_MAX", "RESET_OPTIONS"]
 
@@ -24,7 +25,7 @@ RESET_OPTIONS = ("rho", "n_opponents", "start_s", "start_speed")
 """Keys accepted in ``reset(options=...)``."""
 
 
-class SOfARRaceEnv(gym.Env):
+class SOfARRaceEnv(Snapshots, gym.Env):
     r"""Safe overtaking on a real circuit: learn the barrier decay gamma of an MPC-DCBF controller.
 
     ## Description
@@ -106,12 +107,16 @@ class SOfARRaceEnv(gym.Env):
     overtakes; a 200 s race at the default speed factor is worth about 80 of progress;
     a step that uses a full unit of barrier slack costs 0.5). ``reward_mode="vector"``
     returns the float32 vector and declares it in ``env.unwrapped.reward_space``
-    (MO-Gymnasium convention; scalarise it outside the env). Make it with
-    ``mo_gymnasium.make(...)`` or plain ``gymnasium.make(...)`` (the registered ids leave Gymnasium's
-    passive checker, which expects a float reward, off in vector mode; :mod:`sofar_env.factory`) and use
-    MO-Gymnasium's wrappers (``LinearReward``, ``MORecordEpisodeStatistics`` inside the
-    scalarisation) and ``mo_gymnasium.wrappers.vector.MOSyncVectorEnv``;
-    ``gymnasium.vector.SyncVectorEnv`` stores scalar rewards only. The vector is always in
+    (MO-Gymnasium convention; scalarise it outside the env). Only the vector mode declares a
+    ``reward_space``: a scalar-mode env is not a multi-objective env, and MO-Gymnasium's wrappers
+    (which read ``env.unwrapped.reward_space``) refuse it with an ``AttributeError`` that names
+    ``reward_mode="vector"``, instead of copying the scalar into every objective. So pass
+    ``reward_mode="vector"`` to ``mo_gymnasium.make(...)`` as to plain ``gymnasium.make(...)`` (the
+    registered ids leave Gymnasium's passive checker, which expects a float reward, off in vector mode;
+    :mod:`sofar_env.factory`) and use MO-Gymnasium's wrappers (``LinearReward``,
+    ``MORecordEpisodeStatistics`` inside the scalarisation). ``gymnasium.make_vec(id, num_envs,
+    reward_mode="vector")`` returns ``mo_gymnasium.wrappers.vector.MOSyncVectorEnv`` (the ids' vector
+    entry point); ``gymnasium.vector.SyncVectorEnv`` stores scalar rewards only. The vector is always in
     ``info["reward_vector"]``.
 
     ## Starting State
@@ -178,6 +183,15 @@ class SOfARRaceEnv(gym.Env):
     The controllers are built on the first
     ``reset()``, so constructing the environment is cheap.
 
+    ## Copies and saved states
+
+    ``copy.deepcopy(env)``, ``pickle`` and ``cloudpickle`` copy a running environment (wrapped or not): the
+    copy continues exactly as the original would under the same actions, to the bit. Compiled parts are not
+    serialised but built again from the configuration (the CasADi library is loaded from its disk cache,
+    nothing is compiled; PIQP is set up again in the state of the original's solver); a renderer is not
+    copied. ``env.unwrapped.get_state()`` saves the current moment and ``env.unwrapped.set_state(state)``
+    returns to it (:class:`~sofar_env.snapshot.EnvState`; wrappers' own counters are not part of it).
+
     ## Version History
 
     * v0: initial version. The ``observation`` key (``"extended"``: 16 values) came with the interactive
@@ -197,14 +211,23 @@ class SOfARRaceEnv(gym.Env):
         self.action_space = spaces.Box(GAMMA_MIN, GAMMA_MAX, (1,), np.float32)
         self.observation_space = spaces.Box(-1.0, 1.0, (observation_size(cfg.observation),), np.float32)
         self.objective_names = OBJECTIVE_NAMES
-        self.reward_space = spaces.Box(
-            low=np.array([-1.0, 0.0, -2.0 * k, -1.0 * k, -1.0], np.float32),
-            high=np.array([0.0, float(k * max(cfg.n_opponents, 1)), 2.0 * k, 0.0, 0.0], np.float32),
-            dtype=np.float32,
-        )
+        if cfg.reward_mode == "vector":  # a scalar-mode env declares none: it is not a multi-objective env
+            self.reward_space = spaces.Box(
+                low=np.array([-1.0, 0.0, -2.0 * k, -1.0 * k, -1.0], np.float32),
+                high=np.array([0.0, float(k * max(cfg.n_opponents, 1)), 2.0 * k, 0.0, 0.0], np.float32),
+                dtype=np.float32,
+            )
         self.core = ControlledRace(cfg)
         """The simulation core: the race world and the controller of the ego (car 0)."""
         self._renderer = None
+
+    _state_attributes = ("core", "_np_random", "_np_random_seed")  # what get_state() saves
+
+    def __getattr__(self, name: str):
+        if name == "reward_space":  # only looked up here when the instance has none: scalar mode
+            raise AttributeError("reward_space is declared only with reward_mode='vector' (the step then returns the "
+                                 "reward vector); this env returns the scalar weights . vector")
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     # read-only views of the core, for users and the renderer
     @property

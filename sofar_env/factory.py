@@ -19,10 +19,19 @@ warns about the vector reward as requested).
 :func:`make_custom_env` is the entry point of ``SOfAR-Custom-v0``: a circuit of your own,
 given as ``track=`` a circuit folder (written by ``python -m sofar_env.tracks build``) or a
 :class:`~sofar_env.tracks.Track`.
+
+:func:`make_vector_env` and :func:`make_custom_vector_env` are the ids' vector entry points, which
+``gymnasium.make_vec(id, num_envs, **kwargs)`` uses by default: ``num_envs`` environments made with
+``gymnasium.make(id, **kwargs)`` in a ``gymnasium.vector.SyncVectorEnv`` in scalar mode, and in
+MO-Gymnasium's ``MOSyncVectorEnv`` with ``reward_mode="vector"`` (a ``(num_envs, 5)`` reward array;
+Gymnasium's ``SyncVectorEnv`` stores one float per env and cannot hold the vector). As for every id with a
+vector entry point, ``make_vec``'s ``wrappers=`` and ``vector_kwargs=`` need ``vectorization_mode="sync"``
+or ``"async"``, which build Gymnasium's vector envs: scalar rewards only.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -31,10 +40,10 @@ from typing import Any
 import gymnasium as gym
 
 from .env import SOfARRaceEnv
-from .registration import CUSTOM_ID
+from .registration import CUSTOM_ID, DYNAMIC_IDS, ENV_IDS, INTERACTIVE_IDS
 from .tracks import Track
 
-__all__ = ["make_env", "make_custom_env", "load_custom_track"]
+__all__ = ["make_env", "make_custom_env", "make_vector_env", "make_custom_vector_env", "load_custom_track"]
 
 
 _BUILD_HINT = ("build one with `python -m sofar_env.tracks build EDGES.csv --name NAME --out DIR` "
@@ -96,3 +105,47 @@ def make_custom_env(track: Any = None, **kwargs: Any) -> gym.Env:
 
 
 make_custom_env.metadata = SOfARRaceEnv.metadata
+
+
+def make_vector_env(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
+    """Vector entry point of the ``SOfAR-<Circuit>-...`` ids: ``num_envs`` x ``gymnasium.make(id, **kwargs)`` in a
+    ``SyncVectorEnv``, or in MO-Gymnasium's ``MOSyncVectorEnv`` with ``reward_mode="vector"``.
+
+    ``kwargs`` are the id's (``track``, ``scenario``) with the caller's on top and ``max_episode_steps``, as
+    ``gymnasium.make_vec`` passes them; they make the environments (the id only names their specs).
+    """
+    return _vector_env(_circuit_id(kwargs), num_envs, kwargs)
+
+
+def make_custom_vector_env(num_envs: int = 1, **kwargs: Any) -> gym.vector.VectorEnv:
+    """Vector entry point of ``SOfAR-Custom-v0``: as :func:`make_vector_env`, on the circuit ``track``."""
+    return _vector_env(CUSTOM_ID, num_envs, kwargs)
+
+
+def _vector_env(env_id: str, num_envs: int, kwargs: dict[str, Any]) -> gym.vector.VectorEnv:
+    if int(num_envs) < 1:
+        raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+    make_one = functools.partial(gym.make, env_id, **kwargs)
+    first = make_one()  # validates the arguments once, and tells the reward mode
+    fns = [functools.partial(_made, first)] + [make_one] * (int(num_envs) - 1)
+    if first.unwrapped.config.reward_mode == "vector":
+        from mo_gymnasium.wrappers.vector import MOSyncVectorEnv
+
+        return MOSyncVectorEnv(fns)
+    return gym.vector.SyncVectorEnv(fns)
+
+
+def _made(env: gym.Env) -> gym.Env:
+    return env
+
+
+def _circuit_id(kwargs: Mapping[str, Any]) -> str:
+    """The registered id whose arguments (circuit, world) ``kwargs`` carry, else an id of their circuit, else the
+    first one. It names the specs of the environments; ``kwargs`` (which hold the circuit and the world) make them."""
+    scenario = kwargs.get("scenario")
+    world_ids = {None: ENV_IDS, "paper": ENV_IDS, "interactive": INTERACTIVE_IDS, "dynamic": DYNAMIC_IDS}
+    for ids in (world_ids.get(scenario, ()) if scenario is None or isinstance(scenario, str) else (), ENV_IDS):
+        for env_id in ids:
+            if gym.spec(env_id).kwargs.get("track") == kwargs.get("track"):
+                return env_id
+    return ENV_IDS[0]

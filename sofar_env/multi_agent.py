@@ -56,6 +56,14 @@ car behind it and keeps clear of every controlled car alongside.
 
 ``reset(options=...)`` accepts ``start_s``, ``start_speed``, ``rho`` and ``n_opponents``; other keys are
 ignored with a logged warning (PettingZoo's API test passes arbitrary options).
+
+**AEC.** :func:`env` and :func:`raw_env` give the same race as PettingZoo's agent-environment-cycle
+API (``pettingzoo.utils.parallel_to_aec``; :func:`env` with PettingZoo's order enforcement, :func:`raw_env`
+without): the cars act one after the other, and the race advances once all live cars have acted.
+
+**Copies.** ``copy.deepcopy``, ``pickle`` and ``get_state()`` / ``set_state()`` work as for the Gymnasium
+environment (:class:`~sofar_env.env.SOfARRaceEnv`, "Copies and saved states"; :mod:`sofar_env.snapshot`):
+a copy or a restored state continues to the bit as the original under the same actions.
 """
 
 from __future__ import annotations
@@ -67,22 +75,25 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
-from pettingzoo import ParallelEnv
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils import parallel_to_aec
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 
 from .config import OBJECTIVE_NAMES, EnvConfig, apply_overrides, make_env_config
 from .constants import GAMMA_MAX, GAMMA_MIN
 from .core import ControlledRace, parse_gamma
 from .observation import observation_size
 from .race import MAX_SPEED_FACTOR, _is_real
+from .snapshot import Snapshots
 
-__all__ = ["SOfARParallelEnv", "parallel_env"]
+__all__ = ["SOfARParallelEnv", "parallel_env", "env", "raw_env"]
 
 logger = logging.getLogger(__name__)
 
 _MA_RESET_OPTIONS = ("start_s", "start_speed", "rho", "n_opponents")
 
 
-class SOfARParallelEnv(ParallelEnv):
+class SOfARParallelEnv(Snapshots, ParallelEnv):
     """Multi-car race; see the module docstring. Agents are named ``car_0`` ... ``car_{n-1}``."""
 
     metadata = {"name": "sofar_race_v0", "render_modes": ["human", "rgb_array"], "render_fps": 10,
@@ -120,6 +131,8 @@ class SOfARParallelEnv(ParallelEnv):
         self.objective_names = OBJECTIVE_NAMES
         self._np_random = None
         self._renderer = None
+
+    _state_attributes = ("core", "_np_random", "agents")  # what get_state() saves
 
     def observation_space(self, agent: str) -> spaces.Box:
         return self._observation_spaces[agent]
@@ -216,3 +229,14 @@ def parallel_env(track: str = "LagunaSeca", n_agents: int = 3, **kwargs: Any) ->
     :func:`~sofar_env.config.make_env_config` except ``n_opponents``.
     """
     return SOfARParallelEnv(n_agents=n_agents, track=track, **kwargs)
+
+
+def raw_env(track: str = "LagunaSeca", n_agents: int = 3, **kwargs: Any) -> AECEnv:
+    """The race of :func:`parallel_env` (same arguments) as a PettingZoo ``AECEnv``, without wrappers."""
+    return parallel_to_aec_wrapper(parallel_env(track=track, n_agents=n_agents, **kwargs))
+
+
+def env(track: str = "LagunaSeca", n_agents: int = 3, **kwargs: Any) -> AECEnv:
+    """The race of :func:`parallel_env` (same arguments) as a PettingZoo ``AECEnv``
+    (``pettingzoo.utils.parallel_to_aec``: with PettingZoo's order enforcement)."""
+    return parallel_to_aec(parallel_env(track=track, n_agents=n_agents, **kwargs))

@@ -9,7 +9,8 @@
 
 ``gymnasium.make("sofar_env:SOfAR-Monza-v0")`` works without a prior import. The entry
 points are ``"module:function"`` strings (:mod:`sofar_env.factory`), so the specs pickle
-(vector environments) and nothing heavy is imported at registration. The ids are registered
+(vector environments) and nothing heavy is imported at registration; their vector entry points
+(``gymnasium.make_vec``) give MO-Gymnasium's vector env in vector mode. The ids are registered
 with ``disable_env_checker=True`` because the entry points apply Gymnasium's passive checker
 themselves in scalar mode and leave it off in vector mode (see :mod:`sofar_env.factory`).
 """
@@ -37,12 +38,16 @@ MAX_EPISODE_STEPS = 2000
 """200 s at dt = 0.1 s."""
 ENTRY_POINT = "sofar_env.factory:make_env"
 CUSTOM_ENTRY_POINT = "sofar_env.factory:make_custom_env"
+VECTOR_ENTRY_POINT = "sofar_env.factory:make_vector_env"
+"""What ``gymnasium.make_vec`` uses by default: MO-Gymnasium's ``MOSyncVectorEnv`` in vector mode
+(:func:`sofar_env.factory.make_vector_env`)."""
+CUSTOM_VECTOR_ENTRY_POINT = "sofar_env.factory:make_custom_vector_env"
 
 
-def _register(env_id: str, entry_point: str, kwargs: dict) -> None:
+def _register(env_id: str, entry_point: str, vector_entry_point: str, kwargs: dict) -> None:
     if env_id not in gym.registry:
-        gym.register(id=env_id, entry_point=entry_point, max_episode_steps=MAX_EPISODE_STEPS,
-                     disable_env_checker=True, kwargs=kwargs)
+        gym.register(id=env_id, entry_point=entry_point, vector_entry_point=vector_entry_point,
+                     max_episode_steps=MAX_EPISODE_STEPS, disable_env_checker=True, kwargs=kwargs)
 
 
 def register_envs() -> None:
@@ -51,5 +56,5 @@ def register_envs() -> None:
     for ids, extra in ((ENV_IDS, {}), (INTERACTIVE_IDS, {"scenario": "interactive"}),
                        (DYNAMIC_IDS, {"scenario": "dynamic"})):
         for name, env_id in zip(TRACKS, ids):
-            _register(env_id, ENTRY_POINT, {"track": name, **extra})
-    _register(CUSTOM_ID, CUSTOM_ENTRY_POINT, {})
+            _register(env_id, ENTRY_POINT, VECTOR_ENTRY_POINT, {"track": name, **extra})
+    _register(CUSTOM_ID, CUSTOM_ENTRY_POINT, CUSTOM_VECTOR_ENTRY_POINT, {})

@@ -95,7 +95,9 @@ def test_spaces():
     assert env.observation_space == gym.spaces.Box(-1.0, 1.0, (12,), np.float32)
     assert env.objective_names == OBJECTIVE_NAMES == (
         "safety", "overtakes", "progress", "barrier_margin", "gamma_smoothness")
-    assert env.reward_space.shape == (5,) and env.reward_space.dtype == np.float32
+    assert not hasattr(env, "reward_space")  # scalar mode: not a multi-objective env
+    space = SOfARRaceEnv(reward_mode="vector", **SHORT).reward_space
+    assert space.shape == (5,) and space.dtype == np.float32
     assert env.metadata["render_fps"] == 10 and set(env.metadata["render_modes"]) == {"human", "rgb_array"}
 
 

@@ -68,3 +68,54 @@ def test_mo_sync_vector_env_autoresets_and_records_vector_returns():
             break
     assert finished
     venv.close()
+
+
+def test_scalar_mode_is_not_an_mo_env_and_mo_wrappers_refuse_it():
+    env = mog.make(ENV_ID, race={"duration": 3.0})  # scalar mode (the default)
+    assert not hasattr(env.unwrapped, "reward_space")
+    with pytest.raises(AttributeError, match="reward_mode='vector'"):
+        LinearReward(env, weight=np.ones(5))
+    env.close()
+
+
+def test_linear_reward_through_mo_gymnasium_scalarises_the_real_vector():
+    weights = np.array([10.0, 1.0, 0.05, 0.5, 0.1])
+    env = LinearReward(mog.make(ENV_ID, reward_mode="vector", race={"duration": 3.0}), weight=weights)
+    scalar = mog.make(ENV_ID, race={"duration": 3.0})
+    env.reset(seed=2)
+    scalar.reset(seed=2)
+    for _ in range(5):
+        _, r, *_, info = env.step(np.array([0.5], np.float32))
+        _, s, *_ = scalar.step(np.array([0.5], np.float32))
+        assert info["vector_reward"].shape == (5,) and np.count_nonzero(info["vector_reward"] == s) < 5
+        assert r == pytest.approx(s, rel=1e-5, abs=1e-6)  # the env's own scalar is the same weighted sum
+    env.close()
+    scalar.close()
+
+
+def test_make_vec_in_vector_mode_returns_mo_gymnasium_vector_env():
+    import gymnasium as gym
+
+    venv = gym.make_vec(ENV_ID, num_envs=2, reward_mode="vector", race={"duration": 3.0})
+    assert isinstance(venv, MOSyncVectorEnv) and venv.reward_space.shape == (5,)
+    venv.reset(seed=[0, 1])
+    _, rewards, _, _, infos = venv.step(np.full((2, 1), 0.5, dtype=np.float32))
+    assert rewards.shape == (2, 5) and rewards.dtype == np.float32
+    np.testing.assert_array_equal(rewards, infos["reward_vector"])
+    venv.close()
+
+
+def test_make_vec_in_scalar_mode_is_gymnasium_sync_vector_env():
+    import gymnasium as gym
+
+    venv = gym.make_vec(ENV_ID, num_envs=2, race={"duration": 3.0})
+    assert type(venv) is gym.vector.SyncVectorEnv and venv.envs[0].spec.id == ENV_ID
+    one = gym.make(ENV_ID, race={"duration": 3.0})
+    venv.reset(seed=[5, 6])
+    one.reset(seed=5)
+    for _ in range(3):
+        _, rewards, *_ = venv.step(np.full((2, 1), 0.5, dtype=np.float32))
+        _, r, *_ = one.step(np.array([0.5], np.float32))
+        assert rewards.shape == (2,) and rewards[0] == r
+    venv.close()
+    one.close()

@@ -353,3 +353,18 @@ def test_lateral_rates_reach_the_controllers_of_a_multi_car_race_only():
     single = gym.make("SOfAR-LagunaSeca-v0").unwrapped
     single.reset(seed=0)
     assert single.core._sensed_rows[0].shape[1] == 3
+
+
+def test_aec_env_and_raw_env_pass_the_pettingzoo_api_test():
+    from pettingzoo import AECEnv
+    from pettingzoo.test import api_test
+    from pettingzoo.utils.wrappers import OrderEnforcingWrapper
+
+    from sofar_env.multi_agent import env, raw_env
+
+    aec = env(track="LagunaSeca", n_agents=2, **SHORT)
+    assert isinstance(aec, OrderEnforcingWrapper)
+    api_test(aec, num_cycles=10)
+    raw = raw_env(track="LagunaSeca", n_agents=2, **SHORT)
+    assert isinstance(raw, AECEnv) and not isinstance(raw, OrderEnforcingWrapper)
+    assert raw.possible_agents == ["car_0", "car_1"]
