@@ -11,9 +11,11 @@ to Cartesian coordinates, drawn with the longitudinal semi-axis of the side the 
 approach from), the MIQP lateral plan (orange dots), the MPC prediction (cyan line), the
 opponents (red; in the interactive world purple while a car makes or holds a defensive move and
 pink while it lifts) and the ego (blue) as their 4.9 m x 1.9 m footprints, with a sensor
-the opponents where the controller sees them (white outlines), a text panel
-with time, speed, gamma and overtakes (top left) and a legend of these marks (bottom left;
-``Renderer(legend=False)`` leaves it out). Frames are drawn with PIL (~5-8 ms at 640 x 480).
+the opponents where the controller sees them (white outlines), and a text panel
+with time, speed, gamma and overtakes (top left). A legend strip along the bottom of the frame, below
+the view of the track, names the marks that appear in the world drawn (the defending and lifting colours
+only where opponents defend or lift, the sensed positions only with a sensor; ``Renderer(legend=False)``
+leaves it out and gives the whole frame to the view). Frames are drawn with PIL (~5-8 ms at 640 x 480).
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from .control.barrier import BarrierParams, semi_axis_s
 from .geometry import footprint_corners
 from .vehicle import AV21, VehicleParams
 
-__all__ = ["LEGEND", "Renderer", "write_animation"]
+__all__ = ["LEGEND", "Renderer", "legend_entries", "write_animation"]
 
 _GRASS = (62, 112, 58)
 _TARMAC = (92, 92, 98)
@@ -60,7 +62,20 @@ LEGEND = (
     ("raceline", "line", _RACELINE),
     ("track edge", "line", _EDGE),
 )
-"""The legend of a frame: (label, mark, colour) of everything :meth:`Renderer.draw` draws."""
+"""The legend of a frame: (label, mark, colour) of everything :meth:`Renderer.draw` draws (a frame's legend
+shows those that appear in its world: :func:`legend_entries`)."""
+_ROW, _MARK_W, _PAD, _GAP = 15, 22, 6, 14
+"""Legend layout [px]: row height, mark width, padding, space between two entries of a row."""
+
+
+def legend_entries(race, seen: bool) -> tuple[tuple[str, str, tuple[int, int, int]], ...]:
+    """The entries of :data:`LEGEND` that can appear in ``race``'s world: defending and lifting only where the
+    opponents defend or lift, the sensed positions only with a sensor (``seen``)."""
+    config = getattr(getattr(race, "opponents", None), "config", None)
+    defends = bool(config is not None and config.defence.active)
+    lifts = bool(config is not None and config.pace.lift_rate > 0.0 and config.pace.lift_depth < 1.0)
+    drop = {"defending": not defends, "lifting": not lifts, "sensed position": not seen}
+    return tuple(entry for entry in LEGEND if not drop.get(entry[0], False))
 
 
 def _font(size: int):
@@ -70,16 +85,22 @@ def _font(size: int):
         return ImageFont.load_default()
 
 
-def _legend_image(font) -> Image.Image:
-    """The legend panel of :data:`LEGEND` (drawn once, pasted into every frame)."""
-    row, mark_w, pad = 15, 22, 6
+def _legend_image(font, entries, width: int) -> Image.Image:
+    """The legend strip of ``entries``, ``width`` px wide: the entries left to right in as many rows as they
+    need (drawn once, pasted into every frame)."""
     probe = ImageDraw.Draw(Image.new("RGB", (1, 1)))
-    text_w = max(probe.textlength(label, font=font) for label, _, _ in LEGEND)
-    img = Image.new("RGB", (int(2 * pad + mark_w + 6 + text_w), 2 * pad + row * len(LEGEND) - 3), _PANEL)
+    places, x, row = [], _PAD, 0
+    for label, _, _ in entries:
+        w = _MARK_W + 6 + int(math.ceil(probe.textlength(label, font=font)))
+        if x > _PAD and x + w > width - _PAD:
+            x, row = _PAD, row + 1
+        places.append((x, row))
+        x += w + _GAP
+    img = Image.new("RGB", (width, 2 * _PAD + _ROW * (row + 1) - 3), _PANEL)
     d = ImageDraw.Draw(img)
-    for i, (label, mark, colour) in enumerate(LEGEND):
-        y = pad + row * i + row // 2 - 1
-        x0, x1 = pad, pad + mark_w
+    for (label, mark, colour), (x0, i) in zip(entries, places):
+        y = _PAD + _ROW * i + _ROW // 2 - 1
+        x1 = x0 + _MARK_W
         if mark == "car":
             d.rectangle((x0 + 4, y - 3, x1 - 4, y + 3), fill=colour, outline=(0, 0, 0))
         elif mark == "outline":
@@ -119,24 +140,31 @@ class Renderer:
         self.look_ahead = 0.2 * float(view_width)
         """The camera centre is this far ahead of the ego along its heading [m]."""
         self._font = _font(14)
-        self._legend = _legend_image(_font(12)) if legend else None
+        self.legend = bool(legend)
+        self._legend = None
+        """The legend strip, drawn on the first frame (its entries depend on the world)."""
         self._figure = None
         self._image = None
 
     # ------------------------------------------------------------------ drawing
+    @property
+    def view_height(self) -> int:
+        """Height of the view of the track [px]: the frame above the legend strip."""
+        return self.height - (self._legend.size[1] if self._legend is not None else 0)
+
     def _to_px(self, xy: np.ndarray, centre: np.ndarray) -> list[tuple[float, float]]:
         p = (np.asarray(xy, float).reshape(-1, 2) - centre) * self.scale
         px = p[:, 0] + 0.5 * self.width
-        py = 0.5 * self.height - p[:, 1]
+        py = 0.5 * self.view_height - p[:, 1]
         return list(zip(px.tolist(), py.tolist()))
 
     def _visible(self, xy: np.ndarray, centre: np.ndarray, margin: float = 1.2) -> np.ndarray:
-        half = margin * 0.5 * np.array([self.width, self.height]) / self.scale
+        half = margin * 0.5 * np.array([self.width, self.view_height]) / self.scale
         return np.all(np.abs(np.asarray(xy, float).reshape(-1, 2) - centre) <= half, axis=1)
 
     def _visible_runs(self, centre: np.ndarray) -> list[np.ndarray]:
         """Index arrays of the contiguous stretches of track samples near the view."""
-        half = 0.5 * np.array([self.width, self.height]) / self.scale + self._reach + 5.0
+        half = 0.5 * np.array([self.width, self.view_height]) / self.scale + self._reach + 5.0
         idx = np.flatnonzero(np.all(np.abs(self._mid - centre) <= half, axis=1))
         if idx.size == 0:
             return []
@@ -160,6 +188,8 @@ class Renderer:
              seen: np.ndarray | None = None) -> np.ndarray:
         """One frame (height, width, 3) uint8 centred on controlled car ``car``; ``seen``: rows (s, n, v) of
         the opponents as the car's sensor reports them (drawn as outlines), None without a sensor."""
+        if self.legend and self._legend is None:
+            self._legend = _legend_image(_font(12), legend_entries(race, seen is not None), self.width)
         img = Image.new("RGB", (self.width, self.height), _GRASS)
         d = ImageDraw.Draw(img)
         ego = race.states[car]
@@ -227,11 +257,12 @@ class Renderer:
 
     @property
     def legend_box(self) -> tuple[int, int, int, int] | None:
-        """(left, top, right, bottom) of the legend in a frame [px], None without a legend."""
+        """(left, top, right, bottom) of the legend strip in a frame [px], below the view of the track; None
+        without a legend (or before the first frame)."""
         if self._legend is None:
             return None
         w, h = self._legend.size
-        return 6, self.height - 6 - h, 6 + w, self.height - 6
+        return 0, self.height - h, w, self.height
 
     # ------------------------------------------------------------------ window
     def show(self, frame: np.ndarray) -> None:

@@ -78,7 +78,7 @@ def test_human_mode_draws_into_a_matplotlib_figure():
     assert env.unwrapped._renderer is None
 
 
-def test_frames_carry_a_legend_of_every_mark():
+def test_frames_carry_a_legend_of_the_marks_of_their_world():
     from sofar_env.env import SOfARRaceEnv
     from sofar_env.render import LEGEND, Renderer
 
@@ -88,23 +88,33 @@ def test_frames_carry_a_legend_of_every_mark():
         env.step(np.array([0.5], np.float32))
     frame = env.render()
     left, top, right, bottom = env._renderer.legend_box
-    assert 0 <= left < right <= frame.shape[1] and 0 <= top < bottom <= frame.shape[0]
+    assert (left, right, bottom) == (0, frame.shape[1], frame.shape[0]) and 0 < top < bottom  # a strip at the bottom
     panel = frame[top:bottom, left:right].reshape(-1, 3)
     drawn = {tuple(c) for c in np.unique(panel, axis=0).tolist()}
+    absent = {"defending", "lifting", "sensed position"}  # the paper world: no defence, no lifts, no sensor
     for label, _, colour in LEGEND:
-        assert tuple(colour) in drawn, label  # every mark is in the legend panel, in the colour the frame uses
+        assert (tuple(colour) in drawn) == (label not in absent), label  # in the colour the frame uses
 
-    def draw(legend: bool) -> np.ndarray:
-        r = Renderer(env.track, env.config.race.vehicle, env.config.stack.mpc.barrier, legend=legend)
+    def draw(legend: bool, height: int = 480) -> np.ndarray:
+        r = Renderer(env.track, env.config.race.vehicle, env.config.stack.mpc.barrier, height=height, legend=legend)
         return r.draw(env.race, env.last_output, gamma=0.5)
 
-    with_legend, without = draw(True), draw(False)
-    np.testing.assert_array_equal(with_legend, frame)  # the env's frame is this renderer's
-    inside = np.zeros(frame.shape[:2], bool)
-    inside[top:bottom, left:right] = True
-    np.testing.assert_array_equal(with_legend[~inside], without[~inside])  # the legend covers only its box
-    assert not np.array_equal(with_legend[inside], without[inside])
+    np.testing.assert_array_equal(draw(True), frame)  # the env's frame is this renderer's
+    # the legend covers no part of the view of the track: above it, the frame is a legend-free frame of that height
+    np.testing.assert_array_equal(frame[:top], draw(False, height=top))
     assert Renderer(env.track, legend=False).legend_box is None
+    env.close()
+
+
+def test_the_legend_of_the_interactive_world_names_its_marks():
+    from sofar_env.env import SOfARRaceEnv
+    from sofar_env.render import LEGEND, legend_entries
+
+    env = SOfARRaceEnv(scenario="interactive", render_mode="rgb_array", race={"duration": 1.0})
+    env.reset(seed=0)
+    env.render()
+    assert legend_entries(env.race, seen=True) == LEGEND
+    assert [e[0] for e in legend_entries(env.race, seen=False)] == [e[0] for e in LEGEND if e[0] != "sensed position"]
     env.close()
 
 
