@@ -5,6 +5,10 @@ Examples::
     python -m sofar_env.tracks build boundaries_LS.csv --name LagunaSeca --out tracks/LagunaSeca
     python -m sofar_env.tracks build centerline.csv --format centerline --name MyTrack --out my_tracks/MyTrack
     python -m sofar_env.tracks info LagunaSeca Monza tracks/MyTrack
+
+``build`` checks its arguments before it builds: an input that cannot be read, or an ``--out``
+that is a file, cannot be created, or already holds a circuit (without ``--force``), ends it
+at once with a message and exit status 2.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import sys
 import numpy as np
 
 from .builder import BuildConfig, build_track
+from .builder.io import CircuitExistsError, OutputFolderError, check_output_folder, check_source
 from .format import TrackFormatError
 from .track import Track
 
@@ -28,7 +33,10 @@ def _parser() -> argparse.ArgumentParser:
     build = sub.add_parser("build", help="build a circuit folder from an edges or centreline CSV file")
     build.add_argument("source", help="input CSV file")
     build.add_argument("--name", required=True, help="circuit name stored in meta.json")
-    build.add_argument("--out", required=True, help="output folder (created if needed)")
+    build.add_argument("--out", required=True,
+                       help="output folder (created if needed; one that already holds a circuit needs --force)")
+    build.add_argument("--force", action="store_true",
+                       help="replace the circuit files of an --out folder that already holds a circuit")
     build.add_argument("--format", choices=("edges", "centerline"), default="edges",
                        help="edges: left_x,left_y,right_x,right_y; centerline: x_m,y_m,w_tr_right_m,w_tr_left_m")
     build.add_argument("--top-speed", type=float, default=defaults.top_speed, help="speed cap [m/s]")
@@ -78,6 +86,19 @@ class _UserError(ValueError):
     """An option value or circuit name given on the command line is invalid."""
 
 
+def _check_build_arguments(args: argparse.Namespace) -> None:
+    """Before anything is built (minutes for a real circuit): the input must be a readable file
+    (TrackFormatError, reported as ``error: <file>: <problem>``), and ``--out`` a folder that can be
+    written and, unless ``--force``, holds no circuit yet (a usage error). Both exit with status 2."""
+    check_source(args.source)
+    try:
+        check_output_folder(args.out, overwrite=args.force)
+    except CircuitExistsError as exc:
+        raise _UserError(f"--out {exc}; pass --force to replace its files, or choose another --out") from None
+    except OutputFolderError as exc:
+        raise _UserError(f"--out {exc}") from None
+
+
 def _run(args: argparse.Namespace) -> int:
     if args.command == "build":
         logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
@@ -95,6 +116,7 @@ def _run(args: argparse.Namespace) -> int:
             config.validate()
         except ValueError as exc:
             raise _UserError(str(exc)) from None
+        _check_build_arguments(args)
         track = build_track(args.source, args.name, args.out, source_format=args.format, config=config)
         sys.stdout.write(f"wrote {args.out}\n{_summary(track)}\n")
         return 0

@@ -39,6 +39,11 @@ __all__ = [
     "read_centerline_csv",
     "sha256",
     "write_circuit",
+    "CIRCUIT_FILES",
+    "OutputFolderError",
+    "CircuitExistsError",
+    "check_source",
+    "check_output_folder",
 ]
 
 CENTERLINE_FILE = "centerline.csv"
@@ -79,6 +84,24 @@ def _reject_other_delimiter(path: Path, lineno: int, line: str, ncols: int) -> N
                 f"{path}: line {lineno}: expected comma-separated values, found {shown} "
                 f"({line[:60]!r}); convert the file to commas (with '.' as the decimal point)"
             )
+
+
+def check_source(path: str | os.PathLike) -> None:
+    """Raise TrackFormatError naming ``path`` unless it is a file this process can read.
+
+    The same messages as the readers give (``file not found``, ``cannot read (...)``), only without
+    reading the file: the command line checks its arguments with it before anything runs.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise TrackFormatError(f"{path}: file not found")
+    if path.is_dir():
+        raise TrackFormatError(f"{path}: cannot read (a folder, not a file)")
+    try:
+        with open(path, "rb"):
+            pass
+    except OSError as exc:
+        raise TrackFormatError(f"{path}: cannot read ({exc})") from None
 
 
 def _read_numeric_csv(path: Path, ncols: int) -> np.ndarray:
@@ -143,6 +166,46 @@ def read_centerline_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray
 
 
 # ---------------------------------------------------------------- output folder
+
+
+CIRCUIT_FILES = (RACELINE_FILE, LEFT_EDGE_FILE, RIGHT_EDGE_FILE, CENTERLINE_FILE, META_FILE)
+"""The files :func:`write_circuit` writes (and replaces) in a circuit folder."""
+
+
+class OutputFolderError(ValueError):
+    """The circuit folder cannot be written where asked (see :func:`check_output_folder`)."""
+
+
+class CircuitExistsError(OutputFolderError):
+    """The output folder already holds a circuit, and it is not to be replaced."""
+
+
+def check_output_folder(folder: str | os.PathLike, *, overwrite: bool = True) -> Path:
+    """Check, before a build, that :func:`write_circuit` can write ``folder``; return it as a Path.
+
+    ``folder`` must be an existing folder this process may write into, or not exist yet with its
+    nearest existing parent a folder this process may create it in. With ``overwrite=False`` a folder
+    that already holds any of :data:`CIRCUIT_FILES` is refused as well (:class:`CircuitExistsError`).
+    Raises :class:`OutputFolderError` (a ValueError) saying what is in the way; writes nothing.
+    """
+    folder = Path(folder)
+    if folder.exists() or folder.is_symlink():
+        if not folder.is_dir():
+            raise OutputFolderError(f"{folder} exists and is not a folder")
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise OutputFolderError(f"{folder}: no permission to write into it")
+        present = [name for name in CIRCUIT_FILES if (folder / name).exists()]
+        if present and not overwrite:
+            raise CircuitExistsError(f"{folder} already holds a circuit ({', '.join(present)})")
+        return folder
+    parent = folder.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise OutputFolderError(f"{folder}: cannot create it, {parent} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputFolderError(f"{folder}: no permission to create it in {parent}")
+    return folder
 
 
 def write_circuit(folder: str | os.PathLike, built: BuiltCircuit) -> Path:

@@ -22,7 +22,15 @@ from ..track import Track
 from .checks import check_edges
 from .config import BuildConfig
 from .edges import centerline, orient_edges, prepare_edge
-from .io import CENTERLINE_FILE, BuiltCircuit, read_centerline_csv, read_edges_csv, sha256, write_circuit
+from .io import (
+    CENTERLINE_FILE,
+    BuiltCircuit,
+    check_output_folder,
+    read_centerline_csv,
+    read_edges_csv,
+    sha256,
+    write_circuit,
+)
 from .polyline import (
     clean_closed,
     closest_points,
@@ -160,9 +168,13 @@ def build_track(
 
     ``source_format`` is ``"edges"`` (``left_x, left_y, right_x, right_y``) or
     ``"centerline"`` (``x_m, y_m, w_tr_right_m, w_tr_left_m``).  When
-    ``out_dir`` is given the circuit files are written there and the returned
-    Track is loaded back from disk.
+    ``out_dir`` is given the circuit files are written there (replacing those of
+    a circuit already there) and the returned Track is loaded back from disk; a
+    ``out_dir`` that cannot be written (an existing file, a folder without write
+    permission) raises :class:`~.io.OutputFolderError` before anything is built.
     """
+    if out_dir is not None:
+        check_output_folder(out_dir)
     path = Path(source)
     if source_format == "edges":
         left, right = read_edges_csv(path)
