@@ -116,7 +116,8 @@ class PASTAPolicy:
         return np.clip(gamma, self.action_low, self.action_high).astype(np.float32, copy=False)
 
     def __repr__(self) -> str:
-        return f"PASTAPolicy(path={str(self.path)!r}, preference={self.preference.tolist()})"
+        weights = ", ".join(f"{float(w):.6g}" for w in self.preference)  # float32 weights as written: 0.31
+        return f"PASTAPolicy(path={str(self.path)!r}, preference=[{weights}])"
 
 
 def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = None) -> PASTAPolicy:

@@ -76,9 +76,15 @@ def log_update(writer: Any, agent: PASTA, stats: dict[str, Any]) -> None:
                 writer.add_scalar(f"charts/{tag}", float(np.mean(vals)), step)
 
 
+def format_number(value: float, digits: int = 3) -> str:
+    """``value`` with ``digits`` decimals, without the sign of a value that rounds to zero (no ``-0.000``)."""
+    text = f"{float(value):.{digits}f}"
+    return text[1:] if text.startswith("-") and float(text) == 0.0 else text
+
+
 def format_returns(names: tuple[str, ...], returns: np.ndarray) -> str:
     """``safety -0.120  overtakes 1.000 ...``: per-objective returns labelled with the objective names."""
-    return "  ".join(f"{name} {value:.3f}" for name, value in zip(names, returns))
+    return "  ".join(f"{name} {format_number(value)}" for name, value in zip(names, returns))
 
 
 def console_line(agent: PASTA, stats: dict[str, Any], total_steps: int) -> str:
