@@ -34,7 +34,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--out", default=None, help="output folder (default results/, or results/quick with --quick)")
     p.add_argument("--workers", type=positive_int, default=None, help="worker processes (default: os.cpu_count())")
     p.add_argument("--backend", default="local", choices=("local", "ray"),
-                   help="local: a process pool on this machine; ray: Ray actors (pip install \"sofar[ray]\")")
+                   help="local: a process pool on this machine; ray: Ray actors (pip install \"sofar[ray]\"). Ray's "
+                        "start-up (the instance, then every worker's imports and environments) dominates small sweeps: "
+                        "on --quick it is several times slower than local (results/first_ten_minutes.md); it pays off "
+                        "on long sweeps and on a cluster")
     p.add_argument("--address", default=None,
                    help="with --backend ray: 'auto' or HOST:6379 joins a running Ray cluster (the package must be "
                         "installed on every node); default: start a local Ray instance with --workers CPUs")

@@ -127,7 +127,9 @@ class Args:
     this machine, each owning a slice of the envs, their solvers and a copy of the policy, stepping in chunks
     without a per-step barrier) or ``ray`` (the same in Ray actors, on this machine or a cluster); the learner
     stays here. Every backend gives the same checkpoints; default: ``processes`` with more than one env (with
-    ``--multi-agent``: race) or with ``--num-workers``, else ``local``."""
+    ``--multi-agent``: race) or with ``--num-workers``, else ``local``. Ray's start-up (the instance, then every
+    worker's imports and environments) takes seconds, most of a short run such as ``--quick``: it pays off on
+    long runs and on a cluster."""
     num_workers: Annotated[int, positive_int] | None = None
     """Workers with ``--backend processes`` or ``ray`` (one CPU each; default: one per env, with ``processes``
     at most one per CPU this process may use)."""

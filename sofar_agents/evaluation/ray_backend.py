@@ -56,7 +56,7 @@ def run_ray(pending: Sequence[EpisodeTask], handle: Callable, *, workers: int | 
     Uses an already initialised Ray (and leaves it running); otherwise starts or joins one
     (see the module docstring) and shuts it down at the end. Returns the number of actors.
     """
-    ray = require_ray()
+    ray = require_ray(local=address is None)
     started = init_ray(address, int(workers or os.cpu_count() or 1))
     actors: list = []
     try:

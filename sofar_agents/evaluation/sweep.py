@@ -131,7 +131,7 @@ def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, work
     if backend == "ray":
         from sofar_agents.evaluation import ray_backend
 
-        ray_backend.require_ray()  # fail before reading anything if Ray is missing
+        ray_backend.require_ray(local=address is None)  # fail before reading anything if Ray is missing
     t_start = time.perf_counter()
     done = {_row_key(r) for r in read_episode_csv(csv_path)}
     pending, seen = [], set()

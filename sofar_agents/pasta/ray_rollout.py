@@ -37,7 +37,7 @@ class RayEnvPool(ActorEnvPool):
     def __init__(self, env_fns: Sequence[Callable[[], Any]], num_workers: int, address: str | None = None,
                  chunk_steps: int = 64, cars_per_race: int | None = None) -> None:
         super().__init__(env_fns, num_workers, chunk_steps, cars_per_race)
-        self._ray = require_ray()
+        self._ray = require_ray(local=address is None)
         self._started = init_ray(address, num_workers)
         actor_cls = self._ray.remote(num_cpus=1, max_restarts=0)(EnvSlice)
         self.actors = [actor_cls.remote(fn, lo, self.num_envs) for fn, (lo, _) in zip(self._vector_fns, self.slices)]
