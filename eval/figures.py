@@ -86,8 +86,9 @@ def main(argv=None) -> int:
         except ImportError as exc:  # --backend ray without Ray
             print(f"error: {exc}", file=sys.stderr)
             return 2
-        if stats.failed:
-            print(f"warning: {stats.failed} episodes failed", file=sys.stderr)
+        incomplete = ev.incomplete_message(stats, out)
+        if incomplete:  # the figures are drawn from the finished episodes
+            logging.getLogger("figures").warning(incomplete)
     trace = ev.read_trace_csv(trace_path, strategy=args.strategy)
     if trace["gamma"].size == 0:
         print(f"error: no steps of strategy {args.strategy!r} in {trace_path}", file=sys.stderr)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -36,6 +37,7 @@ from sofar_agents.evaluation.multi_agent import (
     run_race,
 )
 from sofar_agents.evaluation.protocol import Strategy
+from sofar_agents.worker_lifetime import exit_with_parent
 from sofar_env.constants import CIRCUITS
 
 logger = logging.getLogger("multi_agent_races")
@@ -88,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.workers == 1:
         results = [_run(task, overrides, stack) for task in tasks]
     else:
-        with ProcessPoolExecutor(args.workers) as pool:
+        with ProcessPoolExecutor(args.workers, initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
             results = list(pool.map(_run, tasks, [overrides] * len(tasks), [stack] * len(tasks)))
     for r in results:
         logger.info("%s seed %d: %d overtakes, %d colliding, %d off track, %d stalled, pace %s",

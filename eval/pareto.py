@@ -96,7 +96,11 @@ def main(argv=None) -> int:
         return 2
     print(report.markdown)
     print("Wrote " + ", ".join(str(p) for p in report.paths.values()))
-    return 1 if report.stats.failed else 0
+    incomplete = ev.incomplete_message(report.stats, out)
+    if incomplete:
+        logging.getLogger("pareto").error(incomplete)
+        return 1
+    return 0
 
 
 if __name__ == "__main__":

@@ -9,8 +9,11 @@
     python eval/table.py --multi-agent --self-play runs/selfplay/pasta_final.json --gammas 0.3 0.5 --workers 1
 
 Results (per-episode CSV, Markdown table) go to --out; rerunning the same command
-skips the episodes already in the CSV. The logic lives in sofar_agents.evaluation
-(experiments.py runs a table; protocol.py says which episodes it holds).
+skips the episodes already in the CSV. A run that leaves episodes out (failed, or lost
+with a worker process that died) says how many and exits with status 1; numbers out of
+range are usage errors (status 2). The worker processes end with this one, even when it
+is killed. The logic lives in sofar_agents.evaluation (experiments.py runs a table;
+protocol.py says which episodes it holds).
 """
 
 from __future__ import annotations
@@ -23,6 +26,8 @@ from sofar_agents import evaluation as ev
 from sofar_agents.cli_types import gamma_value, int_at_least, nonneg_float, nonneg_int, positive_float, positive_int
 from sofar_env.scenarios import SCENARIOS
 from sofar_env.stack.config import STACK_PRESETS
+
+logger = logging.getLogger("table")
 
 QUICK_DURATION = 30.0
 """Episode horizon of --quick [s]: long enough for a few overtakes (3-4 per episode at rho 0.5)."""
@@ -125,7 +130,11 @@ def main(argv=None) -> int:
               f"({ev.FULL_TABLE1_STEPS / 1e6:.1f} M steps) would take about {full_h:.1f} h on {st.workers} "
               f"worker{'' if st.workers == 1 else 's'}.")
     print(f"Wrote {report.csv_path} and {report.markdown_path}")
-    return 1 if st.failed else 0
+    incomplete = ev.incomplete_message(st, out)
+    if incomplete:
+        logger.error(incomplete)
+        return 1
+    return 0
 
 
 def multi_agent_main(args: argparse.Namespace) -> int:
@@ -155,6 +164,11 @@ def multi_agent_main(args: argparse.Namespace) -> int:
         return 130
     print(report.markdown)
     print(f"Wrote {report.csv_path} and {report.markdown_path}")
+    if report.missing:
+        logger.error("incomplete: %d of %d races are missing (a worker process died); re-run with the same --out %s "
+                     "to resume (the finished races are kept, only the missing ones run)", report.missing,
+                     report.expected, out)
+        return 1
     return 0
 
 

@@ -53,7 +53,7 @@ from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FU
                                               resolve_policy_path, table1_tasks)
 from sofar_agents.evaluation.results import (EPISODE_COLUMNS, TRACE_COLUMNS, EpisodeResult, read_episode_csv,
                                              read_seed_sets, read_trace_csv, select_rows, write_markdown)
-from sofar_agents.evaluation.sweep import SweepStats, run_sweep
+from sofar_agents.evaluation.sweep import SweepStats, incomplete_message, run_sweep
 from sofar_agents.evaluation.training_curves import find_event_dirs, plot_training_curves, read_scalars
 from sofar_agents.evaluation.tables import (PAPER_TABLE1_SUCCESS, Summary, aggregate, format_table1,
                                             format_table2, paper_comparison, rank_marks, summarize)
@@ -108,6 +108,7 @@ __all__ = [
     "run_episode",
     "slack_active",
     "run_sweep",
+    "incomplete_message",
     "run_table1",
     "run_miqp_ablation",
     "TableReport",

@@ -265,8 +265,12 @@ def run_interventions(tasks: Sequence[EpisodeTask], interventions: Sequence[Inte
         nested = [_intervene_star(j) for j in jobs]
     else:
         import multiprocessing as mp
+        import os
 
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+        from sofar_agents.worker_lifetime import exit_with_parent
+
+        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=exit_with_parent,
+                                 initargs=(os.getpid(),)) as pool:
             nested = list(pool.map(_intervene_star, jobs))
     return [r for rs in nested for r in rs]
 

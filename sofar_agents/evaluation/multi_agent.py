@@ -28,6 +28,7 @@ import os
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,7 @@ import numpy as np
 
 from sofar_agents.evaluation.protocol import DEFAULT_DURATION, TRACKS, Strategy, _fmt_float, episode_seed, exact_text
 from sofar_agents.evaluation.results import read_csv_rows
+from sofar_agents.worker_lifetime import exit_with_parent
 
 __all__ = ["RACE_COLUMNS", "race_seed", "RaceTask", "RaceResult", "multi_agent_tasks", "run_race", "run_multi_agent_table",
            "read_race_csv", "format_multi_agent_table", "format_per_circuit"]
@@ -269,6 +271,8 @@ def format_per_circuit(rows: Sequence[RaceResult], strategies: Sequence[str], tr
 
 @dataclass
 class MultiAgentReport:
+    """Outcome of :func:`run_multi_agent_table`."""
+
     markdown: str
     csv_path: Path
     markdown_path: Path
@@ -276,6 +280,11 @@ class MultiAgentReport:
     completed: int
     skipped: int
     elapsed: float
+    missing: int = 0
+    """Races of the table without a row in the CSV (a worker process died): rerunning the same command
+    with the same output folder runs them."""
+    expected: int = 0
+    """Races of the table."""
 
 
 def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "results/multi_agent", *,
@@ -283,7 +292,12 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
                           duration: float = DEFAULT_DURATION, stack: str = "sofar", scenario: str = "paper",
                           workers: int | None = 1, prefix: str = "multi_agent", progress: bool = True,
                           opponents: int = 0) -> MultiAgentReport:
-    """Run (or resume) the races into ``out_dir/<prefix>_races.csv`` and write ``<prefix>.md``."""
+    """Run (or resume) the races into ``out_dir/<prefix>_races.csv`` and write ``<prefix>.md``.
+
+    With ``workers`` > 1 the races run in worker processes that end with this process (even when it is
+    killed); if one dies, the races without a result are logged and counted in ``missing`` of the report
+    (its Markdown says the table is incomplete) instead of raising.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     csv_path = out / f"{prefix}_races.csv"
@@ -307,10 +321,13 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
             _append(csv_path, run_race(task, policies[task.strategy.name]))
             bar.update()
     else:
-        with ProcessPoolExecutor(n_workers) as pool:
-            for result in pool.map(_run_in_worker, todo):
-                _append(csv_path, result)
-                bar.update()
+        with ProcessPoolExecutor(n_workers, initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
+            try:
+                for result in pool.map(_run_in_worker, todo):
+                    _append(csv_path, result)
+                    bar.update()
+            except BrokenProcessPool as exc:
+                logger.error("a worker process died (%s): the races without a result are left out", exc)
     bar.close()
     elapsed = time.perf_counter() - t0
     wanted = {t.key for t in tasks}
@@ -339,4 +356,5 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
     md = "\n".join(parts) + "\n"
     md_path = out / f"{prefix}.md"
     md_path.write_text(md)
-    return MultiAgentReport(md, csv_path, md_path, rows, len(todo), len(tasks) - len(todo), elapsed)
+    return MultiAgentReport(md, csv_path, md_path, rows, len(todo), len(tasks) - len(todo), elapsed, missing,
+                            len(tasks))

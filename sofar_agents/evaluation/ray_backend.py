@@ -8,6 +8,12 @@ whose process dies is retried on the restarted actor (``max_task_retries``); if 
 retries are exhausted the episode is reported as failed and a rerun of the sweep
 retries it.
 
+The actors end with the driver: Ray ends a job's actors when its driver exits, and an actor on
+the driver's machine also watches the driver's process
+(:func:`~sofar_agents.worker_lifetime.exit_with_process`), so a driver killed with SIGKILL does not
+leave busy actors behind. The other processes of a local Ray instance are Ray's own: its GCS and
+raylet end with the driver, its agents follow the raylet within about a minute.
+
 ``address=None`` starts a local Ray instance with ``workers`` CPUs; ``"auto"`` or
 ``"HOST:6379"`` joins a running cluster (``ray start --head``), and then every node
 must have this package installed (``pip install "sofar[ray]"``), as the actors import
@@ -26,6 +32,7 @@ from collections.abc import Callable, Sequence
 from sofar_agents.evaluation.protocol import EpisodeTask
 from sofar_agents.evaluation.sweep import _EpisodeRunner
 from sofar_agents.ray_support import INSTALL_HINT, init_ray, require_ray  # noqa: F401  (re-exported)
+from sofar_agents.worker_lifetime import exit_with_process, process_start_time
 
 logger = logging.getLogger(__name__)
 
@@ -34,10 +41,20 @@ MAX_TASK_RETRIES = 3
 
 
 class _RunnerActor:
-    """Actor body: runs episodes with its own (cached) environments and policies."""
+    """Actor body: runs episodes with its own (cached) environments and policies.
 
-    def __init__(self, runner_cls: type) -> None:
+    ``driver``: ``(Ray node id, pid, start time)`` of the driver; an actor on the same node ends
+    its process as soon as the driver's process has ended.
+    """
+
+    def __init__(self, runner_cls: type, driver: tuple[str, int, str | None] | None = None) -> None:
         warnings.simplefilter("ignore", UserWarning)  # the driver reports failures; keep worker output quiet
+        if driver is not None:
+            import ray
+
+            node_id, pid, start_time = driver
+            if ray.get_runtime_context().get_node_id() == node_id:
+                exit_with_process(pid, start_time)
         self.runner = runner_cls()
 
     def run(self, idx: int, task: EpisodeTask) -> tuple:
@@ -63,7 +80,8 @@ def run_ray(pending: Sequence[EpisodeTask], handle: Callable, *, workers: int | 
         n_cpus = int(ray.cluster_resources().get("CPU", 1))
         n_actors = max(1, min(int(workers or n_cpus), len(pending)))
         actor_cls = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=MAX_TASK_RETRIES)(_RunnerActor)
-        actors = [actor_cls.remote(_EpisodeRunner) for _ in range(n_actors)]
+        driver = (ray.get_runtime_context().get_node_id(), os.getpid(), process_start_time(os.getpid()))
+        actors = [actor_cls.remote(_EpisodeRunner, driver) for _ in range(n_actors)]
         in_flight: dict = {}
         next_idx = 0
 

@@ -1,25 +1,23 @@
 """Sweeps: run a list of episodes over a process pool (or Ray), appending each result to a CSV.
 
-Workers (spawn context) pull tasks from a queue, build their environments and
-policies lazily and keep them for later episodes of the same track/configuration.
-Each finished episode is appended to the CSV (flushed), and episodes already in the
-CSV are skipped, so an interrupted sweep resumes where it stopped. With
-``backend="ray"`` the episodes run in Ray actors instead (``ray_backend``); the CSV is
-written here, by the driver, in the same way.
+Workers (spawn context, ``process_pool``) get their episodes one at a time from this process,
+build their environments and policies lazily and keep them for later episodes of the same
+track/configuration; they end with this process, even when it is killed. Each finished episode
+is appended to the CSV (flushed), and episodes already in the CSV are skipped, so an interrupted
+sweep resumes where it stopped. With ``backend="ray"`` the episodes run in Ray actors instead
+(``ray_backend``); the CSV is written here, by the driver, in the same way. An episode that
+failed or was lost with a worker is counted in :class:`SweepStats` (``failed``, ``missing``):
+the caller decides whether an incomplete sweep is an error.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import multiprocessing as mp
 import os
-import queue
 import time
 import traceback
-import warnings
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -40,6 +38,9 @@ class SweepStats:
     """Episodes already in the CSV."""
     completed: int = 0
     failed: int = 0
+    """Episodes that raised (logged with their traceback in ``errors``)."""
+    missing: int = 0
+    """Episodes that got no result because their worker process died (logged)."""
     steps: int = 0
     """Control steps simulated by the completed episodes."""
     episode_wall_time: float = 0.0
@@ -48,6 +49,11 @@ class SweepStats:
     """Wall time of the sweep [s]."""
     workers: int = 0
     errors: list[str] = field(default_factory=list)
+
+    @property
+    def unfinished(self) -> int:
+        """Episodes of this run left out of the CSV (``failed + missing``): a rerun retries them."""
+        return self.failed + self.missing
 
     @property
     def steps_per_second_per_worker(self) -> float:
@@ -91,28 +97,6 @@ class _EpisodeRunner:
         self.envs.clear()
 
 
-def _worker_loop(tasks, results) -> int:
-    """Process-pool worker: run tasks from ``tasks`` until a None, report to ``results``."""
-    warnings.simplefilter("ignore", UserWarning)  # the parent reports failures; keep worker output quiet
-    runner = _EpisodeRunner()
-    done = 0
-    try:
-        while True:
-            item = tasks.get()
-            if item is None:
-                break
-            idx, task = item
-            try:
-                result, trace = runner.run(task)
-                results.put(("ok", idx, result.to_row(), trace))
-            except Exception:
-                results.put(("error", idx, traceback.format_exc(), None))
-            done += 1
-    finally:
-        runner.close()
-    return done
-
-
 def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, workers: int | None = None,
               trace_path: str | os.PathLike | None = None, progress: bool = True, backend: str = "local",
               address: str | None = None) -> SweepStats:
@@ -122,7 +106,9 @@ def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, work
     process). ``backend="ray"``: ``workers`` Ray actors (default: the CPUs of the Ray instance)
     on a local Ray instance, or on the cluster at ``address`` (``"auto"`` or ``"HOST:6379"``);
     see :mod:`~sofar_agents.evaluation.ray_backend`. Either way only this process writes the
-    CSV. A failed episode is logged and left out of the CSV, so the next run retries it.
+    CSV, and no worker outlives it. A failed episode (``stats.failed``) or one lost with a worker
+    process that died (``stats.missing``) is logged and left out of the CSV, so the next run
+    retries it; check ``stats.unfinished`` to treat an incomplete sweep as an error.
     """
     if backend not in ("local", "ray"):
         raise ValueError(f"unknown sweep backend {backend!r} (expected 'local' or 'ray')")
@@ -186,7 +172,9 @@ def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, work
             finally:
                 runner.close()
         else:
-            _run_pool(pending, n_workers, handle)
+            from sofar_agents.evaluation.process_pool import run_pool
+
+            stats.missing = run_pool(pending, n_workers, handle, _EpisodeRunner)
     finally:
         bar.close()
         out.close()
@@ -196,41 +184,19 @@ def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, work
     return stats
 
 
-def _run_pool(pending: Sequence[EpisodeTask], n_workers: int, handle: Callable) -> None:
-    ctx = mp.get_context("spawn")
-    with ctx.Manager() as manager:
-        task_q, result_q = manager.Queue(), manager.Queue()
-        for i, t in enumerate(pending):
-            task_q.put((i, t))
-        for _ in range(n_workers):
-            task_q.put(None)
-        received = 0
-        pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
-        try:
-            futures = [pool.submit(_worker_loop, task_q, result_q) for _ in range(n_workers)]
-            while received < len(pending):
-                try:
-                    msg = result_q.get(timeout=0.5)
-                except queue.Empty:
-                    if all(f.done() for f in futures):
-                        break
-                    continue
-                handle(msg)
-                received += 1
-            while received < len(pending):  # drain what finished workers left behind
-                try:
-                    handle(result_q.get_nowait())
-                    received += 1
-                except queue.Empty:
-                    break
-            for f in futures:
-                exc = f.exception() if f.done() else None
-                if exc is not None:
-                    logger.error("a worker process failed: %r", exc)
-            if received < len(pending):
-                logger.error("%d episodes got no result (a worker died); rerun to retry them",
-                             len(pending) - received)
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-        pool.shutdown(wait=True)
+def incomplete_message(stats: SweepStats, out: str | os.PathLike, unit: str = "episodes") -> str | None:
+    """What a script reports for a sweep that left episodes out of its CSV, or None if it did not.
+
+    Says how many are missing, why (failed, or lost with a worker process that died), and that
+    re-running the same command with the same ``out`` folder resumes: the CSV keeps the finished
+    episodes and only the missing ones run. Scripts log it as an error and exit with status 1.
+    """
+    if not stats.unfinished:
+        return None
+    why = []
+    if stats.failed:
+        why.append(f"{stats.failed} failed")
+    if stats.missing:
+        why.append(f"{stats.missing} lost with a worker process that died")
+    return (f"incomplete: {stats.unfinished} of {stats.requested} {unit} are missing ({', '.join(why)}); re-run "
+            f"with the same --out {out} to resume (the finished {unit} are kept, only the missing ones run)")
