@@ -20,7 +20,15 @@ mapping into one, validating as it goes:
   dataclass itself or a mapping of overrides applied to the current value;
 * an unknown key at any depth raises :class:`ConfigError` (a ``ValueError``)
   naming the key, its path and the valid keys; lists are accepted for tuple
-  fields.
+  fields;
+* every value is checked against the domain declared next to its field (:mod:`sofar_env.domains`: type,
+  finiteness, bounds), and ``race.dt`` must equal ``stack.mpc.control_dt``; a bad value raises
+  :class:`ConfigError` naming its key path (``race.opponents.gaps``, ``stack.mpc.qp_eps_abs``);
+* ``track`` and ``scenario``, the keys the registered ids pass as keywords, may also appear in the
+  ``config`` mapping only with the same value (the same circuit, by name, alias or path; the same world):
+  ``gymnasium.make("SOfAR-LagunaSeca-v0", config={"track": "Monza"})`` is refused rather than racing
+  Laguna Seca; ``track="Monza"`` as a keyword replaces the id's circuit. An unknown circuit name is an
+  error that lists the valid names.
 
 Example::
 
@@ -31,13 +39,19 @@ Example::
 from __future__ import annotations
 
 import dataclasses
+import math
+import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .domains import check_fields, choice, custom, flag, integer, nested, real
+from .errors import ConfigError
 from .race import RaceConfig
+from .scenarios import SCENARIOS
 
 __all__ = [
     "OBJECTIVE_NAMES",
@@ -64,100 +78,108 @@ _SHORTCUTS = {
 """Top-level keys that set a field of a nested sub-config: key -> path of that sub-config."""
 
 
-class ConfigError(ValueError):
-    """An invalid or unknown configuration key or value."""
-
-
 @dataclass(frozen=True)
 class RewardWeights:
     """Weights of the scalar reward ``weights . reward_vector`` (one per objective)."""
 
-    safety: float = 10.0
+    safety: float = real(10.0)
     """Weight of the safety term (-1 on collision or leaving the track)."""
-    overtakes: float = 1.0
+    overtakes: float = real(1.0)
     """Weight of the overtake count (+1 per overtake)."""
-    progress: float = 0.05
+    progress: float = real(0.05)
     """Weight of the normalised progress (about 1 per control step at the speed profile)."""
-    barrier_margin: float = 0.5
+    barrier_margin: float = real(0.5)
     """Weight of the barrier-margin penalty (in [-1, 0] per control step)."""
-    gamma_smoothness: float = 0.1
+    gamma_smoothness: float = real(0.1)
     """Weight of the gamma-smoothness penalty -|gamma_t - gamma_{t-1}|."""
 
     def __post_init__(self) -> None:
-        for name in OBJECTIVE_NAMES:
-            value = getattr(self, name)
-            if not np.isfinite(value):
-                raise ConfigError(f"reward_weights.{name} must be finite, got {value!r}")
+        check_fields(self, "reward_weights")
 
     def as_array(self) -> np.ndarray:
         """The weights as a float64 array in the order of :data:`OBJECTIVE_NAMES`."""
         return np.array([getattr(self, name) for name in OBJECTIVE_NAMES], dtype=float)
 
 
-def _default_stack_config():
+def _stack_config_class() -> type:
     from .stack import StackConfig  # imports the controllers (CasADi): only when an env is configured
 
-    return StackConfig()
+    return StackConfig
+
+
+def _default_stack_config():
+    return _stack_config_class()()
+
+
+def _track_problem(track: Any) -> str | None:
+    """Why ``track`` names no circuit (None when it does): a shipped name or alias, a folder, or a Track."""
+    from .tracks import Track
+    from .tracks.names import ALIASES, unknown_name_error
+
+    if isinstance(track, Track):
+        return None
+    if not isinstance(track, (str, os.PathLike)):
+        return (f"must be a circuit name, a circuit folder or a sofar_env.tracks.Track, got {track!r} "
+                f"({type(track).__name__})")
+    if isinstance(track, str) and track.strip().lower() in ALIASES:
+        return None
+    if Path(os.fspath(track)).expanduser().is_dir():
+        return None
+    if isinstance(track, os.PathLike) or os.sep in track:
+        return f"{os.fspath(track)!r} is not a circuit folder"
+    return str(unknown_name_error(track))
 
 
 @dataclass(frozen=True)
 class EnvConfig:
     """Everything a SOfAR environment is built from."""
 
-    scenario: str = "paper"
+    scenario: str = choice("paper", SCENARIOS)
     """The world (:mod:`sofar_env.scenarios`): ``"paper"``, ``"interactive"`` or ``"dynamic"``. Set through the ``scenario``
     key, which applies the scenario's overrides before the other keys."""
-    track: Any = "LagunaSeca"
+    track: Any = custom("LagunaSeca", _track_problem, "a circuit name, a circuit folder or a Track")
     """Circuit name (``LagunaSeca``, ``Monza``, ``Indianapolis``, ``Kentucky``, or an alias), a circuit folder path,
     or a :class:`~sofar_env.tracks.Track` (used as is; see the ``SOfAR-Custom-v0`` id)."""
-    decision_interval: int = 1
+    decision_interval: int = integer(1, ge=1)
     """The policy acts every this many control steps; gamma is held in between and the rewards are summed."""
-    observation: str = "paper"
+    observation: str = choice("paper", ("paper", "extended"))
     """Observation layout (:mod:`sofar_env.observation`): ``"paper"``, the 12 values of the paper world, or
     ``"extended"``, 16 values that add the two nearest opponents' sensed lateral rates, the heading error and
     the smallest barrier value (the default of the interactive world)."""
-    reward_mode: str = "scalar"
+    reward_mode: str = choice("scalar", REWARD_MODES)
     """``"scalar"``: reward = weights . vector (a float); ``"vector"``: the float32 reward vector."""
-    reward_weights: RewardWeights = field(default_factory=RewardWeights)
+    reward_weights: RewardWeights = nested(RewardWeights)
     """Weights of the scalar reward."""
-    initial_gamma: float = 0.5
+    initial_gamma: float = real(0.5, gt=0.0, le=1.0)
     """gamma_{t-1} assumed at the first step of an episode (for the smoothness term) [-]."""
-    stall_speed: float = 1.0
+    stall_speed: float = real(1.0, ge=0.0, unit="m/s")
     """A controlled car slower than this is standing still, for the stall rule [m/s] (walking pace; the
     slowest opponent of the paper's world at the lowest pace ratio of Table I moves at 1.75 m/s)."""
-    stall_seconds: float | None = 20.0
+    stall_seconds: float | None = real(20.0, ge=0.0, optional="off", unit="s")
     """The stall rule: a car that stays slower than ``stall_speed`` for this long without interruption
     terminates its episode with ``info["stalled"] = True`` and ``is_success = False`` [s]. 20 s is a
     tenth of the 200 s race: far longer than any stop the controller makes to let a car clear, so it only
     fires when the car is stuck (behind a car it cannot pass, or in a barrier deadlock). ``None`` or 0
     turns the rule off."""
-    timing_info: bool = False
+    timing_info: bool = flag(False)
     """Also report the wall-clock solve times ``mpc_time_ms`` / ``miqp_time_ms`` in ``info``. Off by default:
     they are the only info values that differ between two runs with the same seed, and conformance checks
     that compare infos exactly (Gymnasium's ``check_env``, PettingZoo's seed test) fail with them."""
-    race: RaceConfig = field(default_factory=RaceConfig)
+    race: RaceConfig = nested(RaceConfig)
     """The world: time step, duration, start distribution, vehicle, opponents."""
-    stack: Any = field(default_factory=_default_stack_config)
+    stack: Any = nested(_stack_config_class, factory=_default_stack_config)
     """The controller (:class:`~sofar_env.stack.StackConfig`): speed factor, MIQP, MPC settings."""
 
     def __post_init__(self) -> None:
-        if not isinstance(self.decision_interval, (int, np.integer)) or self.decision_interval < 1:
-            raise ConfigError(f"decision_interval must be an integer >= 1, got {self.decision_interval!r}")
-        if self.observation not in ("paper", "extended"):
-            raise ConfigError(f"observation must be 'paper' or 'extended', got {self.observation!r}")
-        if self.reward_mode not in REWARD_MODES:
-            raise ConfigError(f"reward_mode must be one of {REWARD_MODES}, got {self.reward_mode!r}")
-        if not (0.0 < self.initial_gamma <= 1.0):
-            raise ConfigError(f"initial_gamma must lie in (0, 1], got {self.initial_gamma!r}")
-        if not (isinstance(self.stall_speed, (int, float, np.integer, np.floating)) and not isinstance(
-                self.stall_speed, bool) and np.isfinite(self.stall_speed) and self.stall_speed >= 0.0):
-            raise ConfigError(f"stall_speed must be a finite number >= 0 [m/s], got {self.stall_speed!r}")
-        if self.stall_seconds is not None and not (
-                isinstance(self.stall_seconds, (int, float, np.integer, np.floating))
-                and not isinstance(self.stall_seconds, bool) and np.isfinite(self.stall_seconds)
-                and self.stall_seconds >= 0.0):
-            raise ConfigError(f"stall_seconds must be None (off) or a finite number >= 0 [s], got "
-                              f"{self.stall_seconds!r}")
+        """Check every field's domain (:mod:`sofar_env.domains`), then that the MPC's control interval is the
+        world's time step; raises :class:`ConfigError` naming the key."""
+        check_fields(self)
+        dt, mpc_dt = self.race.dt, self.stack.mpc.control_dt
+        if not math.isclose(mpc_dt, dt, rel_tol=1e-9, abs_tol=0.0):
+            raise ConfigError(
+                f"race.dt ({dt:g} s) and stack.mpc.control_dt ({mpc_dt:g} s) must be equal: the MPC plans and "
+                f"certifies its barrier over one plant period and shifts its plan by it every step. Set both, "
+                f"e.g. config={{'race': {{'dt': {dt!r}}}, 'stack': {{'mpc': {{'control_dt': {dt!r}}}}}}}")
 
     # read-only views of the shortcut keys
     @property
@@ -227,11 +249,53 @@ def apply_overrides(base: Any, overrides: Mapping[str, Any], path: str = "") -> 
         raise ConfigError(f"invalid value in {path or 'config'}: {exc}") from exc
 
 
+def _same_track(a: Any, b: Any) -> bool:
+    """Whether two track values (name, alias, folder path or Track) name the same circuit."""
+    from .tracks import Track
+    from .tracks.names import resolve_track_name
+
+    if isinstance(a, Track) or isinstance(b, Track):
+        return a is b
+
+    def key(t: Any) -> Any:
+        if isinstance(t, str):
+            try:
+                return resolve_track_name(t)
+            except ValueError:
+                pass
+        return os.path.realpath(os.path.expanduser(os.fspath(t))) if isinstance(t, (str, os.PathLike)) else t
+
+    return key(a) == key(b)
+
+
+def _check_agreement(config: Mapping[str, Any], kwargs: Mapping[str, Any]) -> None:
+    """Raise :class:`ConfigError` when ``track`` or ``scenario`` is in both ``config`` and ``kwargs`` with values that
+    differ (the registered ids pass both as keywords), or when ``config["track"]`` names no circuit."""
+    if "track" in config:
+        problem = _track_problem(config["track"])
+        if problem is not None:
+            raise ConfigError(f"config['track']: {problem}")
+        if "track" in kwargs and not _same_track(config["track"], kwargs["track"]):
+            raise ConfigError(
+                f"config['track'] = {config['track']!r} conflicts with track={kwargs['track']!r} (the circuit of a "
+                "registered id, or a keyword): pass track= alone to choose the circuit, or make the id of that "
+                "circuit (SOfAR-<Circuit>-v0; SOfAR-Custom-v0 for a circuit folder or a Track)")
+    if "scenario" in config and "scenario" in kwargs:
+        a, b = config["scenario"], kwargs["scenario"]
+        norm = (lambda v: v.strip().lower() if isinstance(v, str) else v)
+        if norm(a) != norm(b):
+            raise ConfigError(f"config['scenario'] = {a!r} conflicts with scenario={b!r} (the world of a registered "
+                              "id, or a keyword): pass scenario= alone, or make the id of that world")
+
+
 def make_env_config(config: EnvConfig | Mapping[str, Any] | None = None, **kwargs: Any) -> EnvConfig:
     """Build an :class:`EnvConfig` from a config object or mapping plus keyword overrides.
 
-    Keyword arguments win over the mapping. See the module docstring for the accepted keys.
+    Keyword arguments win over the mapping, except that ``track`` and ``scenario`` given both ways must agree
+    (:class:`ConfigError` otherwise). See the module docstring for the accepted keys.
     """
+    if isinstance(config, Mapping):
+        _check_agreement(config, kwargs)
     if isinstance(config, EnvConfig):
         base, items = config, {}
     elif config is None:

@@ -14,6 +14,7 @@ __all__ = [
     "GAMMA_MIN",
     "GAMMA_MAX",
     "EPISODE_SECONDS",
+    "MAX_SPEED_FACTOR",
 ]
 
 CIRCUITS: tuple[str, ...] = ("LagunaSeca", "Monza", "Indianapolis", "Kentucky")
@@ -33,3 +34,5 @@ GAMMA_MAX: float = 1.0
 """Largest barrier decay [-]: gamma = 1 lets the barrier reach 0 in one step."""
 EPISODE_SECONDS: float = 200.0
 """Episode horizon of the paper's protocol [s] (2000 control steps at dt = 0.1 s)."""
+MAX_SPEED_FACTOR: float = 1.5
+"""Largest speed factor of a controller (``StackConfig.speed_factor``, ``RaceConfig.pace_range``) [-]."""

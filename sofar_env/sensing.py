@@ -49,6 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._jit import kernel
+from .domains import check_fields, flag, integer, real
 
 __all__ = ["SensorConfig", "Sensor"]
 
@@ -57,43 +58,32 @@ __all__ = ["SensorConfig", "Sensor"]
 class SensorConfig:
     """Sensor model of the opponents (off by default: perfect sensing)."""
 
-    enabled: bool = False
+    enabled: bool = flag(False)
     """Apply the model; otherwise the true rows are returned unchanged and no random number is drawn."""
-    sigma_s: float = 1.0
+    sigma_s: float = real(1.0, ge=0.0, unit="m")
     """Standard deviation of the arc-length error [m], >= 0."""
-    sigma_n: float = 0.3
+    sigma_n: float = real(0.3, ge=0.0, unit="m")
     """Standard deviation of the lateral-offset error [m], >= 0."""
-    sigma_v: float = 0.5
+    sigma_v: float = real(0.5, ge=0.0, unit="m/s")
     """Standard deviation of the speed error [m/s], >= 0."""
-    correlation_time: float = 0.3
+    correlation_time: float = real(0.3, gt=0.0, unit="s")
     """Correlation time tau of the Gauss-Markov errors [s], > 0."""
-    latency_steps: int = 2
+    latency_steps: int = integer(2, ge=0)
     """Delay of the output in control steps [-], >= 0."""
-    tracker_alpha: float = 0.3
+    tracker_alpha: float = real(0.3, gt=0.0, le=1.0)
     """Position gain of the alpha-beta tracker of the lateral offset [-], in (0, 1]."""
-    tracker_beta: float = 0.05
+    tracker_beta: float = real(0.05, gt=0.0, lt=2.0)
     """Rate gain of the alpha-beta tracker [-], in (0, 2). With alpha 0.3 at 0.1 s steps: a constant
     lateral rate is picked up within about 2 s, and the default noise leaves a rate error of about
     0.33 m/s (std); higher gains react faster and are noisier (0.5 / 0.1: 1.5 s, 0.44 m/s)."""
-    jump_distance: float = 50.0
+    jump_distance: float = real(50.0, gt=0.0, unit="m")
     """A true arc-length change above this between two calls restarts the identity's track [m], > 0."""
-    latency_compensation: bool = True
+    latency_compensation: bool = flag(True)
     """Carry the delayed measurement forward over its age at the measured speed and lateral rate
     (``s + v * age``, ``n + n_dot * age``); off, the output is the raw delayed measurement."""
 
     def __post_init__(self) -> None:
-        values = (self.sigma_s, self.sigma_n, self.sigma_v, self.correlation_time, self.tracker_alpha,
-                  self.tracker_beta, self.jump_distance)
-        if not all(math.isfinite(x) for x in values):
-            raise ValueError("sensor settings must be finite")
-        if min(self.sigma_s, self.sigma_n, self.sigma_v) < 0.0:
-            raise ValueError("sensor standard deviations must be >= 0")
-        if self.correlation_time <= 0.0 or self.jump_distance <= 0.0:
-            raise ValueError("correlation_time and jump_distance must be positive")
-        if int(self.latency_steps) != self.latency_steps or self.latency_steps < 0:
-            raise ValueError(f"latency_steps must be an integer >= 0, got {self.latency_steps}")
-        if not (0.0 < self.tracker_alpha <= 1.0 and 0.0 < self.tracker_beta < 2.0):
-            raise ValueError("tracker gains must satisfy 0 < alpha <= 1 and 0 < beta < 2")
+        check_fields(self, "race.sensor")
 
     @property
     def sigmas(self) -> np.ndarray:

@@ -93,8 +93,8 @@ def test_a_moving_field_never_uses_the_parked_pass():
 
 
 @pytest.mark.parametrize("changes,words", [
-    ({"parked_speed": -0.5}, "parked_speed must be >= 0"),
-    ({"parked_speed": float("nan")}, "parked_speed must be >= 0"),
+    ({"parked_speed": -0.5}, "parked_speed must be a finite number >= 0"),
+    ({"parked_speed": float("nan")}, "parked_speed must be a finite number >= 0"),
     ({"parked_clearance": 0.0}, "parked_clearance must lie in (0, miqp.safe_lat"),
     ({"parked_clearance": 4.0}, "parked_clearance must lie in (0, miqp.safe_lat"),
     ({"parked_window": 9.0}, "parked_window must lie in (0, miqp.safe_lon"),
