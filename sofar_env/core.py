@@ -26,6 +26,12 @@ The stall rule (``EnvConfig.stall_speed``, ``stall_seconds``): a car whose speed
 ``stall_speed`` for ``stall_seconds`` without interruption has *stalled*; its episode
 terminates with ``info["stalled"] = True`` and ``is_success = False`` (it stands still, e.g.
 behind a car it cannot pass; nothing more happens in that episode). No reward term is added.
+
+An episode runs from a successful :meth:`ControlledRace.reset` until every car has terminated or been
+truncated (:attr:`ControlledRace.running`). :meth:`ControlledRace.step` outside an episode (before the
+first successful reset, after a reset that failed part-way, or after the episode ended) raises
+:class:`~sofar_env.errors.ResetNeeded` and changes nothing; a reset whose options are invalid raises before
+anything changes, so the episode it interrupted goes on.
 """
 
 from __future__ import annotations
@@ -39,6 +45,7 @@ import numpy as np
 from .config import EnvConfig, apply_overrides
 from .constants import GAMMA_MAX, GAMMA_MIN
 from .control.barrier import min_barrier
+from .errors import ResetNeeded
 from .observation import observe
 from .rewards import reward_vector, safety_cost, scalarize
 
@@ -194,6 +201,8 @@ class ControlledRace:
         """Per car, the control steps it has been slower than ``stall_speed`` without interruption."""
         self._travel_time = None
         """The speed profile's travel time, for V2V rows of pace-predicting controllers (``race.v2v``)."""
+        self.started = False
+        """Whether a reset has ever succeeded (the world has been placed at least once)."""
 
     # ------------------------------------------------------------------ building
     def build(self) -> None:
@@ -202,9 +211,13 @@ class ControlledRace:
         from .tracks import Track
 
         cfg = self.config
-        self.track = cfg.track if isinstance(cfg.track, Track) else Track.load(cfg.track)
-        self.race = Race(self.track, cfg.race, n_cars=self.n_cars)
-        self.stacks = self._make_stacks(self.speed_factors)
+        try:  # all or nothing: a failure leaves the core unbuilt, and the next reset builds again
+            self.track = cfg.track if isinstance(cfg.track, Track) else Track.load(cfg.track)
+            self.race = Race(self.track, cfg.race, n_cars=self.n_cars)
+            self.stacks = self._make_stacks(self.speed_factors)
+        except BaseException:
+            self.track, self.race, self.stacks = None, None, []
+            raise
         if cfg.race.sensor.enabled:
             from .sensing import Sensor
 
@@ -257,6 +270,17 @@ class ControlledRace:
     def built(self) -> bool:
         return self.race is not None
 
+    @property
+    def running(self) -> bool:
+        """An episode is running: a reset succeeded and some car has neither terminated nor been truncated."""
+        return bool(self.live)
+
+    def not_running_message(self, call: str = "step()") -> str:
+        """Why ``call`` is refused while no episode runs (the message of :class:`ResetNeeded`)."""
+        if not self.started:
+            return f"no episode is running (no reset() has succeeded yet): call reset() before {call}"
+        return f"the episode has ended (every car terminated or was truncated): call reset() before {call}"
+
     # ------------------------------------------------------------------ episode
     def check_reset(self, **race_options: Any) -> None:
         """Raise ``ValueError`` if :meth:`reset` with these options would fail; changes nothing (but builds)."""
@@ -265,21 +289,26 @@ class ControlledRace:
         self.race.check_reset(**race_options)
 
     def reset(self, rng: np.random.Generator, **race_options: Any) -> dict[int, CarStep]:
-        """Start an episode (``race_options`` go to :meth:`Race.reset`); each car's observation and info."""
+        """Start an episode (``race_options`` go to :meth:`Race.reset`); each car's observation and info.
+
+        Invalid options raise (``ValueError``) before anything changes. Past that check the running episode
+        is over: should a later part fail, no episode runs until a reset succeeds.
+        """
         self.check_reset(**race_options)
+        self.live = []
         self.race.reset(rng, **race_options)
         for stack in self.stacks:
             stack.reset()
         if self.sensors is not None:
             for sensor in self.sensors:
                 sensor.reset(rng)
-        self.live = list(range(self.n_cars))
+        cars = list(range(self.n_cars))
         self.slow_steps[:] = 0
         self.previous_gamma[:] = self.config.initial_gamma
         self.outputs = [None] * self.n_cars
         bp = self.config.stack.mpc.barrier
         out = {}
-        for i in self.live:
+        for i in cars:
             opp = self._opponents[i] = self.race.opponent_frenet(i)
             self._sense(i)
             tally = DecisionTally()
@@ -287,10 +316,20 @@ class ControlledRace:
             tally.gamma = self.previous_gamma[i]
             tally.nearest = self.race.nearest_distance(i)
             out[i] = CarStep(self._observe(i), None, False, False, self._info(tally, i))
+        self.live = cars
+        self.started = True
         return out
 
     def step(self, gammas: dict[int, float]) -> dict[int, CarStep]:
-        """One decision of every live car: ``gammas`` maps each live car to its (validated) gamma."""
+        """One decision of every live car: ``gammas`` maps each live car (and no other) to its validated gamma.
+
+        Raises :class:`ResetNeeded` when no episode runs and ``ValueError`` when the cars of ``gammas`` are not
+        the live cars, before anything changes.
+        """
+        if not self.live:
+            raise ResetNeeded(self.not_running_message())
+        if len(gammas) != len(self.live) or any(i not in gammas for i in self.live):
+            raise ValueError(f"gammas must be given for exactly the live cars {self.live}, got cars {sorted(gammas)}")
         race, track = self.race, self.track
         bp = self.config.stack.mpc.barrier
         live = list(self.live)

@@ -16,13 +16,18 @@ from gymnasium import spaces
 from .config import OBJECTIVE_NAMES, EnvConfig, make_env_config
 from .constants import GAMMA_MAX, GAMMA_MIN
 from .core import ControlledRace, parse_gamma
+from .errors import ResetNeeded as _ResetNeeded
 from .observation import observation_size
 from .snapshot import Snapshots
 
-__all__ = ["SOfARRaceEnv", "GAMMA_MIN", "GAMMA_MAX", "RESET_OPTIONS"]
+__all__ = ["SOfARRaceEnv", "ResetNeeded", "GAMMA_MIN", "GAMMA_MAX", "RESET_OPTIONS"]
 
 RESET_OPTIONS = ("rho", "n_opponents", "start_s", "start_speed")
 """Keys accepted in ``reset(options=...)``."""
+
+
+class ResetNeeded(_ResetNeeded, gym.error.ResetNeeded):
+    """``step()`` or ``render()`` with no episode running: a ``RuntimeError`` and Gymnasium's ``ResetNeeded``."""
 
 
 class SOfARRaceEnv(Snapshots, gym.Env):
@@ -135,9 +140,13 @@ class SOfARRaceEnv(Snapshots, gym.Env):
       ``stall_speed`` (1 m/s) for ``stall_seconds`` (20 s) without interruption, e.g.
       stopped for good behind a car it cannot pass (``info["stalled"]``; ``stall_seconds=None``
       or 0 turns the rule off).
-    * Truncation: the race duration (200 s = 2000 control steps; the registered ids use
-      ``max_episode_steps=2000`` and the environment also truncates itself at the
-      duration whatever the decision interval).
+    * Truncation: the race duration (``race.duration``, 200 s = 2000 control steps of ``race.dt`` = 0.1 s by
+      default). The environment truncates itself there, whatever the duration, time step and decision
+      interval; the registered ids add no ``TimeLimit`` of their own (``gymnasium.make(...,
+      max_episode_steps=N)`` still adds one).
+    * After the end, ``step()`` raises :class:`ResetNeeded` (a ``RuntimeError``) and changes nothing, as
+      it does before the first successful ``reset()``; a ``reset()`` that raises leaves the environment as
+      it was (an episode it interrupted goes on; before any episode, the next ``reset()`` starts one).
 
     ``info["is_success"]`` is set at the end of an episode: True when the duration was
     reached without a collision, leaving the track or stalling.
@@ -261,8 +270,8 @@ class SOfARRaceEnv(Snapshots, gym.Env):
         return first.observation, first.info
 
     def step(self, action):
-        if not self.core.built:
-            raise gym.error.ResetNeeded("call reset() before step()")
+        if not self.core.running:
+            raise ResetNeeded(self.core.not_running_message())
         result = self.core.step({0: parse_gamma(action)})[0]
         if self.render_mode == "human":
             self.render()
@@ -274,8 +283,8 @@ class SOfARRaceEnv(Snapshots, gym.Env):
                 "render() called without a render_mode; pass render_mode='rgb_array' or 'human' to the constructor"
             )
             return None
-        if not self.core.built:
-            raise gym.error.ResetNeeded("call reset() before render()")
+        if not self.core.started:
+            raise ResetNeeded(self.core.not_running_message("render()"))
         if self._renderer is None:
             from .render import Renderer
 

@@ -5,7 +5,8 @@ and point here, so that the passive checker follows the reward mode:
 
 * ``reward_mode="scalar"`` (default): the environment is wrapped in Gymnasium's
   :class:`~gymnasium.wrappers.PassiveEnvChecker`, exactly where ``gymnasium.make`` puts it
-  for any other id (``TimeLimit<OrderEnforcing<PassiveEnvChecker<SOfARRaceEnv>>>``);
+  for any other id (``OrderEnforcing<PassiveEnvChecker<SOfARRaceEnv>>``; the ids add no ``TimeLimit``: the
+  environment truncates itself at its configured race duration);
 * ``reward_mode="vector"``: no checker. The step returns the float32 reward vector of
   ``env.unwrapped.reward_space`` (the MO-Gymnasium convention), which the checker, written for
   scalar rewards, reports as "must be a float". ``mo_gymnasium.make`` turns the checker off for
@@ -54,11 +55,37 @@ class _PassiveEnvChecker(gym.wrappers.PassiveEnvChecker):
     """Gymnasium's passive checker, applied by the entry point: the spec keeps ``disable_env_checker=True``.
 
     (Gymnasium's wrapper sets it to False in the spec, so ``gymnasium.make(env.spec)`` would add a second one.)
+
+    A ``reset()`` or ``step()`` that raises leaves the checker as it was, so its first-call checks run on the
+    first call that succeeds. (Gymnasium's own marks the reset as checked before calling it; after a first
+    reset that raised, every later step raised a ``TypeError`` from its data-reuse check.)
     """
 
     @property
     def spec(self):
         return self.env.spec
+
+    def reset(self, *, seed=None, options=None):
+        if self.checked_reset:
+            return self.env.reset(seed=seed, options=options)
+        saved = dict(vars(self))
+        try:
+            return super().reset(seed=seed, options=options)
+        except BaseException:
+            vars(self).clear()
+            vars(self).update(saved)
+            raise
+
+    def step(self, action):
+        if self.checked_step and getattr(self, "checked_data_reuse", True):
+            return self.env.step(action)
+        saved = dict(vars(self))
+        try:
+            return super().step(action)
+        except BaseException:
+            vars(self).clear()
+            vars(self).update(saved)
+            raise
 
 
 def make_env(**kwargs: Any) -> gym.Env:
@@ -70,6 +97,7 @@ def make_env(**kwargs: Any) -> gym.Env:
 
 
 make_env.metadata = SOfARRaceEnv.metadata  # read by gymnasium.make (render-mode wrappers)
+
 
 
 def load_custom_track(track: Any) -> Track:

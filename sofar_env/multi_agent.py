@@ -55,7 +55,11 @@ pass it and lap it, and each pass is credited to the passer (:mod:`sofar_env.rac
 car behind it and keeps clear of every controlled car alongside.
 
 ``reset(options=...)`` accepts ``start_s``, ``start_speed``, ``rho`` and ``n_opponents``; other keys are
-ignored with a logged warning (PettingZoo's API test passes arbitrary options).
+ignored with a logged warning (PettingZoo's API test passes arbitrary options). ``n_agents`` must be an
+integer >= 1 (a :class:`~sofar_env.errors.ConfigError` otherwise). ``step(actions)`` takes one action for
+each agent of ``env.agents`` and no other (an unknown agent, or one that has terminated or been truncated,
+is a ``ValueError``); with no agent left, or before the first successful reset, it raises
+:class:`~sofar_env.errors.ResetNeeded` (a ``RuntimeError``). A call that raises changes nothing.
 
 **AEC.** :func:`env` and :func:`raw_env` give the same race as PettingZoo's agent-environment-cycle
 API (``pettingzoo.utils.parallel_to_aec``; :func:`env` with PettingZoo's order enforcement, :func:`raw_env`
@@ -82,6 +86,8 @@ from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from .config import OBJECTIVE_NAMES, EnvConfig, apply_overrides, make_env_config
 from .constants import GAMMA_MAX, GAMMA_MIN
 from .core import ControlledRace, parse_gamma
+from .domains import is_integer
+from .errors import ConfigError, ResetNeeded
 from .observation import observation_size
 from .race import MAX_SPEED_FACTOR, _is_real
 from .snapshot import Snapshots
@@ -101,8 +107,8 @@ class SOfARParallelEnv(Snapshots, ParallelEnv):
 
     def __init__(self, n_agents: int = 3, config: EnvConfig | Mapping[str, Any] | None = None,
                  render_mode: str | None = None, speed_factors: Sequence[float] | None = None, **kwargs: Any):
-        if int(n_agents) < 1:
-            raise ValueError(f"n_agents must be >= 1, got {n_agents}")
+        if not (is_integer(n_agents) and n_agents >= 1):
+            raise ConfigError(f"n_agents must be an integer >= 1, got {n_agents!r} ({type(n_agents).__name__})")
         cfg = make_env_config(config, **kwargs)
         if not ("n_opponents" in kwargs or (isinstance(config, Mapping) and "n_opponents" in config)):
             cfg = apply_overrides(cfg, {"race": {"opponents": {"n_opponents": 0}}})  # default: controlled cars only
@@ -165,6 +171,7 @@ class SOfARParallelEnv(Snapshots, ParallelEnv):
             logger.warning("ignoring unknown reset option(s) %s; valid: %s", ignored, ", ".join(_MA_RESET_OPTIONS))
         race_options = {k: options[k] for k in _MA_RESET_OPTIONS if k in options}
         self.core.check_reset(**race_options)  # a failed reset leaves the env as it was
+        self.agents = []  # past the checks: should anything below fail, no episode runs
         if seed is not None or self._np_random is None:
             self._np_random, _ = seeding.np_random(seed)
         if self.draw_pace:
@@ -179,11 +186,24 @@ class SOfARParallelEnv(Snapshots, ParallelEnv):
         return observations, infos
 
     def step(self, actions: Mapping[str, Any]):
-        if not self.core.built:
-            raise RuntimeError("call reset() before step()")
+        """One decision of every agent in the race: ``actions`` maps each agent of ``self.agents`` (and no other)
+        to its gamma. Raises :class:`~sofar_env.errors.ResetNeeded` (a ``RuntimeError``) when no episode runs
+        (before the first successful reset, or once every agent has terminated or been truncated) and
+        ``ValueError`` for a missing action, an action for an agent that is not in the race (unknown, or gone:
+        terminated or truncated) or an invalid gamma; a call that raises changes nothing."""
+        if not self.agents:
+            raise ResetNeeded(self.core.not_running_message())
         missing = [a for a in self.agents if a not in actions]
         if missing:
             raise ValueError(f"no action for live agent(s) {missing}")
+        extra = [a for a in actions if a not in self.agents]
+        if extra:
+            gone = [a for a in extra if a in self._index]
+            unknown = [a for a in extra if a not in self._index]
+            raise ValueError("actions for agents not in the race: "
+                             + "; ".join(([f"unknown agent(s) {unknown} (agents: {self.possible_agents})"] if unknown
+                                          else []) + ([f"{gone} have terminated or been truncated"] if gone else []))
+                             + f"; give actions for exactly env.agents = {self.agents}")
         gammas = {self._index[a]: parse_gamma(actions[a]) for a in self.agents}
         results = self.core.step(gammas)
         names = {i: self.possible_agents[i] for i in results}
@@ -201,8 +221,8 @@ class SOfARParallelEnv(Snapshots, ParallelEnv):
         if self.render_mode is None:
             logger.warning("render() called without a render_mode")
             return None
-        if not self.core.built:
-            raise RuntimeError("call reset() before render()")
+        if not self.core.started:
+            raise ResetNeeded(self.core.not_running_message("render()"))
         if self._renderer is None:
             from .render import Renderer
 
