@@ -13,6 +13,13 @@ points are ``"module:function"`` strings (:mod:`sofar_env.factory`), so the spec
 (``gymnasium.make_vec``) give MO-Gymnasium's vector env in vector mode. The ids are registered
 with ``disable_env_checker=True`` because the entry points apply Gymnasium's passive checker
 themselves in scalar mode and leave it off in vector mode (see :mod:`sofar_env.factory`).
+
+The ids pass ``track=`` (and ``scenario=``) to the entry point; a ``config`` mapping that names another
+track or world is refused (:func:`~sofar_env.config.make_env_config`), and ``track=`` / ``scenario=``
+given to ``gymnasium.make`` replace the id's. The ids are registered without ``max_episode_steps``: an
+environment truncates itself at its configured ``race.duration`` (any duration, time step and decision
+interval), with ``info["is_success"]`` at its last step; a ``TimeLimit`` (``gymnasium.make(...,
+max_episode_steps=N)``) would cut a longer race short.
 """
 
 from __future__ import annotations
@@ -35,7 +42,8 @@ CUSTOM_ID = "SOfAR-Custom-v0"
 """A circuit of your own: ``track=`` a circuit folder or a :class:`~sofar_env.tracks.Track` (required; any world
 through ``scenario=``)."""
 MAX_EPISODE_STEPS = 2000
-"""200 s at dt = 0.1 s."""
+"""Control steps of the default race (200 s at dt = 0.1 s). Not a limit of the ids, which register none: each
+environment ends its episode at its own ``race.duration``."""
 ENTRY_POINT = "sofar_env.factory:make_env"
 CUSTOM_ENTRY_POINT = "sofar_env.factory:make_custom_env"
 VECTOR_ENTRY_POINT = "sofar_env.factory:make_vector_env"
@@ -47,7 +55,7 @@ CUSTOM_VECTOR_ENTRY_POINT = "sofar_env.factory:make_custom_vector_env"
 def _register(env_id: str, entry_point: str, vector_entry_point: str, kwargs: dict) -> None:
     if env_id not in gym.registry:
         gym.register(id=env_id, entry_point=entry_point, vector_entry_point=vector_entry_point,
-                     max_episode_steps=MAX_EPISODE_STEPS, disable_env_checker=True, kwargs=kwargs)
+                     disable_env_checker=True, kwargs=kwargs)
 
 
 def register_envs() -> None:

@@ -20,18 +20,18 @@ SHORT = {"race": {"duration": 3.0}}  # 30 control steps
 CHECK = {"race": {"duration": 3.0}}
 
 
-def test_every_id_is_registered_with_a_string_entry_point_and_2000_steps():
+def test_every_id_is_registered_with_a_string_entry_point_and_no_step_limit():
     assert ENV_IDS == ("SOfAR-LagunaSeca-v0", "SOfAR-Monza-v0", "SOfAR-Indianapolis-v0", "SOfAR-Kentucky-v0")
     for env_id in ENV_IDS:
         spec = gym.spec(env_id)
-        assert spec.max_episode_steps == 2000
+        assert spec.max_episode_steps is None  # the env truncates itself at its configured duration
         assert spec.entry_point == "sofar_env.factory:make_env"
         assert pickle.loads(pickle.dumps(spec)) == spec
 
 
-def test_default_env_duration_matches_the_spec():
+def test_default_env_duration_is_2000_steps():
     env = gym.make("SOfAR-LagunaSeca-v0")
-    assert env.unwrapped.config.race.max_steps == env.spec.max_episode_steps == 2000
+    assert env.unwrapped.config.race.max_steps == 2000 and env.spec.max_episode_steps is None
     env.close()
 
 
@@ -304,9 +304,11 @@ def test_decision_interval_sums_the_control_steps():
     assert 1.0 < info["reward_vector"][2] < 2.6  # progress of two control steps
 
 
-def test_registered_env_truncates_at_2000_steps():
-    """The TimeLimit of the spec (the env's own duration is lengthened so that the spec's limit acts first)."""
-    env = gym.make("SOfAR-Kentucky-v0", n_opponents=0, race={"duration": 1000.0}, use_miqp=False)
+def test_an_explicit_max_episode_steps_still_truncates():
+    """gymnasium.make(..., max_episode_steps=N) adds Gymnasium's TimeLimit (the env's own duration is lengthened so
+    that the limit acts first)."""
+    env = gym.make("SOfAR-Kentucky-v0", n_opponents=0, race={"duration": 1000.0}, use_miqp=False,
+                   max_episode_steps=2000)
     env.reset(seed=0)
     env.unwrapped.step = lambda action: (np.zeros(12, np.float32), 0.0, False, False, {})  # skip the physics
     for i in range(1, 2001):

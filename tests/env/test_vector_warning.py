@@ -60,8 +60,8 @@ def test_vector_mode_still_returns_the_declared_vector():
 @pytest.mark.parametrize("env_id", [ENV_IDS[0], INTERACTIVE_IDS[1]])
 def test_scalar_mode_is_passive_checked_where_make_puts_the_checker(env_id):
     env = gym.make(env_id, race=SHORT)
-    assert _wrappers(env) == [gym.wrappers.TimeLimit, gym.wrappers.OrderEnforcing, PassiveEnvChecker]
-    checker = env.env.env
+    assert _wrappers(env) == [gym.wrappers.OrderEnforcing, PassiveEnvChecker]  # no TimeLimit: the env ends itself
+    checker = env.env
     assert not checker.checked_reset and not checker.checked_step
     messages = _run_recording_warnings(env)
     assert checker.checked_reset and checker.checked_step  # the checker ran on the first reset and step
