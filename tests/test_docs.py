@@ -1,8 +1,9 @@
-"""The documentation site builds with ``mkdocs build --strict`` (warnings, e.g. broken references, fail)."""
+"""The documentation site builds with ``mkdocs build --strict`` (warnings, e.g. broken references, fail), with no\nraw Sphinx role in its pages, the whole configuration reference and the results' tables and figures."""
 
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -26,3 +27,22 @@ def test_mkdocs_build_strict(tmp_path: Path) -> None:
     assert 'id="sofar_env.config.EnvConfig.reward_mode"' in config_page
     env_page = (site / "envs" / "paper" / "index.html").read_text(encoding="utf-8")
     assert "<table" in env_page  # the env docstring's spec tables render
+
+    # the docstrings' Sphinx roles render as links or code, never as raw roles
+    raw = re.compile(r":(?:class|func|meth|mod|attr|data|obj|exc):(?:<code>|`)")
+    for page in site.rglob("*.html"):
+        found = raw.search(page.read_text(encoding="utf-8"))
+        assert found is None, (page.relative_to(site), found)
+    assert 'href="../../reference/config/#sofar_env.config.EnvConfig"' in env_page  # a role linked to its target
+
+    # every configuration class has its section, every key a row with its type and default
+    for cls in ("EnvConfig", "RaceConfig", "OpponentConfig", "StackConfig", "MPCConfig", "MIQPConfig", "SensorConfig",
+                "DynamicParams", "BarrierParams", "PASTAConfig"):
+        assert f">{cls}<" in config_page, cls
+    assert 'id="sofar_env.race_config.RaceConfig.duration"' in config_page
+
+    # the results page shows the tables and figures of results/
+    results_page = (site / "results" / "index.html").read_text(encoding="utf-8")
+    assert results_page.count("<table>") >= 5 and "Table II" in results_page
+    for image in ("figures/distance_vs_gamma.png", "figures/gamma_hist.png", "paper_stack/figures/gamma_hist.png"):
+        assert f'src="../img/results/{image}"' in results_page and (site / "img" / "results" / image).is_file()
