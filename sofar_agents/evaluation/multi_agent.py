@@ -294,10 +294,12 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
                           opponents: int = 0) -> MultiAgentReport:
     """Run (or resume) the races into ``out_dir/<prefix>_races.csv`` and write ``<prefix>.md``.
 
-    With ``workers`` > 1 the races run in worker processes that end with this process (even when it is
+    ``workers``: None for one per CPU, below 1 raises ValueError. With ``workers`` > 1 the races run in worker processes that end with this process (even when it is
     killed); if one dies, the races without a result are logged and counted in ``missing`` of the report
     (its Markdown says the table is incomplete) instead of raising.
     """
+    if workers is not None and int(workers) < 1:  # 0 is not "unset": None is
+        raise ValueError(f"workers must be >= 1 (or None: one per CPU), got {workers!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     csv_path = out / f"{prefix}_races.csv"

@@ -102,8 +102,8 @@ def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, work
               address: str | None = None) -> SweepStats:
     """Run every task not yet in ``csv_path``, appending one row per finished episode.
 
-    ``backend="local"``: ``workers`` processes (default ``os.cpu_count()``; 1 runs in this
-    process). ``backend="ray"``: ``workers`` Ray actors (default: the CPUs of the Ray instance)
+    ``backend="local"``: ``workers`` processes (None: ``os.cpu_count()``; 1 runs in this
+    process; below 1 raises ValueError). ``backend="ray"``: ``workers`` Ray actors (default: the CPUs of the Ray instance)
     on a local Ray instance, or on the cluster at ``address`` (``"auto"`` or ``"HOST:6379"``);
     see :mod:`~sofar_agents.evaluation.ray_backend`. Either way only this process writes the
     CSV, and no worker outlives it. A failed episode (``stats.failed``) or one lost with a worker
@@ -114,6 +114,8 @@ def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, work
         raise ValueError(f"unknown sweep backend {backend!r} (expected 'local' or 'ray')")
     if address is not None and backend != "ray":
         raise ValueError("address (a Ray cluster) needs backend='ray'")
+    if workers is not None and int(workers) < 1:  # 0 is not "unset": None is
+        raise ValueError(f"workers must be >= 1 (or None: one per CPU), got {workers!r}")
     if backend == "ray":
         from sofar_agents.evaluation import ray_backend
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 
+import pytest
+
 from sofar_agents import evaluation as ev
 
 
@@ -33,3 +35,19 @@ def test_sweep_stats_speed_and_estimate():
     assert st.steps_per_second_per_worker == 100.0
     assert st.estimate_hours(3.6e6, 10) == 1.0
     assert ev.SweepStats().steps_per_second_per_worker != ev.SweepStats().steps_per_second_per_worker  # NaN
+
+
+@pytest.mark.parametrize("run", ["sweep", "multi-agent table"])
+@pytest.mark.parametrize("workers", [0, -2])
+def test_zero_or_negative_workers_are_refused_not_all_cpus(tmp_path, run, workers):
+    """0 is not "unset" (None is): a sweep asked for 0 workers raises before it reads or runs anything."""
+    from sofar_agents.evaluation.multi_agent import run_multi_agent_table
+
+    with pytest.raises(ValueError, match="workers must be >= 1"):
+        if run == "sweep":
+            ev.run_sweep(ev.table1_tasks([ev.Strategy.fixed(0.5)], ["LagunaSeca"], [0.5], episodes=1, duration=0.3),
+                         tmp_path / "e.csv", workers=workers, progress=False)
+        else:
+            run_multi_agent_table([ev.Strategy.fixed(0.5)], tmp_path / "ma", tracks=["LagunaSeca"], races=1,
+                                  workers=workers, progress=False)
+    assert not any(tmp_path.iterdir())
