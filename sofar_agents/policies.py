@@ -133,15 +133,16 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
     Raises:
         FileNotFoundError: a checkpoint file is missing.
         ValueError: wrong format version, observation size or tensor shapes, NaN/inf
-            weights, non-finite or inverted action bounds, a preference of the wrong
-            length or without a positive finite sum (the message names the file and
-            the field).
+            weights, any JSON field of the wrong type or out of range (action bounds outside
+            the gamma range [0.05, 1] or inverted, a preference of the wrong length or
+            without a positive finite sum, ...), or a tensor file that is not the one the
+            JSON was written with (the message names the file and the field).
     """
     meta, json_path, pt_path = read_checkpoint_metadata(path)
     if obs_dim is not None and meta["obs_dim"] != obs_dim:
         raise ValueError(f"{json_path}: checkpoint expects observations of size {meta['obs_dim']}, "
                          f"not {obs_dim}")
-    layers = read_actor_layers(meta, pt_path)
+    layers = read_actor_layers(meta, pt_path, json_path)
     return PASTAPolicy(layers, meta["obs_dim"], meta["preference"] if preference is None else preference,
                        meta["action_low"], meta["action_high"], path=json_path,
                        objective_names=meta.get("objective_names"),

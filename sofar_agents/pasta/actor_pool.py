@@ -27,6 +27,11 @@ Bit-identity assumes that the actors run the same torch build on the same kind o
 the driver (float kernels differ between instruction sets) and that the local run used one
 torch thread (``--torch-threads 1``, the default), as the actors do.
 
+Between rollouts the pool keeps each env's episode state (as the local collector does) and reports
+it, with each env's :class:`~sofar_agents.pasta.resume.EpisodeRecord`, as a
+:class:`~sofar_agents.pasta.resume.RolloutState` (:meth:`ActorEnvPool.rollout_state`) for checkpoints;
+:meth:`ActorEnvPool.start_rollouts` continues a loaded one by replaying each actor's episodes.
+
 A dead actor ends the run with ``RuntimeError`` (the env state it held is lost); the
 agent is left as it was before the rollout, so ``train/pasta.py`` still writes its final
 checkpoint and the run can be resumed from it. A rollout that fails (or is interrupted) closes
@@ -50,6 +55,7 @@ import torch
 from sofar_agents.pasta.buffer import RolloutBuffer
 from sofar_agents.pasta.distribution import gaussian_log_prob, make_squash
 from sofar_agents.pasta.networks import Actor, network_inputs
+from sofar_agents.pasta.resume import EpisodeRecord, RolloutState, replay_vector_env, vector_records
 from sofar_agents.pasta.rollout import EPISODE_INFO_KEYS, _info_item, reward_vectors
 
 __all__ = ["ActorEnvPool", "EnvSlice", "slices"]
@@ -100,10 +106,22 @@ class EnvSlice:
     def get_attr(self, name: str) -> tuple:
         return self.env.get_attr(name)
 
-    def reset(self, seed: int) -> None:
-        """Reset the vector env with ``seed`` (env, or race, ``i`` of it with ``seed + i``)."""
+    def reset(self, seed: int) -> np.ndarray:
+        """Reset the vector env with ``seed`` (env, or race, ``i`` of it with ``seed + i``); the observations."""
         obs, _ = self.env.reset(seed=seed)
         self.obs = np.asarray(obs, dtype=np.float32).reshape(self.m, -1)
+        return self.obs
+
+    def episode_records(self) -> list[EpisodeRecord] | None:
+        """The episode record of each of its envs (None if its envs keep none, e.g. races)."""
+        return vector_records(self.env)
+
+    def replay(self, records: list[EpisodeRecord]) -> np.ndarray:
+        """Rebuild its envs' episodes from ``records`` (:func:`~sofar_agents.pasta.resume.replay_vector_env`);
+        the observations reached."""
+        obs = replay_vector_env(self.env, records)
+        self.obs = np.asarray(obs, dtype=np.float32).reshape(self.m, -1)
+        return self.obs
 
     def begin(self, state: dict[str, np.ndarray], spec: tuple, noise: np.ndarray, prefs: np.ndarray,
               n_objectives: int, max_steps: int) -> dict[str, Any]:
@@ -252,30 +270,77 @@ class ActorEnvPool(abc.ABC):
         except Exception as err:
             raise self._failure(w, err) from err
 
-    def get_attr(self, name: str) -> tuple:
-        """Attribute ``name`` of every env (through the wrappers), in env order."""
-        self._check_open()
-        refs = [self._call(w, "get_attr", name) for w in range(len(self.slices))]
+    def _call_all(self, method: str, args: Sequence[tuple] | None = None) -> list[Any]:
+        """``method`` of every actor (``args[w]`` for actor ``w``), answers in actor order; the first failure
+        is raised once every answer has been read (so that none is left for a later call)."""
+        refs = [self._call(w, method, *(args[w] if args is not None else ())) for w in range(len(self.slices))]
         values, error = [], None
-        for w, ref in enumerate(refs):  # every answer is read, so that none is left for a later call
+        for w, ref in enumerate(refs):
             try:
-                values.extend(self._get(w, ref))
+                values.append(self._get(w, ref))
             except RuntimeError as err:
                 error = error or err
         if error is not None:
             raise error
-        return tuple(values)
+        return values
+
+    def get_attr(self, name: str) -> tuple:
+        """Attribute ``name`` of every env (through the wrappers), in env order."""
+        self._check_open()
+        return tuple(v for values in self._call_all("get_attr", [(name,)] * len(self.slices)) for v in values)
+
+    # ----------------------------------------------------------------- rollout state
+
+    def start_rollouts(self, agent: Any, resume: RolloutState | None) -> RolloutState:
+        """Begin the episodes of the next rollouts: continue ``resume`` where each actor can replay its
+        episodes to the saved observations, else (logged) and without it start new ones with a seeded reset
+        (as :meth:`RolloutCollector.prepare`); the rollout state at that point. A failure closes the pool, as
+        a failed rollout does."""
+        self._check_open()
+        try:
+            if resume is None or not self._continue(resume):
+                self._state = self._reset(agent)
+            return self.rollout_state()
+        except BaseException:
+            self.close()
+            raise
+
+    def _continue(self, st: RolloutState) -> bool:
+        try:
+            if st.episodes is None:
+                raise ValueError("the checkpoint holds no episode records")
+            if st.n_envs != self.num_envs:
+                raise ValueError(f"the checkpoint holds {st.n_envs} envs, the pool has {self.num_envs}")
+            obs = np.concatenate(self._call_all("replay", [(st.episodes[lo:hi],) for lo, hi in self.slices]))
+            if not np.array_equal(obs.reshape(st.last_obs.shape), st.last_obs):
+                raise ValueError("the replayed episodes reach other observations than the saved ones")
+        except (ValueError, RuntimeError) as err:
+            logger.warning("cannot continue the saved episodes (%s): starting new episodes with a seeded reset, "
+                           "so the resumed run is not bit-identical to an uninterrupted one", err)
+            return False
+        self._state = {"prefs": st.prefs.copy(), "disc": st.disc_returns.copy(), "ret": st.ep_returns.copy(),
+                       "len": st.ep_lengths.copy(), "last_obs": st.last_obs.copy()}
+        return True
+
+    def rollout_state(self) -> RolloutState:
+        """The per-env state between two rollouts, with every env's episode record (None for races)."""
+        self._check_open()
+        if self._state is None:
+            raise RuntimeError("no rollout has begun yet")
+        per_actor = self._call_all("episode_records")
+        records = None if any(r is None for r in per_actor) else [r for rs in per_actor for r in rs]
+        st = self._state
+        return RolloutState(st["last_obs"].copy(), st["prefs"].copy(), st["disc"].copy(), st["ret"].copy(),
+                            st["len"].copy(), records)
 
     # ----------------------------------------------------------------- rollout
 
     def _reset(self, agent: Any) -> dict[str, np.ndarray]:
         seed = agent.seed + agent.num_updates * 7919  # as RolloutCollector.reset
-        refs = [self._call(w, "reset", seed + offset) for w, offset in enumerate(self.seed_offsets)]
-        for w, ref in enumerate(refs):
-            self._get(w, ref)
+        obs = self._call_all("reset", [(seed + offset,) for offset in self.seed_offsets])
         n, k = self.num_envs, agent.n_objectives
         return {"prefs": agent.sample_preferences(n), "disc": np.zeros((n, k)), "ret": np.zeros((n, k)),
-                "len": np.zeros(n, dtype=np.int64)}
+                "len": np.zeros(n, dtype=np.int64), "last_obs": np.concatenate(obs)}
 
     def collect_rollout(self, agent: Any, t_steps: int) -> RolloutBuffer:
         """One rollout of ``t_steps`` steps per env, as :meth:`RolloutCollector.collect` would collect it locally."""
@@ -382,6 +447,7 @@ class ActorEnvPool(abc.ABC):
         next_val[-1] = last_values
         ended = term | trunc
         next_val[ended] = final_val[ended]
+        st["last_obs"] = last_obs
         st["buffer"] = RolloutBuffer(full["obs"], pref_b, full["u"], full["actions"], full["logp"], full["rewards"],
                                      val_b, next_val, term, trunc, episodes)
         return st

@@ -6,7 +6,9 @@ predicts actions and saves / loads checkpoints (:mod:`sofar_agents.pasta.checkpo
 The algorithm is summarised in :mod:`sofar_agents.pasta`.
 
 Randomness: one ``numpy.random.Generator`` and one ``torch.Generator`` owned by the
-agent, both derived from ``seed``. The global RNGs are never touched.
+agent, both derived from ``seed``. The global RNGs are never touched. A checkpoint holds both
+generators' states and the collector's rollout state, so that training resumed from it is
+bit-identical to training that was not interrupted (:mod:`sofar_agents.pasta.resume`).
 """
 
 from __future__ import annotations
@@ -116,7 +118,7 @@ class PASTA:
         self.train_time = 0.0
         self.metadata: dict[str, Any] = {}
         self.ep_info_buffer: deque[dict[str, Any]] = deque(maxlen=100)
-        self._rollout = RolloutCollector()  # per-env episode state between rollouts (not saved)
+        self._rollout = RolloutCollector()  # per-env episode state between rollouts (saved as the rollout state)
 
     # ----------------------------------------------------------------- helpers
 
@@ -195,10 +197,16 @@ class PASTA:
 
     # ----------------------------------------------------------------- rollout
 
+    def prepare(self, vec_env: Any) -> None:
+        """Make ``vec_env`` ready for the next :meth:`collect` now (what the first collect would do first):
+        continue the episodes of a loaded checkpoint, or reset the envs with the agent's seed. Lets a caller
+        see a failing first reset before it writes anything; the rollouts that follow are the same."""
+        self._rollout.prepare(self, vec_env)
+
     def collect(self, vec_env: Any, n_steps: int | None = None) -> RolloutBuffer:
         """Run the current stochastic policy for ``n_steps`` steps in every env.
 
-        The env is reset on the first call (with the agent's seed) and whenever a
+        The env is prepared (:meth:`prepare`) on the first call and whenever a
         different vector env is passed; otherwise collection continues from the
         last observation. Updates the return normaliser and ``num_timesteps``. See
         :class:`~sofar_agents.pasta.rollout.RolloutCollector`.

@@ -2,23 +2,32 @@
 
 A checkpoint is a pair of files with a common stem (format_version 1):
 
-- ``<stem>.json``: ``format_version``, ``algorithm``, ``weights_file``, ``obs_dim``,
-  ``n_objectives``, ``objective_names``, ``act_dim``, ``action_low``, ``action_high``,
-  ``action_squashing`` (``"sigmoid"``: ``a = low + (high - low) * sigmoid(u)``, or
-  ``"clip"``: ``a = clip(u, low, high)``; the same as ``config.action_squashing``),
-  ``activation`` (``"tanh"``), the deployment ``preference``, the agent's ``seed``,
-  the PASTA ``config``, the optimiser ``state`` counters and ``training`` metadata
-  (command, seed, env, code version, steps, wall time).
+- ``<stem>.json``: ``format_version``, ``algorithm``, ``weights_file``, ``weights_sha256`` (the SHA-256 of
+  the tensor file), ``obs_dim``, ``n_objectives``, ``objective_names``, ``act_dim``, ``action_low``,
+  ``action_high`` (within the gamma range [0.05, 1]), ``action_squashing`` (``"sigmoid"``:
+  ``a = low + (high - low) * sigmoid(u)``, or ``"clip"``: ``a = clip(u, low, high)``; the same as
+  ``config.action_squashing``), ``activation`` (``"tanh"``), the deployment ``preference``, the agent's
+  ``seed``, the PASTA ``config``, the ``state`` counters and the agent's numpy generator state, the
+  ``rollout`` state to resume from (:mod:`sofar_agents.pasta.resume`; absent when the agent has not
+  collected yet) and ``training`` metadata (command, seed, env, code version, steps, wall time). Every
+  field and its check: :mod:`sofar_agents.pasta.checkpoint_meta`.
 - ``<stem>.pt``: ``torch.save`` of a dict of tensors and state dicts only (``actor``,
-  ``critic``, ``optimizer``, the return normaliser statistics, the utopia), read with
+  ``critic``, ``optimizer``, the return normaliser statistics, the utopia, the agent's torch
+  generator state ``torch_generator`` and the ``rollout`` tensors), read with
   ``torch.load(weights_only=True)``; never pickled Python objects.
+
+Writing is atomic: both files are written to temporary files in their folder, then moved over the
+old ones with ``os.replace``, the tensor file first and the JSON last, so that a save interrupted at
+any point leaves the old pair, or a new tensor file with the old JSON, which reading refuses (its
+``weights_sha256`` does not match), never a torn file. A save validates the JSON it is about to write
+as reading would, and writes nothing if it fails.
 
 Reading checks everything before anything is built: a file that is not a checkpoint
 (random bytes, JSON of another kind, a truncated or foreign tensor file, missing keys or
-tensors), NaN/inf in any tensor or in the preference and action bounds, action bounds
-with ``action_low >= action_high``, and a preference of the wrong length, with a negative
-entry or without a positive finite sum all raise ``ValueError`` naming the file and the
-field.
+tensors), every JSON field (type and range, :func:`~sofar_agents.pasta.checkpoint_meta.validate_metadata`),
+NaN/inf in any tensor, the rollout state's shapes, and a tensor file that is not the one the JSON was
+written with (``weights_sha256``; checkpoints written before the field are read without the check),
+all raise ``ValueError`` naming the file and the field.
 
 :func:`save_agent` / :func:`load_agent` back :meth:`PASTA.save` / :meth:`PASTA.load`;
 :func:`read_checkpoint_metadata` and :func:`read_actor_layers` back the numpy policy
@@ -30,16 +39,22 @@ functions that touch the tensor file, so that reading the metadata (and importin
 from __future__ import annotations
 
 import copy
+import hashlib
+import io
 import json
+import os
 import re
+import tempfile
 import time
-from pathlib import Path
 from collections.abc import Iterator
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sofar_agents.pasta.config import SQUASHINGS, PASTAConfig
+from sofar_agents.pasta.checkpoint_meta import FORMAT_VERSION, validate_metadata
+from sofar_agents.pasta.config import PASTAConfig
+from sofar_agents.pasta.resume import RolloutState, check_rollout_meta
 
 if TYPE_CHECKING:
     from sofar_agents.pasta.agent import PASTA
@@ -55,13 +70,6 @@ __all__ = [
     "load_agent",
 ]
 
-FORMAT_VERSION = 1
-"""Version of the PASTA checkpoint format written and accepted by this package."""
-
-_REQUIRED_KEYS = ("format_version", "obs_dim", "n_objectives", "action_low", "action_high", "preference",
-                  "config")
-
-
 def checkpoint_paths(path: str | Path) -> tuple[Path, Path]:
     """``(json_path, pt_path)`` for a checkpoint path given as ``stem``, ``stem.json`` or ``stem.pt``."""
     p = Path(path)
@@ -73,8 +81,8 @@ def read_checkpoint_metadata(path: str | Path) -> tuple[dict[str, Any], Path, Pa
     """Read and validate the JSON half of a checkpoint.
 
     Returns ``(metadata, json_path, pt_path)``. Raises ``FileNotFoundError`` when a
-    file is missing and ``ValueError`` (naming the file) for a wrong format version
-    or inconsistent fields.
+    file is missing and ``ValueError`` (naming the file and the field) for a wrong format
+    version or any field of the wrong type, out of range or inconsistent with the others.
     """
     json_path, pt_path = checkpoint_paths(path)
     if not json_path.is_file():
@@ -83,63 +91,14 @@ def read_checkpoint_metadata(path: str | Path) -> tuple[dict[str, Any], Path, Pa
         meta = json.loads(json_path.read_bytes())
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise ValueError(f"{json_path}: not a valid JSON checkpoint ({err})") from err
-    if not isinstance(meta, dict):
-        raise ValueError(f"{json_path}: expected a JSON object")
-    missing = [k for k in _REQUIRED_KEYS if k not in meta]
-    if missing:
-        raise ValueError(f"{json_path}: not a PASTA checkpoint, missing keys {missing}")
-    if meta["format_version"] != FORMAT_VERSION:
-        raise ValueError(
-            f"{json_path}: checkpoint format_version {meta['format_version']!r} is not supported "
-            f"(this version of sofar_agents reads format_version {FORMAT_VERSION})"
-        )
-    for key in ("obs_dim", "n_objectives"):
-        if not isinstance(meta[key], int) or isinstance(meta[key], bool) or meta[key] < 1:
-            raise ValueError(f"{json_path}: {key} must be a positive integer, got {meta[key]!r}")
-    if not isinstance(meta["config"], dict):
-        raise ValueError(f"{json_path}: config must be a JSON object, got {type(meta['config']).__name__}")
-    k = meta["n_objectives"]
-    preference = _finite_vector(meta, "preference", json_path)
-    if len(preference) != k:
-        raise ValueError(f"{json_path}: preference has {len(preference)} entries for {k} objectives")
-    if np.any(preference < 0):
-        raise ValueError(f"{json_path}: preference must be non-negative, got {meta['preference']}")
-    if not (np.isfinite(preference.sum()) and preference.sum() > 0):
-        raise ValueError(f"{json_path}: preference must sum to a positive finite value, got {meta['preference']}")
-    if "objective_names" in meta and len(meta["objective_names"]) != k:
-        raise ValueError(f"{json_path}: {len(meta['objective_names'])} objective names for {k} objectives")
-    low = _finite_vector(meta, "action_low", json_path)
-    high = _finite_vector(meta, "action_high", json_path)
-    if len(low) != len(high) or len(low) == 0:
-        raise ValueError(f"{json_path}: action_low and action_high differ in length or are empty")
-    if np.any(low >= high):
-        raise ValueError(f"{json_path}: action_low {meta['action_low']} must lie below action_high "
-                         f"{meta['action_high']} in every component")
-    squashing = meta.get("action_squashing", "sigmoid")
-    if squashing not in SQUASHINGS or meta.get("activation", "tanh") != "tanh":
-        raise ValueError(f"{json_path}: unsupported squashing/activation "
-                         f"{meta.get('action_squashing')!r}/{meta.get('activation')!r}")
-    config = meta["config"]
-    if config.get("action_squashing", "sigmoid") != squashing:
-        raise ValueError(f"{json_path}: action_squashing {squashing!r} disagrees with the config's "
-                         f"{config.get('action_squashing', 'sigmoid')!r}")
+    validate_metadata(meta, json_path)
+    if meta.get("rollout") is not None:
+        check_rollout_meta(meta["rollout"], str(json_path))
     if "weights_file" in meta:
         pt_path = json_path.parent / meta["weights_file"]
     if not pt_path.is_file():
         raise FileNotFoundError(f"checkpoint weights {pt_path} (referenced by {json_path}) not found")
     return meta, json_path, pt_path
-
-
-def _finite_vector(meta: dict[str, Any], key: str, json_path: Path) -> np.ndarray:
-    """``meta[key]`` as a 1-D float array; ``ValueError`` naming the file and the field unless finite."""
-    value = meta[key]
-    if not isinstance(value, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                              for v in value):
-        raise ValueError(f"{json_path}: {key} must be a list of numbers, got {value!r}")
-    arr = np.asarray(value, dtype=np.float64)
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{json_path}: {key} must be finite, got {value}")
-    return arr
 
 
 def _actor_layers(actor_state: dict[str, np.ndarray], pt_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -182,12 +141,18 @@ def validate_actor_state(actor_state: dict[str, np.ndarray], meta: dict[str, Any
 def read_tensors(pt_path: Path) -> dict[str, Any]:
     """The tensor dict of a checkpoint (``torch.load(weights_only=True)`` on the CPU).
 
-    Raises ``ValueError`` (naming the file) when it cannot be read or has no ``actor``.
+    Raises ``ValueError`` (naming the file) when it cannot be read, has no ``actor`` or holds NaN/inf.
     """
+    return _load_tensors(pt_path)[0]
+
+
+def _load_tensors(pt_path: Path) -> tuple[dict[str, Any], str]:
+    """:func:`read_tensors` and the SHA-256 of the bytes it read."""
     import torch
 
     try:
-        state = torch.load(pt_path, map_location="cpu", weights_only=True)
+        data = Path(pt_path).read_bytes()
+        state = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
     except Exception as err:  # noqa: BLE001 - re-raised with the file name
         raise ValueError(f"{pt_path}: cannot read the tensor file ({err})") from err
     if not isinstance(state, dict) or not isinstance(state.get("actor"), dict):
@@ -195,7 +160,16 @@ def read_tensors(pt_path: Path) -> dict[str, Any]:
     for name, tensor in _tensors(state):
         if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
             raise ValueError(f"{pt_path}: tensor {name} is not finite (NaN or inf)")
-    return state
+    return state, hashlib.sha256(data).hexdigest()
+
+
+def _check_digest(meta: dict[str, Any], digest: str, json_path: Path, pt_path: Path) -> None:
+    """``ValueError`` naming both files unless the tensor file is the one the JSON was written with."""
+    expected = meta.get("weights_sha256")
+    if expected is not None and expected != digest:
+        raise ValueError(f"{json_path} and {pt_path} are not one checkpoint: weights_sha256 {expected} in the "
+                         f"JSON, {digest} for the tensor file (a save interrupted between its two files, or "
+                         "files of two saves); use a complete pair")
 
 
 def _tensors(obj: Any, prefix: str = "") -> Iterator[tuple[str, Any]]:
@@ -216,9 +190,14 @@ def _actor_arrays(state: dict[str, Any]) -> dict[str, np.ndarray]:
     return {k: v.detach().cpu().numpy() for k, v in state["actor"].items()}
 
 
-def read_actor_layers(meta: dict[str, Any], pt_path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The actor's ``(weight, bias)`` pairs as numpy arrays, checked against ``meta``."""
-    return validate_actor_state(_actor_arrays(read_tensors(pt_path)), meta, pt_path)
+def read_actor_layers(meta: dict[str, Any], pt_path: Path,
+                      json_path: Path | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The actor's ``(weight, bias)`` pairs as numpy arrays, checked against ``meta`` (and, when it has
+    ``weights_sha256``, that ``pt_path`` is the tensor file it was written with; ``json_path`` names it)."""
+    state, digest = _load_tensors(pt_path)
+    layers = validate_actor_state(_actor_arrays(state), meta, pt_path)
+    _check_digest(meta, digest, json_path or Path("the checkpoint JSON"), pt_path)
+    return layers
 
 
 def _json_default(obj: Any) -> Any:
@@ -232,16 +211,20 @@ def _json_default(obj: Any) -> Any:
 
 
 def save_agent(agent: PASTA, path: str | Path, metadata: dict[str, Any] | None = None) -> Path:
-    """Write ``agent`` as ``<stem>.pt`` (tensors only) and ``<stem>.json`` (everything else).
+    """Write ``agent`` as ``<stem>.pt`` (tensors only) and ``<stem>.json`` (everything else), atomically.
 
     ``path`` may end in ``.json``, ``.pt`` or have no such suffix. ``metadata``
     (e.g. the training command and env id) is merged into ``agent.metadata`` and
-    stored under ``"training"``. Returns the JSON path.
+    stored under ``"training"``. Besides the weights, the optimiser and the counters, the
+    checkpoint holds the agent's generator states and its collector's rollout state, so that
+    training resumed from it continues exactly (:mod:`sofar_agents.pasta.resume`). Both files are
+    written to temporary files in their folder and moved into place with ``os.replace``, the JSON
+    last (module docstring); a JSON that reading would refuse raises ``ValueError`` before anything
+    is written. Returns the JSON path.
     """
     import torch
 
     json_path, pt_path = checkpoint_paths(path)
-    json_path.parent.mkdir(parents=True, exist_ok=True)
     if metadata:
         agent.metadata.update(metadata)
     state = {
@@ -251,10 +234,17 @@ def save_agent(agent: PASTA, path: str | Path, metadata: dict[str, Any] | None =
         "return_rms_mean": torch.as_tensor(agent.return_rms.mean),
         "return_rms_var": torch.as_tensor(agent.return_rms.var),
         "return_rms_count": torch.tensor(agent.return_rms.count, dtype=torch.float64),
+        "torch_generator": agent.torch_gen.get_state(),
     }
     if agent.utopia is not None:
         state["utopia"] = torch.as_tensor(agent.utopia)
-    torch.save(state, pt_path)
+    rollout: RolloutState | None = agent._rollout.checkpoint_state()
+    rollout_meta = None
+    if rollout is not None:
+        rollout_meta, state["rollout"] = rollout.to_checkpoint()
+    buf = io.BytesIO()
+    torch.save(state, buf)
+    data = buf.getvalue()
     try:
         from importlib.metadata import version
 
@@ -265,6 +255,7 @@ def save_agent(agent: PASTA, path: str | Path, metadata: dict[str, Any] | None =
         "format_version": FORMAT_VERSION,
         "algorithm": "PASTA",
         "weights_file": pt_path.name,
+        "weights_sha256": hashlib.sha256(data).hexdigest(),
         "obs_dim": agent.obs_dim,
         "n_objectives": agent.n_objectives,
         "objective_names": list(agent.objective_names),
@@ -282,6 +273,7 @@ def save_agent(agent: PASTA, path: str | Path, metadata: dict[str, Any] | None =
             "mu": agent.mu_controller.mu,
             "last_conflict": agent.last_conflict,
             "train_time_s": agent.train_time,
+            "rng": agent.rng.bit_generator.state,
         },
         "training": {
             **agent.metadata,
@@ -290,8 +282,54 @@ def save_agent(agent: PASTA, path: str | Path, metadata: dict[str, Any] | None =
             "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         },
     }
-    json_path.write_text(json.dumps(meta, indent=2, default=_json_default))
+    if rollout_meta is not None:
+        meta["rollout"] = rollout_meta
+    text = json.dumps(meta, indent=2, default=_json_default)
+    check = json.loads(text)
+    validate_metadata(check, json_path)  # never write a checkpoint that reading would refuse
+    if rollout_meta is not None:
+        check_rollout_meta(check["rollout"], str(json_path))
+    _write_pair(pt_path, data, json_path, text.encode())
     return json_path
+
+
+def _write_pair(pt_path: Path, pt_data: bytes, json_path: Path, json_data: bytes) -> None:
+    """Write both files to temporary files in their folders, then ``os.replace`` them, the JSON last.
+
+    A failure (or an interrupt) at any point removes the temporary files still there and leaves the
+    old files, or the new tensor file with the old JSON (which reading refuses by its digest).
+    """
+    tmp: list[Path] = []
+    try:
+        for target, data in ((pt_path, pt_data), (json_path, json_data)):
+            target.parent.mkdir(parents=True, exist_ok=True)
+            fd, name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+            tmp.append(Path(name))
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+        for src, target in zip(list(tmp), (pt_path, json_path)):
+            os.replace(src, target)
+            tmp.remove(src)
+        _sync_folder(json_path.parent)
+    finally:
+        for leftover in tmp:
+            leftover.unlink(missing_ok=True)
+
+
+def _sync_folder(folder: Path) -> None:
+    """fsync a folder, so that the renames in it survive a crash (where the platform allows it)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 _AGENT_TENSORS = ("actor", "critic", "return_rms_mean", "return_rms_var", "return_rms_count")
@@ -302,21 +340,38 @@ def load_agent(cls: type[PASTA], path: str | Path) -> PASTA:
     """Rebuild an agent of class ``cls`` from a checkpoint written by :func:`save_agent`.
 
     Raises ``FileNotFoundError`` for a missing file and ``ValueError`` (naming the
-    file and the field) for a wrong format version, non-finite or inconsistent
-    metadata, a tensor file that cannot be read, holds NaN/inf or lacks an entry,
-    and weights that do not match the metadata. Every part is read and checked
-    before the agent is returned, so a failed load hands back nothing half-built.
+    file and the field) for a wrong format version, a JSON field of the wrong type or
+    out of range, a tensor file that cannot be read, holds NaN/inf or lacks an entry,
+    weights that do not match the metadata, a rollout state of the wrong shapes and a
+    tensor file that is not the one the JSON was written with. Every part is read and
+    checked before the agent is returned, so a failed load hands back nothing half-built.
+    The agent's generators and its collector's rollout state are restored when the
+    checkpoint has them (older checkpoints: the generators start from the seed and the
+    first rollout begins with a seeded reset).
     """
+    import torch
+
     meta, json_path, pt_path = read_checkpoint_metadata(path)
     try:
         config = PASTAConfig.from_dict(meta["config"])
     except (TypeError, ValueError, KeyError) as err:
         raise ValueError(f"{json_path}: invalid config ({err})") from err
-    state = read_tensors(pt_path)
+    state, digest = _load_tensors(pt_path)
     missing = [key for key in _AGENT_TENSORS if key not in state]
     if missing:
         raise ValueError(f"{pt_path}: tensor file is missing {missing}")
     validate_actor_state(_actor_arrays(state), meta, pt_path)
+    _check_digest(meta, digest, json_path, pt_path)
+    torch_state = state.get("torch_generator")
+    if torch_state is not None:
+        try:
+            torch.Generator().set_state(torch_state)
+        except (RuntimeError, TypeError) as err:
+            raise ValueError(f"{pt_path}: tensor torch_generator is not a torch generator state ({err})") from err
+    rollout = None
+    if meta.get("rollout") is not None:
+        rollout = RolloutState.from_checkpoint(meta["rollout"], state.get("rollout"), str(pt_path),
+                                               (meta["obs_dim"], meta["n_objectives"]))
     try:
         agent = cls(
             meta["obs_dim"], meta["n_objectives"], meta["action_low"], meta["action_high"], config,
@@ -342,5 +397,11 @@ def load_agent(cls: type[PASTA], path: str | Path) -> PASTA:
         agent.utopia = utopia
     (agent.num_timesteps, agent.num_updates, agent.mu_controller.mu, agent.last_conflict,
      agent.train_time) = counters
+    if "rng" in meta.get("state", {}):
+        agent.rng.bit_generator.state = meta["state"]["rng"]
+    if torch_state is not None:
+        agent.torch_gen.set_state(torch_state)
+    if rollout is not None:
+        agent._rollout.restore(rollout)
     agent.metadata = copy.deepcopy(meta.get("training", {}))
     return agent

@@ -11,10 +11,15 @@ t_steps)`` method, an :class:`sofar_agents.pasta.actor_pool.ActorEnvPool` whose 
 worker processes or Ray actors) is handed the whole rollout instead of being stepped here.
 :func:`make_training_env` builds the training env of ``train/pasta.py`` (picklable, so
 that remote workers can build it).
+
+Between two rollouts the collector holds a :class:`~sofar_agents.pasta.resume.RolloutState`
+(``boundary``): what a checkpoint saves so that training resumed from it continues every env's
+episode exactly (:mod:`sofar_agents.pasta.resume`). A loaded one is continued by the next rollout.
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -24,6 +29,7 @@ import torch
 from sofar_agents.pasta.buffer import RolloutBuffer
 from sofar_agents.pasta.distribution import gaussian_log_prob
 from sofar_agents.pasta.networks import network_inputs
+from sofar_agents.pasta.resume import EpisodeRecorder, RolloutState, replay_vector_env, vector_records
 
 if TYPE_CHECKING:
     from sofar_agents.pasta.agent import PASTA
@@ -32,6 +38,8 @@ __all__ = ["RolloutCollector", "reward_vectors", "make_training_env", "EPISODE_I
 
 EPISODE_INFO_KEYS = ("is_success", "overtakes", "laps", "collision", "off_track")
 """Final-info entries copied into the episode records of a rollout when present."""
+
+logger = logging.getLogger(__name__)
 
 
 def _info_item(infos: dict[str, Any], key: str, i: int) -> Any:
@@ -49,7 +57,8 @@ def make_training_env(env_id: str, env_kwargs: dict[str, Any], rho_min: float, r
 
     ``gymnasium.make(env_id, reward_mode="vector", **env_kwargs)`` wrapped in
     :class:`~sofar_agents.wrappers.RandomRhoReset` (rho uniform in ``[rho_min, rho_max]``
-    or from ``rho_values``) and :class:`~sofar_agents.wrappers.LinearReward`. An id
+    or from ``rho_values``), :class:`~sofar_agents.wrappers.LinearReward` and, outermost,
+    :class:`~sofar_agents.pasta.resume.EpisodeRecorder` (for exact resumption). An id
     without ``module:`` that is not registered yet is registered by importing ``sofar_env``.
     A module-level function, so ``functools.partial(make_training_env, ...)`` is a
     picklable env factory.
@@ -62,7 +71,7 @@ def make_training_env(env_id: str, env_kwargs: dict[str, Any], rho_min: float, r
         import sofar_env  # noqa: F401  (registers the SOfAR ids)
     env = gym.make(env_id, reward_mode="vector", **env_kwargs)
     env = RandomRhoReset(env, rho_min, rho_max, rho_values)
-    return LinearReward(env)
+    return EpisodeRecorder(LinearReward(env))
 
 
 def reward_vectors(rewards: Any, infos: dict[str, Any], done: np.ndarray, n_objectives: int) -> np.ndarray:
@@ -101,9 +110,10 @@ class RolloutCollector:
     Holds, per env, what carries over from one rollout to the next: the last
     observation, the preference of the running episode (drawn with
     :meth:`PASTA.sample_preferences` at every episode start), its discounted and
-    undiscounted returns and its length. The env is reset (seeded from the agent's
-    seed and update count) on the first rollout and whenever a different vector env
-    is passed.
+    undiscounted returns and its length. The env is prepared (:meth:`prepare`) on the
+    first rollout and whenever a different vector env is passed: a loaded rollout state
+    (:meth:`restore`) is continued, else the env is reset (seeded from the agent's seed
+    and update count).
     """
 
     def __init__(self) -> None:
@@ -113,6 +123,62 @@ class RolloutCollector:
         self.disc_returns: np.ndarray | None = None
         self.ep_returns: np.ndarray | None = None
         self.ep_lengths: np.ndarray | None = None
+        self.boundary: RolloutState | None = None
+        """The state after the last rollout (or the preparation of the env): what a checkpoint saves."""
+        self.pending: RolloutState | None = None
+        """A rollout state to continue on the next rollout (:meth:`restore`)."""
+
+    def checkpoint_state(self) -> RolloutState | None:
+        """The rollout state a checkpoint saves now: the last boundary, else a restored one not yet continued."""
+        return self.boundary if self.boundary is not None else self.pending
+
+    def restore(self, state: RolloutState | None) -> None:
+        """Continue ``state`` on the next rollout (None: start fresh episodes); the env is prepared again."""
+        self.pending, self.boundary = state, None
+        self.env, self.last_obs = None, None
+
+    def prepare(self, agent: PASTA, vec_env: Any) -> None:
+        """Make ``vec_env`` ready for the next rollout, unless it already is (it collected the last one).
+
+        A restored rollout state is continued when its episodes can be rebuilt in ``vec_env``
+        (:func:`~sofar_agents.pasta.resume.replay_vector_env`, reaching the saved observations); otherwise
+        (with a warning) and without one, every env starts a new episode from a seeded :meth:`reset`. Errors
+        of the envs (a reset that fails) propagate. Sets :attr:`boundary`.
+        """
+        if self.env is vec_env and self.boundary is not None:
+            return
+        pending, self.pending = self.pending, None
+        if getattr(vec_env, "collect_rollout", None) is not None:  # an actor pool keeps its per-env state itself
+            self.boundary = vec_env.start_rollouts(agent, pending)
+            self.env = vec_env
+            return
+        if pending is None or not self._continue(agent, vec_env, pending):
+            self.reset(agent, vec_env)
+        self.boundary = self._capture(vec_env)
+
+    def _continue(self, agent: PASTA, vec_env: Any, state: RolloutState) -> bool:
+        """Rebuild ``state``'s episodes in ``vec_env``; False (logged) if they cannot be rebuilt exactly."""
+        try:
+            if state.episodes is None:
+                raise ValueError("the checkpoint holds no episode records")
+            obs = replay_vector_env(vec_env, state.episodes)
+            if not np.array_equal(np.asarray(obs, dtype=np.float32).reshape(state.last_obs.shape), state.last_obs):
+                raise ValueError("the replayed episodes reach other observations than the saved ones")
+        except Exception as err:  # noqa: BLE001 - any failure to rebuild falls back to fresh episodes
+            logger.warning("cannot continue the saved episodes (%s): starting new episodes with a seeded reset, "
+                           "so the resumed run is not bit-identical to an uninterrupted one", err)
+            return False
+        self.env = vec_env
+        self.last_obs, self.prefs = state.last_obs.copy(), state.prefs.copy()
+        self.disc_returns, self.ep_returns = state.disc_returns.copy(), state.ep_returns.copy()
+        self.ep_lengths = state.ep_lengths.copy()
+        return True
+
+    def _capture(self, vec_env: Any) -> RolloutState:
+        assert self.last_obs is not None and self.prefs is not None and self.disc_returns is not None
+        assert self.ep_returns is not None and self.ep_lengths is not None
+        return RolloutState(self.last_obs.copy(), self.prefs.copy(), self.disc_returns.copy(),
+                            self.ep_returns.copy(), self.ep_lengths.copy(), vector_records(vec_env))
 
     def reset(self, agent: PASTA, vec_env: Any) -> None:
         """Check the autoreset mode, reset ``vec_env`` and start new episodes in every env."""
@@ -141,12 +207,13 @@ class RolloutCollector:
         ``next_values`` of the buffer hold V of each transition's true successor:
         zero after termination, ``V(final_obs)`` after truncation.
         """
+        self.prepare(agent, vec_env)
         remote = getattr(vec_env, "collect_rollout", None)
         if remote is not None:  # the envs live elsewhere (e.g. Ray actors) and collect the rollout themselves
-            return remote(agent, t_steps)
+            buffer = remote(agent, t_steps)
+            self.boundary = vec_env.rollout_state()
+            return buffer
         cfg = agent.config
-        if self.env is not vec_env or self.last_obs is None:
-            self.reset(agent, vec_env)
         assert self.last_obs is not None and self.prefs is not None
         assert self.disc_returns is not None and self.ep_returns is not None and self.ep_lengths is not None
         n, k = vec_env.num_envs, agent.n_objectives
@@ -223,5 +290,6 @@ class RolloutCollector:
         next_val_b[-1] = last_values
         ended = term_b | trunc_b
         next_val_b[ended] = final_val[ended]  # zero for terminated, V(final_obs) for truncated
+        self.boundary = self._capture(vec_env)
         return RolloutBuffer(obs_b, pref_b, u_b, act_b, logp_b, rew_b, val_b, next_val_b, term_b, trunc_b,
                              episodes)
