@@ -9,10 +9,15 @@ Randomness: one ``numpy.random.Generator`` and one ``torch.Generator`` owned by 
 agent, both derived from ``seed``. The global RNGs are never touched. A checkpoint holds both
 generators' states and the collector's rollout state, so that training resumed from it is
 bit-identical to training that was not interrupted (:mod:`sofar_agents.pasta.resume`).
+
+:meth:`PASTA.learn` applies each iteration (a rollout and the update on it) as a whole: an
+exception or interrupt (Ctrl-C) inside one puts the agent back as it was before it, so that
+what is saved afterwards is the last consistent state.
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import logging
 import time
@@ -313,13 +318,24 @@ class PASTA:
         statistics plus ``rollout`` (the :class:`RolloutBuffer`) and ``episodes``; it
         may return ``False`` to stop. A summary is logged at INFO level every
         ``log_interval`` updates.
+
+        Each rollout and its update are applied as a whole: if either raises (or is
+        interrupted), the agent (weights, optimiser, normaliser, utopia, mu, counters,
+        generators, rollout state) is put back as it was before the rollout and the
+        exception propagates; the envs, which moved on, are rebuilt from that rollout
+        state by the next :meth:`collect`.
         """
         target = self.num_timesteps + int(total_steps)
         while self.num_timesteps < target:
-            t0 = time.perf_counter()
-            buffer = self.collect(vec_env, self.config.n_steps)
-            t_collect = time.perf_counter() - t0
-            stats = self.update(buffer)
+            before = self._consistent_state()
+            try:
+                t0 = time.perf_counter()
+                buffer = self.collect(vec_env, self.config.n_steps)
+                t_collect = time.perf_counter() - t0
+                stats = self.update(buffer)
+            except BaseException:
+                self._restore_consistent_state(before)
+                raise
             stats["collect_time"] = t_collect
             stats["sps"] = buffer.rewards.shape[0] * buffer.rewards.shape[1] / (time.perf_counter() - t0)
             stats["rollout"] = buffer
@@ -336,6 +352,37 @@ class PASTA:
             if callback is not None and callback(self, stats) is False:
                 break
         return self
+
+    def _consistent_state(self) -> dict[str, Any]:
+        """A copy of everything a rollout and an update change (see :meth:`learn`)."""
+        return {
+            "actor": copy.deepcopy(self.actor.state_dict()),
+            "critic": copy.deepcopy(self.critic.state_dict()),
+            "optimizer": copy.deepcopy(self.optimizer.state_dict()),
+            "return_rms": (self.return_rms.mean.copy(), self.return_rms.var.copy(), self.return_rms.count),
+            "utopia": None if self.utopia is None else self.utopia.copy(),
+            "scalars": (self.mu_controller.mu, self.last_conflict, self.num_timesteps, self.num_updates,
+                        self.train_time),
+            "rng": copy.deepcopy(self.rng.bit_generator.state),
+            "torch_gen": self.torch_gen.get_state(),
+            "episodes": list(self.ep_info_buffer),
+            "rollout": self._rollout.checkpoint_state(),
+        }
+
+    def _restore_consistent_state(self, saved: dict[str, Any]) -> None:
+        """Put back what :meth:`_consistent_state` copied; the next rollout rebuilds the envs from its rollout state."""
+        self.actor.load_state_dict(saved["actor"])
+        self.critic.load_state_dict(saved["critic"])
+        self.optimizer.load_state_dict(saved["optimizer"])
+        self.return_rms.mean, self.return_rms.var, self.return_rms.count = saved["return_rms"]
+        self.utopia = saved["utopia"]
+        (self.mu_controller.mu, self.last_conflict, self.num_timesteps, self.num_updates,
+         self.train_time) = saved["scalars"]
+        self.rng.bit_generator.state = saved["rng"]
+        self.torch_gen.set_state(saved["torch_gen"])
+        self.ep_info_buffer.clear()
+        self.ep_info_buffer.extend(saved["episodes"])
+        self._rollout.restore(saved["rollout"])
 
     # ----------------------------------------------------------------- persistence
 
