@@ -61,7 +61,7 @@ def test_no_numeric_flag_takes_a_bare_int_or_float(path, parse_only):
     """Every number goes through an argument type of sofar_agents.cli_types (or its own check), never int/float."""
     argv = {"eval/plot_training.py": ["run"], "eval/headroom.py": ["x.csv"], "eval/paired.py": ["x.csv"],
             "eval/interventions.py": ["x.csv"], "eval/trajectories.py": ["record", "--out", "x.npz"],
-            "eval/bench_train.py": ["--compare", "HEAD"]}.get(path, [])
+            "eval/bench_train.py": ["--compare", "HEAD"], "eval/reference_numerics.py": ["sweep"]}.get(path, [])
     parser = _run(path, argv).parser
     actions = list(parser._actions)
     for sub in (a for a in parser._actions if isinstance(a, argparse._SubParsersAction)):

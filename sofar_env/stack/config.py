@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 from ..control.barrier import BarrierParams
 from ..control.mpc import MPCConfig
+from ..control.refnum.config import ReferenceNumerics
 from ..constants import MAX_SPEED_FACTOR
 from ..domains import check_fields, flag, integer, nested, real
 from ..errors import ConfigError
@@ -137,6 +138,12 @@ class StackConfig:
     miqp: MIQPConfig = nested(MIQPConfig, factory=lambda: MIQPConfig(closing_decel=BarrierParams().a_brake))
     """The passing-side planner (its closing-speed window sized by the barrier's a_brake: the
     consistent clearances of this module's docstring)."""
+    reference_numerics: ReferenceNumerics | None = nested(ReferenceNumerics, default=None, optional="the MPC-DCBF")
+    """None (every preset but one): the MPC-DCBF of :mod:`sofar_env.control.mpc`. Set: the low-level
+    controller is the **bug-compatible** MPC of :mod:`sofar_env.control.refnum`, which reproduces the
+    numerical defects of the paper's reference implementation (phantom opponents, soft barrier rows
+    bounded at -1e9, HPIPM's iteration cap, a zero command on failure). Only the preset
+    ``"reference-numerics"`` sets it; ``mpc`` then gives its time grid and weights."""
 
     def __post_init__(self) -> None:
         """Check every field's domain (:mod:`sofar_env.domains`), then the checks that relate fields; raises
@@ -153,7 +160,8 @@ class StackConfig:
                               f"got {self.parked_clearance!r}")
 
 
-STACK_PRESETS: tuple[str, ...] = ("sofar", "paper", "sofar-ends", "sofar-recover")
+STACK_PRESETS: tuple[str, ...] = ("sofar", "paper", "sofar-ends", "sofar-recover", "reference-numerics",
+                                  "reference-numerics-no-phantoms")
 """Names accepted by :func:`stack_preset` (and by the environments' ``stack=`` key)."""
 
 
@@ -196,6 +204,16 @@ def stack_preset(name: str) -> StackConfig:
     Both are candidate fixes of the stalls, measured against ``"sofar"`` in the results;
     ``"sofar"`` stays as it is, so the tables made with it stay valid.
 
+    ``"reference-numerics"`` is a **bug-compatible** controller, never a default: ``"paper"`` with the
+    low-level MPC replaced by :class:`~sofar_env.control.refnum.ReferenceNumericsMPC`, which reproduces
+    the numerical defects of the paper's reference code (``StackConfig.reference_numerics``): every
+    opponent slot filled, with "phantom" opponents 99999 m away; soft barrier rows with a lower bound
+    of -1e9; no DCBF on the first transition; HPIPM's dense solver with acados' options; throttle 0
+    and steering 0 when the solve fails. It exists to explain the paper's Table I (the collapse of
+    gamma 0.05 and 0.95), not to race with. ``"reference-numerics-no-phantoms"`` is the same controller
+    with one defect removed, the phantom opponents (slots without an opponent on the target line get no
+    rows): the control experiment that attributes a difference to the phantoms.
+
     Where the paper leaves a choice open, both presets make the same one (so the
     difference between them is only the list above): the MIQP runs every second control
     step over 76 nodes 0.15 s apart; its side windows are ``safe_lon`` = 8 m and
@@ -216,6 +234,11 @@ def stack_preset(name: str) -> StackConfig:
             return dataclasses.replace(base, follow=False, parked_pass=False, pace_prediction=False,
                                        lateral_prediction=False, footprint_edges=False,
                                        miqp=dataclasses.replace(base.miqp, closing_decel=0.0))
+        if key in ("reference-numerics", "reference-numerics-no-phantoms"):
+            paper = stack_preset("paper")
+            grid = dataclasses.replace(paper.mpc, first_step=paper.mpc.ts)  # the reference's uniform grid
+            numerics = ReferenceNumerics(phantoms=key == "reference-numerics")
+            return dataclasses.replace(paper, mpc=grid, reference_numerics=numerics)
         if key in ("sofar-ends", "sofar-recover"):
             base = StackConfig()
             rows = "ends" if key == "sofar-ends" else "recoverable"

@@ -64,7 +64,13 @@ class OvertakingStack:
         self.config = config or StackConfig()
         self.vehicle = vehicle
         cfg = self.config
-        self.mpc = MPCDCBF(cfg.mpc, vehicle)
+        if cfg.reference_numerics is None:
+            self.mpc = MPCDCBF(cfg.mpc, vehicle)
+        else:  # the bug-compatible controller (stack_preset("reference-numerics"))
+            from ..control.refnum import ReferenceNumericsMPC
+
+            rn = cfg.reference_numerics
+            self.mpc = ReferenceNumericsMPC(cfg.mpc, rn, vehicle, rn.spacing(getattr(track, "name", None)))
         self.planner = PassingSidePlanner(cfg.miqp)
         self.predict = OpponentPredictor(track, pace_ratio=cfg.pace_prediction)
         self.edges = TrackEdges(track, vehicle, footprint_aware=cfg.footprint_edges)
@@ -180,6 +186,9 @@ class OvertakingStack:
             t_end = float(self._mpc_t[-1])
             rate = lateral_rate * (min(t_end, cfg.lateral_prediction_time) / t_end)
             opp_mpc = np.column_stack([opp_mpc[:, 0], n_now, opp_mpc[:, 2], rate])
+        if cfg.reference_numerics is not None:  # its slots are filled from every opponent on the track
+            half = 0.5 * float(self.track.length)
+            opp_mpc = relative_opponents(self.track, s, opponents, half, half)[:, :3]
         result = self.mpc.solve(np.array([0.0, n, e, v, delta]), stage, opp_mpc, gamma)
         if not result.success:
             self.counters["mpc_failures"] += 1

@@ -1,0 +1,155 @@
+"""What the paper's Table I shows, and why: the bug-compatible controller's threshold sweep and Table I.
+
+    python eval/reference_numerics.py sweep                 # the gamma grid, with and without phantoms
+    python eval/reference_numerics.py table                 # Table I under it, beside the paper and ours
+    python eval/reference_numerics.py sweep --summarize     # only re-make sweep.md / sweep.png from the CSVs
+
+``sweep`` runs fixed gammas on a fine grid with ``stack="reference-numerics"`` (the reference
+implementation's numerics, defects included: ``sofar_env.control.refnum``) and a subset of it with the
+control preset ``"reference-numerics-no-phantoms"`` (the same controller without the phantom opponents),
+on the same seeded episodes (1 per circuit and pace ratio, i.e. 20 per gamma), then writes ``sweep.md``
+(success, episodes with solver failures, failed episodes that had one, the paired effect of the phantoms)
+and ``sweep.png``. ``table`` runs Table I (paper protocol: 4 circuits x 5 rho x 5 episodes per fixed
+gamma) under ``"reference-numerics"`` and writes ``table1_compare.md``: its success per circuit beside the
+paper's Table I and the project's ``paper`` and ``sofar`` controllers on the same seeded episodes
+(``--paper-csv``, ``--sofar-csv``), with exact paired tests. Both resume from their CSVs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from sofar_agents import evaluation as ev
+from sofar_agents.cli_types import gamma_value, int_at_least, nonneg_int, positive_float
+from sofar_agents.evaluation import thresholds as th
+from sofar_agents.evaluation.protocol import FIXED_GAMMAS, TRACKS, Strategy
+
+logger = logging.getLogger("reference_numerics")
+
+STACK, CONTROL = "reference-numerics", "reference-numerics-no-phantoms"
+SWEEP_GAMMAS = (0.05, 0.054, 0.058, 0.062, 0.07, 0.15, 0.50, 0.87, 0.89, 0.90, 0.91, 0.93, 0.95)
+CONTROL_GAMMAS = (0.05, 0.058, 0.50, 0.90, 0.95)
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("sweep", help="success and solver failures against gamma")
+    s.add_argument("--out", default="results/reference_numerics", help="results folder")
+    s.add_argument("--gammas", nargs="+", type=gamma_value, default=list(SWEEP_GAMMAS))
+    s.add_argument("--control-gammas", nargs="+", type=gamma_value, default=list(CONTROL_GAMMAS),
+                   help="gammas also run without phantoms (the control)")
+    s.add_argument("--seed", type=nonneg_int, default=31, help="base seed (default 31, a set no table uses)")
+    s.add_argument("--episodes", type=int_at_least(1), default=1, help="episodes per (circuit, rho)")
+    s.add_argument("--duration", type=positive_float, default=100.0, help="episode horizon [s] (default 100)")
+    s.add_argument("--summarize", action="store_true", help="run nothing; re-make sweep.md and sweep.png")
+    t = sub.add_parser("table", help="Table I under the bug-compatible controller, beside the paper and ours")
+    t.add_argument("--out", default="results/reference_numerics", help="results folder")
+    t.add_argument("--seed", type=nonneg_int, default=0, help="base seed (default 0: Table I's episodes)")
+    t.add_argument("--paper-csv", default="results/paper_stack/table1_episodes.csv",
+                   help="Table I episodes of stack='paper' on the same seed")
+    t.add_argument("--sofar-csv", default="results/table1_episodes.csv",
+                   help="Table I episodes of stack='sofar' on the same seed")
+    t.add_argument("--summarize", action="store_true", help="run nothing; re-make table1_compare.md")
+    for q in (s, t):
+        q.add_argument("--workers", type=int_at_least(1), default=None, help="worker processes")
+        q.add_argument("--no-progress", action="store_true")
+    return p.parse_args(argv)
+
+
+def run_sweep(args) -> str:
+    out = Path(args.out) / "sweep"
+    for stack, gammas in ((STACK, args.gammas), (CONTROL, args.control_gammas)):
+        if not args.summarize:
+            ev.run_table1(ev.build_strategies(gammas, adaptive=False), out / stack, episodes=args.episodes,
+                          base_seed=args.seed, duration=args.duration, workers=args.workers,
+                          progress=not args.no_progress, stack=stack)
+    grid = {STACK: {Strategy.fixed(g).name for g in args.gammas},
+            CONTROL: {Strategy.fixed(g).name for g in args.control_gammas}}
+    rows = [r for stack in (STACK, CONTROL) if (out / stack / "table1_episodes.csv").exists()
+            for r in ev.read_episode_csv(out / stack / "table1_episodes.csv") if r["strategy"] in grid[stack]]
+    points = th.sweep_points(rows)
+    effects = th.phantom_effects(rows, STACK, CONTROL)
+    (low, high) = th.failure_edges(points, STACK)
+    text = ["# Threshold sweep of the bug-compatible controller\n",
+            f"Fixed gammas under `stack=\"{STACK}\"` and, on the same seeded episodes, `\"{CONTROL}\"`; "
+            f"base seed {args.seed}, {args.duration:g} s per episode, 1 episode per circuit and pace ratio "
+            f"(4 circuits x 5 rho). Predicted edges of the failure zones: γ < {th.PREDICTED_THRESHOLDS[0]} "
+            f"and γ > {th.PREDICTED_THRESHOLDS[1]}.\n",
+            th.format_sweep(points, effects, STACK, CONTROL),
+            f"\nEdges of the solver-failure zones (share of episodes with failed solves above that at γ = 0.5): "
+            f"low side between γ = {low[0]} and {low[1]}, high side between γ = {high[0]} and {high[1]} "
+            "(None: no excess on that side).\n"]
+    ev.write_markdown(Path(args.out) / "sweep.md", "\n".join(text))
+    th.plot_sweep(points, Path(args.out) / "sweep.png", STACK, CONTROL)
+    return "\n".join(text)
+
+
+def run_table(args) -> str:
+    out = Path(args.out) / "table1"
+    if not args.summarize:
+        ev.run_table1(ev.build_strategies(FIXED_GAMMAS, adaptive=False), out, base_seed=args.seed,
+                      workers=args.workers, progress=not args.no_progress, stack=STACK)
+    sets = {"refnum": ev.read_episode_csv(out / "table1_episodes.csv")}
+    for name, path in (("paper", args.paper_csv), ("sofar", args.sofar_csv)):
+        if Path(path).exists():
+            sets[name] = ev.read_episode_csv(path)
+    rows = [r for rs in sets.values() for r in rs]
+    per = ev.aggregate(ev.label_by_stack({"all": rows})["all"], ("track", "strategy"))
+    stacks = [s for s in (STACK, "paper", "sofar") if any((r.get("stack") or "sofar") == s for r in rows)]
+    lines = ["# Table I under the bug-compatible controller, beside the paper's and the project's controllers\n",
+             f"Success [%] per circuit and fixed γ; the project's rows on the same seeded episodes (base seed "
+             f"{args.seed}, 25 per circuit and γ).\n",
+             "| Track | γ | paper's Table I | " + " | ".join(f"`{s}`" for s in stacks) + " |",
+             "|---|---:|---:|" + "---:|" * len(stacks)]
+    for track in [*TRACKS, "all"]:
+        for g in FIXED_GAMMAS:
+            strategy = Strategy.fixed(g).name
+            cells = []
+            for s in stacks:
+                if track == "all":
+                    hits = [r for r in rows if (r.get("stack") or "sofar") == s and r["strategy"] == strategy]
+                    cells.append(f"{100 * sum(bool(r['success']) for r in hits) / len(hits):.0f}" if hits else "–")
+                else:
+                    summ = per.get((track, f"{s}:{strategy}"))
+                    cells.append(f"{summ.success_rate:.0f}" if summ else "–")
+            paper = (sum(ev.PAPER_TABLE1_SUCCESS[t][g] for t in TRACKS) / len(TRACKS) if track == "all"
+                     else ev.PAPER_TABLE1_SUCCESS[track][g])
+            lines.append(f"| {track} | {g:g} | {paper:.0f} | " + " | ".join(cells) + " |")
+    pooled = ev.label_by_stack({"all": rows})
+    comparisons = []
+    for g in FIXED_GAMMAS:
+        strategy = Strategy.fixed(g).name
+        for other in stacks[1:]:
+            try:
+                comparisons.append(ev.paired_comparison(pooled, f"{STACK}:{strategy}", f"{other}:{strategy}"))
+            except ValueError:
+                continue
+    mids = [f"{STACK}:{Strategy.fixed(g).name}" for g in FIXED_GAMMAS if 0.1 < g < 0.9]
+    for g in (0.05, 0.95):
+        for mid in mids:
+            try:
+                comparisons.append(ev.paired_comparison(pooled, f"{STACK}:{Strategy.fixed(g).name}", mid))
+            except ValueError:
+                continue
+    lines += ["\n## Paired tests (exact McNemar, episodes matched by circuit, rho and seed)\n",
+              ev.format_paired(comparisons)]
+    text = "\n".join(lines)
+    ev.write_markdown(Path(args.out) / "table1_compare.md", text)
+    return text
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    text = run_sweep(args) if args.command == "sweep" else run_table(args)
+    sys.stdout.write(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
