@@ -1,0 +1,21 @@
+"""Every preset, world and multi-car race resolves to the values it had before the configuration layer was
+rebuilt (the snapshot in ``data/resolved_configs.json``, written by :mod:`.resolved_configs`)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from .resolved_configs import collect
+
+SNAPSHOT = json.loads((Path(__file__).parent / "data" / "resolved_configs.json").read_text())
+NOW = collect()
+
+
+@pytest.mark.parametrize("group", sorted(SNAPSHOT))
+def test_every_resolved_config_equals_the_snapshot(group):
+    assert sorted(NOW[group]) == sorted(SNAPSHOT[group])
+    for name, value in SNAPSHOT[group].items():
+        assert NOW[group][name] == value, f"{group}/{name}"
