@@ -26,6 +26,12 @@ with ``--resume``); another ``--out`` that already holds a run (a ``pasta_final.
 unless ``--force`` is given, which starts over there. After every update one console line reports the
 mean returns of the last finished episodes per objective, by name.
 
+Nothing is written into ``--out`` before the environments, the agent (or the checkpoint of ``--resume``)
+and the first reset have been checked; a run that stops before its first update writes no
+``pasta_final``. A run stopped (Ctrl-C) during an update saves the state before that update. A checkpoint
+holds the generators' and the environments' state, so that ``--resume`` with the same environments and
+``--n-envs`` continues bit-identically to a run that was not stopped (:mod:`sofar_agents.pasta.resume`).
+
 ``--quick`` is a preset for a first look (1 to 2 minutes on one core): 16384 steps
 in rollouts of 512, 30 s episodes, 4 PPO epochs, output in ``runs/pasta_quick``; options
 given explicitly win over it.
@@ -318,6 +324,36 @@ def make_vec_env(args: Args) -> Any:
 # ---------------------------------------------------------------------------- main
 
 
+def build_agent(args: Args, overrides: dict[str, Any], vec_env: Any) -> tuple[PASTA, float]:
+    """The agent to train on ``vec_env`` (loaded from ``--resume``, or new) and the wall time of its earlier
+    stages [s]; ``SystemExit`` or ``ValueError`` when it does not fit the env or the options."""
+    obs_space, act_space = vec_env.single_observation_space, vec_env.single_action_space
+    obs_dim = int(np.prod(obs_space.shape))
+    k = n_objectives(vec_env)
+    if args.resume:
+        agent = PASTA.load(args.resume)
+        if (agent.obs_dim, agent.n_objectives) != (obs_dim, k):
+            raise SystemExit(f"{args.resume}: checkpoint has obs_dim {agent.obs_dim} and {agent.n_objectives} "
+                             f"objectives, the environment {obs_dim} and {k}")
+        if overrides:
+            try:
+                agent.reconfigure(**overrides)
+            except ValueError as err:
+                raise SystemExit(f"--resume: {err}") from err
+        if args.preference is not None:
+            agent.preference = agent._check_preference(args.preference)
+        logger.info("resumed from %s at %d steps", args.resume, agent.num_timesteps)
+        return agent, float(agent.metadata.get("wall_time_s", 0.0))
+    overrides.setdefault("mu_decay_steps", args.total_steps)
+    config = dataclasses.replace(PASTAConfig(), **overrides)
+    preference = args.preference
+    if preference is None and k == len(REFERENCE_PREFERENCE):
+        preference = REFERENCE_PREFERENCE
+    agent = PASTA(obs_dim, k, act_space.low, act_space.high, config, preference=preference, seed=args.seed,
+                  objective_names=objective_names(vec_env))
+    return agent, 0.0
+
+
 def main(argv: list[str] | None = None) -> Path:
     args, overrides = parse_args(argv)
     logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="%(asctime)s %(name)s: %(message)s")
@@ -332,42 +368,24 @@ def main(argv: list[str] | None = None) -> Path:
     torch.set_num_threads(args.torch_threads)
     out = Path(args.out)
     check_out(out, args.force, args.resume)
-    out.mkdir(parents=True, exist_ok=True)
     t_start = time.time()
 
+    # Everything that can fail is checked before anything is written to --out: the environments, the
+    # agent (or the checkpoint it resumes) and the first reset (or the replay of the resumed episodes).
     ensure_registered(args.env_id)
     world = world_of(args.env_id, env_kwargs_of(args))
     if world is not None:  # compile the kernels here, before the workers start and outside the progress bar's ETA
         warm_up([world], multi_agent=args.multi_agent)
     vec_env = make_vec_env(args)
-    obs_space, act_space = vec_env.single_observation_space, vec_env.single_action_space
-    obs_dim = int(np.prod(obs_space.shape))
-    k = n_objectives(vec_env)
-    names = objective_names(vec_env)
-
-    if args.resume:
-        agent = PASTA.load(args.resume)
-        if (agent.obs_dim, agent.n_objectives) != (obs_dim, k):
-            raise SystemExit(f"{args.resume}: checkpoint has obs_dim {agent.obs_dim} and {agent.n_objectives} "
-                             f"objectives, the environment {obs_dim} and {k}")
-        if overrides:
-            try:
-                agent.reconfigure(**overrides)
-            except ValueError as err:
-                raise SystemExit(f"--resume: {err}") from err
-        if args.preference is not None:
-            agent.preference = agent._check_preference(args.preference)
-        prev_wall = float(agent.metadata.get("wall_time_s", 0.0))
-        logger.info("resumed from %s at %d steps", args.resume, agent.num_timesteps)
-    else:
-        overrides.setdefault("mu_decay_steps", args.total_steps)
-        config = dataclasses.replace(PASTAConfig(), **overrides)
-        preference = args.preference
-        if preference is None and k == len(REFERENCE_PREFERENCE):
-            preference = REFERENCE_PREFERENCE
-        agent = PASTA(obs_dim, k, act_space.low, act_space.high, config, preference=preference, seed=args.seed,
-                      objective_names=names)
-        prev_wall = 0.0
+    try:
+        agent, prev_wall = build_agent(args, overrides, vec_env)
+        remaining = max(0, args.total_steps - agent.num_timesteps)
+        if remaining:
+            agent.prepare(vec_env)
+    except BaseException:
+        vec_env.close()
+        raise
+    out.mkdir(parents=True, exist_ok=True)
 
     run_meta = {
         "command": shlex.join(["python", "train/pasta.py", *(sys.argv[1:] if argv is None else argv)]),
@@ -406,7 +424,6 @@ def main(argv: list[str] | None = None) -> Path:
         meta = {"wall_time_s": prev_wall + time.time() - t_start, "num_timesteps": agent.num_timesteps}
         return agent.save(path, metadata=meta)
 
-    remaining = max(0, args.total_steps - agent.num_timesteps)
     pbar = tqdm(total=args.total_steps, initial=min(agent.num_timesteps, args.total_steps), unit="step",
                 disable=not args.progress, dynamic_ncols=True, desc="PASTA")
 
@@ -419,12 +436,17 @@ def main(argv: list[str] | None = None) -> Path:
             logger.debug("checkpoint %s", path)
         return True
 
+    start_updates, completed = agent.num_updates, False
     try:
         with logging_redirect_tqdm():  # log lines above the one progress bar, not through it
             agent.learn(vec_env, remaining, callback=callback, log_interval=0)
+        completed = True
     finally:
         pbar.close()
-        final = save(out / "pasta_final")
+        if completed or agent.num_updates > start_updates:  # an interrupted update was undone by learn()
+            final = save(out / "pasta_final")
+        else:
+            logger.warning("stopped before the first update: %s not written", out / "pasta_final")
         writer.close()
         vec_env.close()
         if args.track:

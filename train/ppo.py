@@ -184,7 +184,6 @@ def main(argv: list[str] | None = None) -> Path:
     if norm_path is not None and args.normalize_reward and not norm_path.is_file():
         raise SystemExit(f"--resume {resume}: the reward normaliser {norm_path} is missing "
                          "(or pass --no-normalize-reward)")
-    out.mkdir(parents=True, exist_ok=True)
     env_kwargs = json.loads(args.env_kwargs)
     if args.decision_interval is not None:
         env_kwargs["decision_interval"] = args.decision_interval
@@ -212,8 +211,11 @@ def main(argv: list[str] | None = None) -> Path:
         callbacks.append(CheckpointCallback(max(args.save_every // args.n_envs, 1), str(out / "checkpoints"),
                                             name_prefix="ppo", save_vecnormalize=args.normalize_reward))
     remaining = max(0, args.total_steps - model.num_timesteps)
+    # Nothing is written into --out before the first reset (SB3 resets the envs before it writes logs or
+    # checkpoints): a run that fails there leaves no trace that would make the corrected command refuse it.
     model.learn(remaining, callback=callbacks, tb_log_name="ppo", reset_num_timesteps=resume is None,
                 progress_bar=False)
+    out.mkdir(parents=True, exist_ok=True)
     final = out / "ppo_final.zip"
     model.save(final)
     if args.normalize_reward:
