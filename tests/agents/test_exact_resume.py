@@ -118,7 +118,8 @@ def test_the_training_script_resumes_bit_identically(tmp_path: Path) -> None:
 
     def train(*args: str) -> None:
         proc = subprocess.run([sys.executable, "train/pasta.py", *run, *args], cwd=ROOT, capture_output=True,
-                              text=True, timeout=600, env={**os.environ, "PYTHONPATH": str(HERE)})
+                              text=True, timeout=600, env={**os.environ, "PYTHONPATH": os.pathsep.join(
+                                  p for p in (str(HERE), os.environ.get("PYTHONPATH")) if p)})
         assert proc.returncode == 0, proc.stderr[-3000:]
         assert "not bit-identical" not in proc.stderr, proc.stderr[-3000:]
 
