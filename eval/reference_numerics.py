@@ -3,6 +3,7 @@
     python eval/reference_numerics.py sweep                 # the gamma grid, with and without phantoms
     python eval/reference_numerics.py table                 # Table I under it, beside the paper and ours
     python eval/reference_numerics.py sweep --summarize     # only re-make sweep.md / sweep.png from the CSVs
+    python eval/reference_numerics.py road                  # the synthetic-road loop, beside acados' failures
 
 ``sweep`` runs fixed gammas on a fine grid with ``stack="reference-numerics"`` (the reference
 implementation's numerics, defects included: ``sofar_env.control.refnum``) and a subset of it with the
@@ -12,7 +13,9 @@ on the same seeded episodes (1 per circuit and pace ratio, i.e. 20 per gamma), t
 and ``sweep.png``. ``table`` runs Table I (paper protocol: 4 circuits x 5 rho x 5 episodes per fixed
 gamma) under ``"reference-numerics"`` and writes ``table1_compare.md``: its success per circuit beside the
 paper's Table I and the project's ``paper`` and ``sofar`` controllers on the same seeded episodes
-(``--paper-csv``, ``--sofar-csv``), with exact paired tests. Both resume from their CSVs.
+(``--paper-csv``, ``--sofar-csv``), with exact paired tests. Both resume from their CSVs. ``road`` runs the
+closed loop of ``sofar_agents.evaluation.refnum_road`` (a synthetic road, the MPC's own model as plant) at
+both ends of gamma and writes ``road.md``, next to what acados' own solver gave on the same loop.
 """
 
 from __future__ import annotations
@@ -32,6 +35,17 @@ logger = logging.getLogger("reference_numerics")
 STACK, CONTROL = "reference-numerics", "reference-numerics-no-phantoms"
 SWEEP_GAMMAS = (0.05, 0.054, 0.058, 0.062, 0.07, 0.15, 0.50, 0.87, 0.89, 0.90, 0.91, 0.93, 0.95)
 CONTROL_GAMMAS = (0.05, 0.058, 0.50, 0.90, 0.95)
+ROAD_RUNS = ((0.3, 300, (0.03, 0.05, 0.055, 0.06, 0.07, 0.1), True), (0.8, 600, (0.05, 0.5, 0.88, 0.89, 0.9, 0.95), True),
+             (0.3, 300, (0.05, 0.95), False), (0.8, 600, (0.05, 0.95), False))
+"""(rho, control steps, gammas, phantoms) of the synthetic-road runs."""
+ACADOS_ROAD = {
+    (0.3, True): "γ ≤ 0.055: 174 of 175 solves fail, off the road at 17.4 s; γ 0.06: 67 of 300; γ ≥ 0.07: none",
+    (0.8, True): "γ ≤ 0.88: none (γ 0.05: 11 of 600); γ ≥ 0.90: every solve fails from the start, off the road at "
+                 "17.7 s",
+    (0.3, False): "no failure at any γ", (0.8, False): "no failure at any γ",
+}
+"""Failed solves measured on the same loop with acados (SQP_RTI, FULL_CONDENSING_HPIPM, the comma-deps-acados
+0.2.2 build) and an OCP written from the same description: reference data, not re-made here."""
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -55,6 +69,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     t.add_argument("--sofar-csv", default="results/table1_episodes.csv",
                    help="Table I episodes of stack='sofar' on the same seed")
     t.add_argument("--summarize", action="store_true", help="run nothing; re-make table1_compare.md")
+    r = sub.add_parser("road", help="the synthetic-road loop at both ends of gamma, beside acados' failures")
+    r.add_argument("--out", default="results/reference_numerics", help="results folder")
     for q in (s, t):
         q.add_argument("--workers", type=int_at_least(1), default=None, help="worker processes")
         q.add_argument("--no-progress", action="store_true")
@@ -74,16 +90,21 @@ def run_sweep(args) -> str:
             for r in ev.read_episode_csv(out / stack / "table1_episodes.csv") if r["strategy"] in grid[stack]]
     points = th.sweep_points(rows)
     effects = th.phantom_effects(rows, STACK, CONTROL)
-    (low, high) = th.failure_edges(points, STACK)
+    (low, high) = th.failure_edges(rows, STACK)
+    excess = th.failure_excess(rows, STACK)
     text = ["# Threshold sweep of the bug-compatible controller\n",
             f"Fixed gammas under `stack=\"{STACK}\"` and, on the same seeded episodes, `\"{CONTROL}\"`; "
             f"base seed {args.seed}, {args.duration:g} s per episode, 1 episode per circuit and pace ratio "
             f"(4 circuits x 5 rho). Predicted edges of the failure zones: γ < {th.PREDICTED_THRESHOLDS[0]} "
             f"and γ > {th.PREDICTED_THRESHOLDS[1]}.\n",
             th.format_sweep(points, effects, STACK, CONTROL),
-            f"\nEdges of the solver-failure zones (share of episodes with failed solves above that at γ = 0.5): "
-            f"low side between γ = {low[0]} and {low[1]}, high side between γ = {high[0]} and {high[1]} "
-            "(None: no excess on that side).\n"]
+            "\n## Episodes with failed solves against γ = 0.5, paired\n",
+            "| γ | episodes | with a failed solve | the same episodes at γ = 0.5 | p (exact McNemar) |",
+            "|---:|---:|---:|---:|---:|",
+            *(f"| {g:g} | {n} | {k} | {k_ref} | {p:.3g} |" for g, (n, k, k_ref, p) in excess.items()),
+            f"\nEdges of the failure zones (the first γ, walking away from 0.5, with more episodes with failed "
+            f"solves than at 0.5, paired p < 0.05): low side between γ = {low[0]} and {low[1]}, high side "
+            f"between γ = {high[0]} and {high[1]} (None: no such γ on that side).\n"]
     ev.write_markdown(Path(args.out) / "sweep.md", "\n".join(text))
     th.plot_sweep(points, Path(args.out) / "sweep.png", STACK, CONTROL)
     return "\n".join(text)
@@ -143,10 +164,30 @@ def run_table(args) -> str:
     return text
 
 
+def run_road(args) -> str:
+    from sofar_agents.evaluation.refnum_road import road_loop
+
+    lines = ["# The bug-compatible MPC on the synthetic road, beside acados\n",
+             "Failed solves (HPIPM status) per run; the car leaves the road when |n| > 20 m. `acados` is what the "
+             "same loop gave with acados' own SQP_RTI and FULL_CONDENSING_HPIPM.\n",
+             "| rho | phantoms | γ | steps | failed solves | HPIPM statuses (0/1/2/3) | left the road at [s] | acados |",
+             "|---:|---|---:|---:|---:|---|---:|---|"]
+    for rho, steps, gammas, phantoms in ROAD_RUNS:
+        for g in gammas:
+            out = road_loop(g, rho, steps, phantoms)
+            st = "/".join(str(out.qp_status.get(k, 0)) for k in range(4))
+            lines.append(f"| {rho:g} | {'yes' if phantoms else 'no'} | {g:g} | {out.steps} | {out.failures} | {st} "
+                         f"| {out.left_road_at if out.left_road_at is not None else '–'} "
+                         f"| {ACADOS_ROAD[(rho, phantoms)] if g == gammas[0] else ''} |")
+    text = "\n".join(lines) + "\n"
+    ev.write_markdown(Path(args.out) / "road.md", text)
+    return text
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    text = run_sweep(args) if args.command == "sweep" else run_table(args)
+    text = {"sweep": run_sweep, "table": run_table, "road": run_road}[args.command](args)
     sys.stdout.write(text)
     return 0
 

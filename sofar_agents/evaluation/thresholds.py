@@ -21,7 +21,7 @@ from typing import Any
 
 from .paired import PairedComparison, label_by_stack, paired_comparison
 
-__all__ = ["GammaPoint", "PREDICTED_THRESHOLDS", "sweep_points", "phantom_effects", "failure_edges",
+__all__ = ["GammaPoint", "PREDICTED_THRESHOLDS", "sweep_points", "phantom_effects", "failure_excess", "failure_edges",
            "format_sweep", "plot_sweep", "wilson_interval"]
 
 PREDICTED_THRESHOLDS = (0.0564, 0.900)
@@ -104,25 +104,52 @@ def phantom_effects(rows: Iterable[Mapping[str, Any]], stack: str, control: str)
     return out
 
 
-def failure_edges(points: Sequence[GammaPoint], stack: str, middle: float = 0.5) -> tuple[tuple, tuple]:
-    """``((last_low, first_clean), (last_clean, first_high))``: around the failure-free middle of the gamma
-    range, the grid points where the share of episodes with solver failures of ``stack`` stops and starts
-    exceeding the middle's (the gamma nearest ``middle``). A side with no excess gives ``(None, None)``."""
-    pts = sorted((p for p in points if p.stack == stack), key=lambda p: p.gamma)
-    if not pts:
-        return (None, None), (None, None)
-    mid = min(range(len(pts)), key=lambda i: abs(pts[i].gamma - middle))
-    base = pts[mid].failure_episode_rate
-    low = (None, None)
-    for i in range(mid, 0, -1):
-        if pts[i - 1].failure_episode_rate > base:
-            low = (pts[i - 1].gamma, pts[i].gamma)
-            break
-    high = (None, None)
-    for i in range(mid, len(pts) - 1):
-        if pts[i + 1].failure_episode_rate > base:
-            high = (pts[i].gamma, pts[i + 1].gamma)
-            break
+def _failure_flags(rows: Iterable[Mapping[str, Any]], stack: str) -> dict[float, dict[tuple, bool]]:
+    """Per gamma of ``stack``: episode (circuit, rho, seed) -> whether it had a failed MPC solve."""
+    out: dict[float, dict[tuple, bool]] = defaultdict(dict)
+    for r in rows:
+        g = _gamma(str(r["strategy"]))
+        if g is None or str(r.get("stack") or "sofar") != stack:
+            continue
+        out[g][(str(r["track"]), round(float(r["rho"]), 6), int(r["seed"]))] = int(float(r.get("mpc_failures") or 0)) > 0
+    return out
+
+
+def failure_excess(rows: Iterable[Mapping[str, Any]], stack: str, reference: float = 0.5) -> dict[float, tuple]:
+    """Per gamma of ``stack``: ``(episodes, with failures, with failures at the reference gamma, p)``, p the
+    two-sided exact McNemar test of "had a failed solve" against the reference gamma on the same episodes."""
+    from scipy.stats import binomtest
+
+    flags = _failure_flags(rows, stack)
+    if reference not in flags:
+        raise ValueError(f"no episodes of {stack!r} at the reference gamma {reference}")
+    ref = flags[reference]
+    out = {}
+    for g, f in sorted(flags.items()):
+        common = f.keys() & ref.keys()
+        only_g = sum(f[k] and not ref[k] for k in common)
+        only_ref = sum(ref[k] and not f[k] for k in common)
+        p = 1.0 if only_g + only_ref == 0 else float(binomtest(only_g, only_g + only_ref, 0.5).pvalue)
+        out[g] = (len(common), sum(f[k] for k in common), sum(ref[k] for k in common), p)
+    return out
+
+
+def failure_edges(rows: Iterable[Mapping[str, Any]], stack: str, reference: float = 0.5,
+                  alpha: float = 0.05) -> tuple[tuple, tuple]:
+    """``((low_in, low_out), (high_out, high_in))``: walking down (up) the grid from ``reference``, the first
+    gamma whose share of episodes with failed solves is higher than at ``reference`` with paired p < ``alpha``
+    (:func:`failure_excess`), and its neighbour towards ``reference``: the edge of a failure zone lies between
+    the two. ``(None, None)`` on a side with no such gamma."""
+    ex = failure_excess(rows, stack, reference)
+    grid = sorted(ex)
+    mid = grid.index(reference)
+
+    def excess(g: float) -> bool:
+        n, k, k_ref, p = ex[g]
+        return k > k_ref and p < alpha
+
+    low = next(((grid[i], grid[i + 1]) for i in range(mid - 1, -1, -1) if excess(grid[i])), (None, None))
+    high = next(((grid[i - 1], grid[i]) for i in range(mid + 1, len(grid)) if excess(grid[i])), (None, None))
     return low, high
 
 
@@ -163,19 +190,27 @@ def plot_sweep(points: Sequence[GammaPoint], path, stack: str = "reference-numer
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharex=True)
+    grid = sorted({p.gamma for p in points})
+    pos = {g: i for i, g in enumerate(grid)}  # the grid evenly spaced: both ends of the range readable
+
+    def where(t: float) -> float:  # a threshold between two grid points, placed linearly between them
+        import numpy as np
+
+        return float(np.interp(t, grid, range(len(grid))))
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharex=True)
     for name, style in ((stack, "o-"), (control, "s--")):
         pts = sorted((p for p in points if p.stack == name), key=lambda p: p.gamma)
         if not pts:
             continue
-        g = [p.gamma for p in pts]
-        axes[0].plot(g, [100 * p.success_rate for p in pts], style, label=name, ms=4)
-        axes[1].plot(g, [100 * p.failure_episode_rate for p in pts], style, label=name, ms=4)
+        x = [pos[p.gamma] for p in pts]
+        axes[0].plot(x, [100 * p.success_rate for p in pts], style, label=name, ms=4)
+        axes[1].plot(x, [100 * p.failure_episode_rate for p in pts], style, label=name, ms=4)
     for ax, title in zip(axes, ("success [% of episodes]", "episodes with a failed MPC solve [%]")):
         for t in PREDICTED_THRESHOLDS:
-            ax.axvline(t, color="grey", lw=0.8, ls=":")
-        ax.set_xscale("logit")
-        ax.set_xlabel("fixed γ (logit scale)")
+            ax.axvline(where(t), color="grey", lw=0.8, ls=":")
+        ax.set_xticks(range(len(grid)), [f"{g:g}" for g in grid], fontsize=7, rotation=60)
+        ax.set_xlabel("fixed γ (grid points evenly spaced)")
         ax.set_title(title)
         ax.set_ylim(-3, 103)
         ax.grid(alpha=0.3)

@@ -39,10 +39,14 @@ def test_phantom_effect_is_paired_per_gamma():
 
 
 def test_edges_bracket_the_failure_zones():
-    low, high = th.failure_edges(th.sweep_points(_sweep()), "reference-numerics")
-    assert low == (0.05, 0.06) and high == (0.9, 0.95)
+    low, high = th.failure_edges(_sweep(), "reference-numerics")
+    assert low == (0.05, 0.06)          # 10 of 10 episodes against 0 of 10: p = 0.002
+    assert high == (0.9, 0.95)          # 6 of 10 against 0 of 10: p = 0.031
+    ex = th.failure_excess(_sweep(), "reference-numerics")
+    assert ex[0.95] == (10, 6, 0, pytest.approx(2 * 0.5 ** 6))
+    assert th.failure_edges(_sweep(), "reference-numerics", alpha=0.01)[1] == (None, None)
     clean = [r for r in _sweep() if r["strategy"] in ("gamma=0.5", "gamma=0.06")]
-    assert th.failure_edges(th.sweep_points(clean), "reference-numerics") == ((None, None), (None, None))
+    assert th.failure_edges(clean, "reference-numerics") == ((None, None), (None, None))
 
 
 @pytest.mark.parametrize("k, n, lo, hi", [(0, 20, 0.0, 0.161), (20, 20, 0.839, 1.0), (10, 20, 0.299, 0.701)])

@@ -156,8 +156,23 @@ class ReferenceNumericsMPC:
         (not only those near: the slots are filled as the reference fills them, :func:`slot_rows`)."""
         t_start = time.perf_counter()
         x0, arrays, opp, gamma = validate_arguments(x0, stage, opponents, gamma, self._n)
+        slots, real = slot_rows(opp, x0[3], self.numerics, self.spacing)
+        return self._solve(x0, arrays, slots, real, gamma, t_start)
+
+    def solve_slots(self, x0, stage: MPCStageData, slots, gamma: float) -> MPCResult:
+        """:meth:`solve` with the OCP's slot rows given as they are: ``slots`` is ``(numerics.slots, 3)`` rows
+        ``(s_rel, n, v)``, each one counted as an opponent (no phantom is made and none is left out). For
+        experiments that place the rows themselves, as the reference's own probes do."""
+        t_start = time.perf_counter()
+        rows = np.asarray(slots, float)
+        if rows.shape != (self.numerics.slots, 3) or not np.all(np.isfinite(rows)):
+            raise ValueError(f"slots must be {self.numerics.slots} finite rows (s_rel, n, v), got shape {rows.shape}")
+        x0, arrays, _, gamma = validate_arguments(x0, stage, rows, gamma, self._n)
+        return self._solve(x0, arrays, rows, np.ones(len(rows), dtype=bool), gamma, t_start)
+
+    def _solve(self, x0, arrays, slots, real, gamma, t_start) -> MPCResult:
+        """One real-time iteration on validated arguments and filled slots."""
         rn, n, cfg = self.numerics, self._n, self.config
-        slots, real = slot_rows(opp, x0[3], rn, self.spacing)
         xbar, ubar = self._guess(x0, arrays, self.predicted_s(x0[3]))
         ts = cfg.ts
         k_idx = np.arange(n)
