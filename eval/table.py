@@ -1,7 +1,7 @@
 """The paper's Table I (per-circuit comparison) and, with --miqp-ablation, Table II.
 
     python eval/table.py                         # full Table I: 4 circuits x 5 rho x 5 episodes x 7 strategies
-    python eval/table.py --quick                 # a quick look (~15-30 s): 2 circuits, rho 0.5, 1 episode of 30 s
+    python eval/table.py --quick                 # a quick look: 2 circuits, rho 0.5, 1 episode of 30 s
     python eval/table.py --miqp-ablation         # Table II: Laguna Seca with / without the MIQP layer
     python eval/table.py --sb3 runs/ppo/model.zip --workers 2 --out results/
     python eval/table.py --backend ray [--address auto]   # episodes on Ray (local instance or a cluster)
@@ -40,9 +40,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--workers", type=positive_int, default=None, help="worker processes (default: os.cpu_count())")
     p.add_argument("--backend", default="local", choices=("local", "ray"),
                    help="local: a process pool on this machine; ray: Ray actors (pip install \"sofar[ray]\"). Ray's "
-                        "start-up (the instance, then every worker's imports and environments) dominates small sweeps: "
-                        "on --quick it is several times slower than local (results/first_ten_minutes.md); it pays off "
-                        "on long sweeps and on a cluster")
+                        "start-up (the instance, then every worker's imports and environments) can dominate a small "
+                        "sweep such as --quick (both timed in results/first_ten_minutes.md); it pays off on long "
+                        "sweeps and on a cluster")
     p.add_argument("--address", default=None,
                    help="with --backend ray: 'auto' or HOST:6379 joins a running Ray cluster (the package must be "
                         "installed on every node); default: start a local Ray instance with --workers CPUs")

@@ -23,8 +23,11 @@ def test_mkdocs_build_strict(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site)],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    from sofar_env.config import EnvConfig, RaceConfig
+
+    env_config, race_config = (f"{c.__module__}.{c.__qualname__}" for c in (EnvConfig, RaceConfig))
     config_page = (site / "reference" / "config" / "index.html").read_text(encoding="utf-8")
-    assert 'id="sofar_env.config.EnvConfig.reward_mode"' in config_page
+    assert f'id="{env_config}.reward_mode"' in config_page
     env_page = (site / "envs" / "paper" / "index.html").read_text(encoding="utf-8")
     assert "<table" in env_page  # the env docstring's spec tables render
 
@@ -33,13 +36,13 @@ def test_mkdocs_build_strict(tmp_path: Path) -> None:
     for page in site.rglob("*.html"):
         found = raw.search(page.read_text(encoding="utf-8"))
         assert found is None, (page.relative_to(site), found)
-    assert 'href="../../reference/config/#sofar_env.config.EnvConfig"' in env_page  # a role linked to its target
+    assert f'href="../../reference/config/#{env_config}"' in env_page  # a role linked to its target
 
     # every configuration class has its section, every key a row with its type and default
     for cls in ("EnvConfig", "RaceConfig", "OpponentConfig", "StackConfig", "MPCConfig", "MIQPConfig", "SensorConfig",
                 "DynamicParams", "BarrierParams", "PASTAConfig"):
         assert f">{cls}<" in config_page, cls
-    assert 'id="sofar_env.race_config.RaceConfig.duration"' in config_page
+    assert f'id="{race_config}.duration"' in config_page
 
     # the results page shows the tables and figures of results/
     results_page = (site / "results" / "index.html").read_text(encoding="utf-8")

@@ -5,7 +5,7 @@ Usage (from the repository root, with the package installed)::
     python train/pasta.py                                   # Laguna Seca, defaults
     python train/pasta.py --stack paper                     # with the paper's Algorithm 1 as controller
     python train/pasta.py --scenario interactive            # in the interactive world
-    python train/pasta.py --quick                           # a few-minute run that finishes episodes
+    python train/pasta.py --quick                           # a short run that finishes episodes
     python train/pasta.py --n-envs 2 --total-steps 800000 --out runs/pasta_ls   # 2 worker processes
     python train/pasta.py --resume runs/pasta_ls/pasta_final.json --total-steps 1200000   # continue in place
     python train/pasta.py --n-envs 2 --backend local         # gymnasium's AsyncVectorEnv (lock-step) instead
@@ -32,7 +32,7 @@ and the first reset have been checked; a run that stops before its first update 
 holds the generators' and the environments' state, so that ``--resume`` with the same environments and
 ``--n-envs`` continues bit-identically to a run that was not stopped (:mod:`sofar_agents.pasta.resume`).
 
-``--quick`` is a preset for a first look (1 to 2 minutes on one core): 16384 steps
+``--quick`` is a preset for a first look (its time: ``results/first_ten_minutes.md``): 16384 steps
 in rollouts of 512, 30 s episodes, 4 PPO epochs, output in ``runs/pasta_quick``; options
 given explicitly win over it.
 
@@ -134,8 +134,8 @@ class Args:
     without a per-step barrier) or ``ray`` (the same in Ray actors, on this machine or a cluster); the learner
     stays here. Every backend gives the same checkpoints; default: ``processes`` with more than one env (with
     ``--multi-agent``: race) or with ``--num-workers``, else ``local``. Ray's start-up (the instance, then every
-    worker's imports and environments) takes seconds, most of a short run such as ``--quick``: it pays off on
-    long runs and on a cluster."""
+    worker's imports and environments) takes seconds, a large share of a short run such as ``--quick``: it pays
+    off on long runs and on a cluster."""
     num_workers: Annotated[int, positive_int] | None = None
     """Workers with ``--backend processes`` or ``ray`` (one CPU each; default: one per env, with ``processes``
     at most one per CPU this process may use)."""
@@ -147,7 +147,7 @@ class Args:
     cars: Annotated[int, int_at_least(2)] = 4
     """Controlled cars per race with ``--multi-agent``."""
     quick: bool = False
-    """Preset for a first look (1 to 2 minutes): 16384 steps, rollouts of 512, 30 s
+    """Preset for a first look (timed in results/first_ten_minutes.md): 16384 steps, rollouts of 512, 30 s
     episodes, 4 epochs, ``--out runs/pasta_quick``; explicit options win."""
     force: bool = False
     """Start over in an ``--out`` that already holds a run (its checkpoints are replaced); not needed to
