@@ -361,7 +361,7 @@ def main(argv: list[str] | None = None) -> Path:
         from sofar_agents.ray_support import require_ray
 
         try:
-            require_ray()
+            require_ray(local=args.address is None)
         except ImportError as err:
             print(f"train/pasta.py: --backend ray: {err}", file=sys.stderr)
             raise SystemExit(2) from err
