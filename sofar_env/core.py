@@ -169,10 +169,19 @@ class ControlledRace:
     terminated leaves the race (multi-car races); otherwise it stays where it is (the
     single-car environment ends its episode there anyway). The world and the controllers
     are built on the first :meth:`reset`.
+
+    Every car's controller gets ``config.stack`` as it is. ``measured_barrier`` is the barrier that the
+    reward's ``barrier_margin`` term, ``info["min_barrier"]``, the extended observation and the rendering
+    measure (default: ``config.stack.mpc.barrier``). The PettingZoo adapter passes the barrier of the
+    configuration without its multi-car layer: the layer widens the controllers' barrier
+    (``race.heading_extent``) but not the one the rewards were defined with.
     """
 
-    def __init__(self, config: EnvConfig, n_cars: int = 1, speed_factors=None, remove_crashed: bool = False):
+    def __init__(self, config: EnvConfig, n_cars: int = 1, speed_factors=None, remove_crashed: bool = False,
+                 measured_barrier=None):
         self.config = config
+        self.measured_barrier = config.stack.mpc.barrier if measured_barrier is None else measured_barrier
+        """The barrier of the rewards, the info, the extended observation and the rendering (see above)."""
         self.n_cars = int(n_cars)
         if speed_factors is None:
             self.speed_factors = None
@@ -232,23 +241,12 @@ class ControlledRace:
             self._travel_time = TravelTime(self.track)
 
     def _make_stacks(self, speed_factors) -> list:
+        """One controller per car, of ``config.stack`` as it is (the adapters resolve it, the multi-car defaults
+        included: :mod:`sofar_env.configs.resolve`), with car i's speed factor ``speed_factors[i]`` when given."""
         from .stack import OvertakingStack
 
         cfg = self.config
         stack = cfg.stack
-        if self.n_cars > 1:  # the multi-car defaults of race (see sofar_env.multi_agent)
-            race = cfg.race
-            overrides: dict[str, Any] = {}
-            if race.side_lock > 0 and stack.miqp.alongside_gap == 0:
-                overrides["miqp"] = {"alongside_gap": race.side_lock}
-            if race.lateral_rates == "mpc":
-                overrides["lateral_prediction_plan"] = False
-            if math.isfinite(race.mpc_restart_slack) and math.isinf(stack.mpc.restart_slack):
-                overrides.setdefault("mpc", {})["restart_slack"] = race.mpc_restart_slack
-            if race.heading_extent > 0 and stack.mpc.barrier.heading_extent == 0:
-                overrides.setdefault("mpc", {})["barrier"] = {"heading_extent": race.heading_extent}
-            if overrides:
-                stack = apply_overrides(stack, overrides)
         if speed_factors is None:
             configs = [stack] * self.n_cars
         else:
@@ -306,7 +304,7 @@ class ControlledRace:
         self.slow_steps[:] = 0
         self.previous_gamma[:] = self.config.initial_gamma
         self.outputs = [None] * self.n_cars
-        bp = self.config.stack.mpc.barrier
+        bp = self.measured_barrier
         out = {}
         for i in cars:
             opp = self._opponents[i] = self.race.opponent_frenet(i)
@@ -331,7 +329,7 @@ class ControlledRace:
         if len(gammas) != len(self.live) or any(i not in gammas for i in self.live):
             raise ValueError(f"gammas must be given for exactly the live cars {self.live}, got cars {sorted(gammas)}")
         race, track = self.race, self.track
-        bp = self.config.stack.mpc.barrier
+        bp = self.measured_barrier
         live = list(self.live)
         tallies = {i: DecisionTally() for i in live}
         running = list(live)
@@ -417,7 +415,7 @@ class ControlledRace:
         """Car ``car``'s observation from what it senses (the layout of ``EnvConfig.observation``)."""
         if self.config.observation == "paper":
             return observe(self.race, car, self._sensed[car])
-        return observe(self.race, car, self._sensed_rows[car], "extended", self.config.stack.mpc.barrier)
+        return observe(self.race, car, self._sensed_rows[car], "extended", self.measured_barrier)
 
     def _v2v_rows(self) -> list[np.ndarray]:
         """Each car's opponent rows for its controller under ``race.v2v`` (:mod:`sofar_env.v2v`): for every other

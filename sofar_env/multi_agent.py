@@ -46,6 +46,10 @@ half the car length, times a smooth ``|sin|`` of each; ``stack.mpc.barrier.headi
 :mod:`sofar_env.control.barrier`): a car turned in a chicane reaches further across the track than the
 ellipse of aligned cars covers.
 The ``scenario`` key of the interactive world (:mod:`sofar_env.scenarios`) applies here too.
+These multi-car defaults are one layer of the configuration's resolution
+(:func:`~sofar_env.configs.resolve.multi_car_overrides`), applied after the world and the ``stack`` preset and
+before the user's own keys, which win: ``stack={"mpc": {"barrier": {"heading_extent": 0.0}}}`` gives 0.
+``env.config`` is the resolved configuration, what every car's controller gets.
 
 **Scripted opponents.** ``n_opponents=k`` (or the reset option) adds the scripted field of the
 single-car environment at pace ratio ``rho`` (the config's ``race.opponents.rho``, or the reset
@@ -83,7 +87,8 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import parallel_to_aec
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 
-from .config import OBJECTIVE_NAMES, EnvConfig, apply_overrides, make_env_config
+from .config import OBJECTIVE_NAMES, EnvConfig
+from .configs.resolve import resolve_env_config
 from .constants import GAMMA_MAX, GAMMA_MIN
 from .core import ControlledRace, parse_gamma
 from .domains import is_integer
@@ -109,10 +114,11 @@ class SOfARParallelEnv(Snapshots, ParallelEnv):
                  render_mode: str | None = None, speed_factors: Sequence[float] | None = None, **kwargs: Any):
         if not (is_integer(n_agents) and n_agents >= 1):
             raise ConfigError(f"n_agents must be an integer >= 1, got {n_agents!r} ({type(n_agents).__name__})")
-        cfg = make_env_config(config, **kwargs)
-        if not ("n_opponents" in kwargs or (isinstance(config, Mapping) and "n_opponents" in config)):
-            cfg = apply_overrides(cfg, {"race": {"opponents": {"n_opponents": 0}}})  # default: controlled cars only
-        self.config = cfg
+        # the multi-car defaults (no scripted opponents, the controllers' settings of race.side_lock, lateral_rates,
+        # mpc_restart_slack, heading_extent) apply as a layer below the user's keys
+        self.config = resolve_env_config(config, kwargs, multi_car=True)
+        """The resolved configuration, the multi-car defaults included (what the cars' controllers get)."""
+        measured_barrier = resolve_env_config(config, kwargs).stack.mpc.barrier  # without the multi-car layer
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.render_mode = render_mode
@@ -129,7 +135,7 @@ class SOfARParallelEnv(Snapshots, ParallelEnv):
             raise ValueError(f"speed_factors must be numbers in (0, {MAX_SPEED_FACTOR:g}], one per car (cycled), "
                              f"got {speed_factors!r}")
         self.core = ControlledRace(self.config, n_cars=self.n_agents, speed_factors=speed_factors,
-                                   remove_crashed=True)
+                                   remove_crashed=True, measured_barrier=measured_barrier)
         """The simulation core: the race world and one controller per car."""
         obs_size = observation_size(self.config.observation)
         self._observation_spaces = {a: spaces.Box(-1.0, 1.0, (obs_size,), np.float32) for a in self.possible_agents}
@@ -226,7 +232,7 @@ class SOfARParallelEnv(Snapshots, ParallelEnv):
         if self._renderer is None:
             from .render import Renderer
 
-            self._renderer = Renderer(self.track, self.config.race.vehicle, self.config.stack.mpc.barrier,
+            self._renderer = Renderer(self.track, self.config.race.vehicle, self.core.measured_barrier,
                                       fps=self.metadata["render_fps"])
         car = self._index[self.agents[0]] if self.agents else 0
         frame = self.core.render_frame(self._renderer, car)

@@ -1,7 +1,7 @@
 """Named reward terms of the SOfAR environments (pure functions of one control step).
 
 The reward is a vector of five objectives, in the order of
-:data:`~sofar_env.config.OBJECTIVE_NAMES`:
+:data:`~sofar_env.configs.objectives.OBJECTIVE_NAMES`:
 
 ====================  ==========  ==========================================================================
 objective             range       per control step
@@ -18,15 +18,18 @@ objective             range       per control step
                                   can be non-zero)
 ====================  ==========  ==========================================================================
 
-With a decision interval k > 1 the environments sum the vectors of the k control steps.
+The objectives (name, term, bounds, default weight, reference preference) are defined once, in
+:mod:`sofar_env.configs.objectives`; this module evaluates them. With a decision interval k > 1 the
+environments sum the vectors of the k control steps.
 :func:`safety_cost` is the matching per-step cost for constrained RL.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from .configs.objectives import (OBJECTIVES, StepOutcome, barrier_margin_term, gamma_smoothness_term,
+                                 overtake_term, progress_term, safety_term)
 
 __all__ = [
     "safety_term",
@@ -40,42 +43,13 @@ __all__ = [
 ]
 
 
-def safety_term(collision: bool, off_track: bool) -> float:
-    """-1 on a collision or leaving the track, else 0."""
-    return -1.0 if (collision or off_track) else 0.0
-
-
-def overtake_term(overtakes: int) -> float:
-    """+1 per overtake in the step."""
-    return float(overtakes)
-
-
-def progress_term(progress: float, profile_speed: float, dt: float) -> float:
-    """Arc length gained [m] normalised by what the speed profile would cover in ``dt`` [s]."""
-    return float(progress) / (max(float(profile_speed), 1.0) * float(dt))
-
-
-def barrier_margin_term(barrier_slack: float, min_h: float) -> float:
-    """-min(1, barrier_slack + max(0, -min_h)); 0 when no slack is used and every h >= 0."""
-    depth = -min_h if math.isfinite(min_h) and min_h < 0.0 else 0.0
-    return -min(1.0, max(0.0, float(barrier_slack)) + depth)
-
-
-def gamma_smoothness_term(gamma: float, previous_gamma: float) -> float:
-    """-|gamma_t - gamma_{t-1}|."""
-    return -abs(float(gamma) - float(previous_gamma))
-
-
 def reward_vector(*, collision: bool, off_track: bool, overtakes: int, progress: float, profile_speed: float,
                   dt: float, barrier_slack: float, min_h: float, gamma: float, previous_gamma: float) -> np.ndarray:
-    """The five objectives of one control step (float64, order of ``OBJECTIVE_NAMES``)."""
-    return np.array([
-        safety_term(collision, off_track),
-        overtake_term(overtakes),
-        progress_term(progress, profile_speed, dt),
-        barrier_margin_term(barrier_slack, min_h),
-        gamma_smoothness_term(gamma, previous_gamma),
-    ])
+    """The objectives of one control step (float64, order of ``OBJECTIVE_NAMES``): each entry of
+    :data:`~sofar_env.configs.objectives.OBJECTIVES` evaluated on the step."""
+    step = StepOutcome(collision, off_track, overtakes, progress, profile_speed, dt, barrier_slack, min_h, gamma,
+                       previous_gamma)
+    return np.array([o.term(step) for o in OBJECTIVES])
 
 
 def scalarize(vector: np.ndarray, weights: np.ndarray) -> float:

@@ -1,5 +1,10 @@
 """World scenarios: ``"paper"`` (the paper's world) and ``"interactive"`` (a world in which gamma matters).
 
+The worlds are values of the configuration layer (:data:`sofar_env.configs.registry.WORLD_REGISTRY`); this
+module describes them and keeps the former names (:data:`SCENARIOS`, :func:`scenario_overrides`) as views.
+"paper" names the world here; the controller preset ``stack="paper"`` and the observation layout
+``observation="paper"`` are independent of it (see the registry's docstring).
+
 A scenario is a named set of overrides of :class:`~sofar_env.config.EnvConfig`, applied before the
 user's own keys (which therefore win). ``stack`` picks the controller, ``scenario`` the world; the two
 combine freely.
@@ -63,48 +68,16 @@ from __future__ import annotations
 
 from typing import Any
 
+from .configs.registry import WORLD_REGISTRY, NameView, world_overrides
+
 __all__ = ["SCENARIOS", "scenario_overrides"]
 
-SCENARIOS: tuple[str, ...] = ("paper", "interactive", "dynamic")
-"""Names accepted by the ``scenario`` key."""
-
-_INTERACTIVE: dict[str, Any] = {
-    "observation": "extended",
-    "race": {
-        "sensor": {"enabled": True},
-        "opponents": {
-            "pace": {"spread": 0.1, "lift_rate": 1.0 / 60.0},
-            "lines": {"amplitude": 1.5},
-            "defence": {"enabled": True},
-        },
-    },
-}
-
-
-_DYNAMIC_RACE: dict[str, Any] = {
-    "plant": "dynamic",
-    "dynamic": {"yaw_rate_gain": 2.0},
-    "vehicle": {"lat_acc_max": 8.5, "a_min": -7.0},
-    "start_speed_fraction": (0.5, 0.7),
-}
-_DYNAMIC_STACK: dict[str, Any] = {
-    "speed_factor": 0.7,
-    "mpc": {"track_margin": 2.2, "q": (0.0, 20.0, 0.0, 2.5, 0.0), "r": (0.01, 50.0)},
-}
+SCENARIOS = NameView(WORLD_REGISTRY)
+"""Names accepted by the ``scenario`` key: the worlds of :data:`~sofar_env.configs.registry.WORLD_REGISTRY`
+(``"paper"``, ``"interactive"``, ``"dynamic"``), a live view that compares equal to their tuple."""
 
 
 def scenario_overrides(name: str) -> dict[str, Any]:
-    """The configuration overrides of scenario ``name`` (a fresh nested dict)."""
-    import copy
-
-    key = name.strip().lower() if isinstance(name, str) else name
-    if key == "paper":
-        return {}
-    if key == "interactive":
-        return copy.deepcopy(_INTERACTIVE)
-    if key == "dynamic":
-        out = copy.deepcopy(_INTERACTIVE)
-        out["race"].update(copy.deepcopy(_DYNAMIC_RACE))
-        out["stack"] = copy.deepcopy(_DYNAMIC_STACK)
-        return out
-    raise ValueError(f"unknown scenario {name!r}; valid scenarios: {', '.join(SCENARIOS)}")
+    """The configuration overrides of scenario ``name`` (a fresh nested dict); ``ValueError`` for an unknown
+    name."""
+    return world_overrides(name)

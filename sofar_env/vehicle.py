@@ -19,14 +19,12 @@ length along the reference line [m], lateral offset (+ left) [m], heading error
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from ._jit import kernel
-from .domains import check_fields, real
-from .errors import ConfigError
+from .configs.vehicle import AV21, VehicleParams
 
 __all__ = [
     "VehicleParams",
@@ -42,47 +40,6 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
-class VehicleParams:
-    """Physical parameters and actuation limits (Dallara AV-21 defaults)."""
-
-    wheelbase: float = real(2.9718, gt=0.0, unit="m")
-    """L, distance between the axles [m]."""
-    lr: float = real(1.2933, gt=0.0, unit="m")
-    """l_r, distance from the centre of gravity to the rear axle [m]."""
-    a_min: float = real(-10.0, lt=0.0, unit="m/s^2")
-    """Strongest braking, lower bound on the longitudinal acceleration [m/s^2]."""
-    a_max: float = real(3.0, gt=0.0, unit="m/s^2")
-    """Largest longitudinal acceleration [m/s^2]."""
-    steer_rate_max: float = real(0.35, gt=0.0, unit="rad/s")
-    """Bound on |delta_dot| [rad/s]."""
-    steer_max: float = real(0.25, gt=0.0, lt=0.5 * math.pi, unit="rad")
-    """Bound on |delta| [rad]."""
-    lat_acc_max: float = real(15.0, gt=0.0, unit="m/s^2")
-    """Bound on |a_lat| = v * yaw rate [m/s^2] (soft in the MPC)."""
-    length: float = real(4.9, gt=0.0, unit="m")
-    """Footprint length, bumper to bumper [m]."""
-    width: float = real(1.9, gt=0.0, unit="m")
-    """Footprint width [m]."""
-    cg_to_front: float = real(2.45, gt=0.0, unit="m")
-    """Distance from the centre of gravity (the reference point) to the front of the footprint [m]."""
-
-    def __post_init__(self) -> None:
-        check_fields(self, "race.vehicle")
-        if not self.lr < self.wheelbase:
-            raise ConfigError(f"race.vehicle needs 0 < lr < wheelbase, got lr={self.lr}, wheelbase={self.wheelbase}")
-        if not self.cg_to_front < self.length:
-            raise ConfigError(f"race.vehicle.cg_to_front must lie inside the footprint (< length = {self.length}), "
-                              f"got {self.cg_to_front}")
-
-    @property
-    def cg_to_rear(self) -> float:
-        """Distance from the centre of gravity to the rear of the footprint [m]."""
-        return self.length - self.cg_to_front
-
-
-AV21 = VehicleParams()
-"""The default parameter set."""
 
 
 # --------------------------------------------------------------------------------------

@@ -128,14 +128,13 @@ def race_env(task: RaceTask, race_overrides: dict[str, Any] | None = None,
              stack_overrides: dict[str, Any] | None = None):
     """The PettingZoo environment of ``task`` (not reset): its circuit, cars, duration, controller preset,
     world and scripted opponents, with ``race_overrides`` / ``stack_overrides`` as in :func:`run_race`."""
-    from sofar_env.config import apply_overrides, make_env_config
+    from sofar_env.config import make_env_config
     from sofar_env.multi_agent import parallel_env
 
     mixed = {"n_opponents": int(task.opponents)} if task.opponents else {}
-    config = make_env_config(None, stack=task.stack)
-    if stack_overrides:
-        config = apply_overrides(config, {"stack": stack_overrides})
-    return parallel_env(task.track, n_agents=task.cars, config=config,
+    if stack_overrides:  # user keys: they win over the preset, the world and the multi-car defaults
+        mixed["stack"] = dict(stack_overrides)
+    return parallel_env(task.track, n_agents=task.cars, config=make_env_config(None, stack=task.stack),
                         race={**(race_overrides or {}), "duration": float(task.duration)},
                         scenario=task.scenario, timing_info=False, **mixed)
 

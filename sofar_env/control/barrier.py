@@ -49,43 +49,18 @@ from __future__ import annotations
 
 import math
 
-from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
 from .._jit import kernel, minimum
-from ..domains import check_fields, real
+from ..configs.mpc import BarrierParams
 
 __all__ = ["BarrierParams", "barrier_expr", "barrier", "barrier_table", "casadi_barrier", "casadi_ops", "min_barrier",
            "semi_axis_s", "softplus"]
 
 
-@dataclass(frozen=True)
-class BarrierParams:
-    """Parameters of the velocity-aware elliptic barrier."""
-
-    a0: float = real(7.0, gt=0.0, unit="m")
-    """Longitudinal semi-axis at zero closing speed [m]."""
-    b: float = real(2.7, gt=0.0, unit="m")
-    """Lateral semi-axis [m]."""
-    a_brake: float = real(10.0, gt=0.0, unit="m/s^2")
-    """Braking capability used for the braking-distance term of the semi-axis [m/s^2]."""
-    sigma: float = real(2.0, gt=0.0, unit="m")
-    """Gap scale of the ahead/behind blend tanh(ds / sigma) of the closing speed [m]."""
-    sharpness: float = real(4.0, gt=0.0, unit="s/m")
-    """Sharpness k of the softplus smooth max(0, v_close) [s/m]."""
-    heading_extent: float = real(0.0, ge=0.0, unit="m")
-    """Widening of the lateral semi-axis with the heading error e of the ego to the track and the course
-    angle c of the opponent: ``b + heading_extent (|sin e|_eps + |sin c|_eps)``, with the smooth
-    ``|x|_eps = sqrt(x^2 + eps^2) - eps``, eps = 0.01. A car turned by e reaches ``(length / 2) |sin e|``
-    further across the track than an aligned one, so half the car length (2.45 m) covers both cars'
-    rotation (the opponent's where it is known, see :func:`barrier_expr`). 0 (the default): the ellipse
-    of aligned cars [m]."""
-
-    def __post_init__(self) -> None:
-        check_fields(self, "stack.mpc.barrier")
 
 
 _NUMPY_OPS = SimpleNamespace(abs=np.abs, exp=np.exp, log1p=np.log1p, tanh=np.tanh, sin=np.sin, sqrt=np.sqrt)

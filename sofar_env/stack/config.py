@@ -1,246 +1,33 @@
-"""Configuration of the overtaking stack, and its two named presets.
+"""Configuration of the overtaking stack and its named presets, as views of the configuration layer.
 
-:class:`StackConfig` holds every setting of the hierarchical controller: the speed
-reference, the MIQP schedule, the opponents' window, the pass-or-follow decision
-(:mod:`sofar_env.stack.follow`), the opponent prediction (:mod:`sofar_env.stack.prediction`),
-the footprint-aware track edges (:mod:`sofar_env.stack.edges`) and the two planners'
-own configurations. :func:`stack_preset` names the two controllers the evaluation
-compares: ``"sofar"`` (these defaults) and ``"paper"`` (Algorithm 1 as written).
-
-The default MIQP configuration also closes a gap between the two planners
-(*consistent clearances*): the MIQP's side-constraint window is extended by the
-braking distance of the closing speed (``MIQPConfig.closing_decel`` = the barrier's
-``a_brake``), the shape of the MPC's barrier ellipse, so that a plan crossing an
-opponent's lane inside its braking distance, which the barrier then forbids, is no
-longer produced.
+:class:`StackConfig` is defined in :mod:`sofar_env.configs.stack` (importable without the solvers); the presets
+are the entries of :data:`~sofar_env.configs.registry.STACK_PRESET_REGISTRY`, each a frozen value with its
+documentation. :func:`stack_preset` and :data:`STACK_PRESETS` read that registry, so a preset registered there
+(:func:`~sofar_env.configs.registry.register_stack_preset`) is one entry and shows here at once.
 """
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass
-
-from ..control.barrier import BarrierParams
-from ..control.mpc import MPCConfig
-from ..control.refnum.config import ReferenceNumerics
-from ..constants import MAX_SPEED_FACTOR
-from ..domains import check_fields, flag, integer, nested, real
-from ..errors import ConfigError
-from ..planning.miqp import MIQPConfig
+from ..configs.registry import STACK_PRESET_REGISTRY, NameView
+from ..configs.registry import stack_preset as _stack_preset
+from ..configs.stack import StackConfig
 
 __all__ = ["StackConfig", "STACK_PRESETS", "stack_preset"]
 
-
-@dataclass(frozen=True)
-class StackConfig:
-    """Configuration of the hierarchical controller."""
-
-    speed_factor: float = real(0.8, gt=0.0, le=MAX_SPEED_FACTOR)
-    """Ego speed reference = speed_factor x the circuit's speed profile [-]."""
-    use_miqp: bool = flag(True)
-    """Run the passing-side MIQP; when False the MPC tracks the raceline (n_ref = 0)."""
-    miqp_interval: int = integer(2, ge=1)
-    """Run the MIQP every this many control steps (1 = every step)."""
-    look_behind: float = real(30.0, ge=0.0, unit="m")
-    """Opponents up to this far behind the ego are passed to the planners [m]."""
-    look_ahead: float = real(400.0, ge=0.0, unit="m")
-    """Opponents up to this far ahead of the ego are passed to the planners [m]."""
-    follow: bool = flag(True)
-    """Follow an opponent that cannot be passed instead of forcing the pass (:mod:`sofar_env.stack.follow`)."""
-    follow_slack: float = real(0.5, ge=0.0, unit="m")
-    """A passing plan that violates the clearance of an opponent ahead by more than this is
-    not attempted: the ego follows that opponent [m]. With 0.5 m a pass is planned with at
-    least 3.25 m lateral clearance (safe_lat 3.75 m), 0.55 m more than the barrier's lateral
-    semi-axis b = 2.7 m: a pass planned at about b stalls alongside the opponent (the barrier
-    is near 0 there and, for small gamma, may only decay slowly), and a looser 0.8 m led to
-    exactly that, and a collision, on Kentucky at rho = 0.1, gamma = 0.05."""
-    follow_release_slack: float = real(0.1, ge=0.0, unit="m")
-    """Hysteresis of the follow decision [m]: while following, an opponent ahead stays blocked
-    until the passing plan violates its clearance by at most this (entering takes
-    ``follow_slack``). Without it the decision can flicker every MIQP call near the threshold,
-    and each flicker trades braking for a pass attempt (Laguna Seca, last corner)."""
-    follow_recheck: int = integer(2, ge=1)
-    """While following, the passing plan is re-examined at every this-many-th MIQP call (1: at
-    every call). In between, only the follow plan is re-solved, for the same followed cars
-    (matched by their predicted positions); a follow plan that then violates the clearance of a
-    car it passes by more than ``follow_slack``, or a followed car that is no longer found, falls
-    back to the full pass-or-follow decision. It halves the second MIQP solve of most calls while
-    following; resuming a pass waits at most ``(follow_recheck - 1) miqp_interval`` more steps."""
-    follow_gap: float = real(12.0, ge=0.0, unit="m")
-    """Arc-length distance kept behind a followed opponent [m] (the barrier's a0 = 7 m plus 5 m)."""
-    follow_decel: float = real(5.0, gt=0.0, unit="m/s^2")
-    """Deceleration planned when following [m/s^2]: the speed reference is capped at
-    sqrt(v_o^2 + 2 follow_decel (gap - follow_gap)), the speed from which the ego reaches the
-    opponent's speed ``follow_gap`` behind it, and the MIQP node positions brake at this rate."""
-    follow_reach_decel: float = real(8.0, gt=0.0, unit="m/s^2")
-    """Deceleration [m/s^2] that decides whether the ego can still stay behind an opponent
-    (:meth:`~sofar_env.stack.follow.PassOrFollow.can_stay_behind`); if not, the pass is not abandoned."""
-    follow_alongside: bool = flag(True)
-    """Also follow a blocking car the ego is alongside or less than the barrier's a0 behind,
-    when braking at ``follow_reach_decel`` drops the ego behind it (else such a pass is held)."""
-    parked_pass: bool = flag(True)
-    """Pass a near-stationary opponent with the barrier's clearance when the passing clearance does not fit
-    (:mod:`sofar_env.stack.follow`): instead of following a car slower than ``parked_speed``, which would
-    stop the ego behind it for good, the pass is re-planned with a side-constraint window shaped like the
-    MPC's barrier ellipse (lateral semi-axis ``parked_clearance``, longitudinal ``parked_window`` plus the
-    braking distance of the closing speed), and a car is followed only if that plan enters the barrier's
-    own ellipse around it. While such a plan is in force the MPC measures the swing of the car's ends
-    against the edges' directions (:meth:`~sofar_env.stack.edges.TrackEdges.for_mpc`). Only with
-    ``follow``, and only when every opponent the passing plan has to clear is near-stationary."""
-    parked_speed: float = real(1.0, ge=0.0, unit="m/s")
-    """An opponent slower than this counts as near-stationary (parked) [m/s]. Below the slowest opponent of
-    the paper's world at the lowest pace ratio of Table I (0.1 x Monza's 17.5 m/s profile minimum = 1.75 m/s),
-    so moving fields never trigger the parked pass; equal to the environment's default ``stall_speed``, so a
-    car slow enough to stall the ego when followed is one the stack tries to pass."""
-    parked_clearance: float = real(3.0, unit="m")
-    """Lateral semi-axis [m] of the passing plan's elliptic window around a near-stationary opponent (instead
-    of the box window ``miqp.safe_lat``): the barrier's lateral semi-axis b = 2.7 m plus 0.3 m, the margin the
-    plan aims for; the decision to follow only needs b. A parked car does not move towards the ego, so the
-    margin of ``safe_lat`` for a moving car (``follow_slack``) is not needed; 3.0 m leaves 1.1 m between the
-    two 1.9 m wide footprints."""
-    parked_window: float = real(7.0, unit="m")
-    """Longitudinal semi-axis [m] of that window at zero closing speed (it grows by the braking distance of
-    the closing speed, ``miqp.closing_decel``, on the approach): the barrier's a0 = 7 m, so the plan has the
-    shape of the ellipse the MPC keeps the ego out of. A box window (the full clearance over ``|gap| <
-    3 m``, and at both end nodes of every node interval touching it) asked for the full clearance up to a
-    node spacing beyond the cars' overlap, where the barrier needs 0.9 b or less: in a chicane, whose edges
-    converge on the raceline by up to 0.5 m per metre, that stopped the ego behind cars with room beside
-    them (rho = 0, 4 circuits x seeds 0-5: Monza seed 5)."""
-    pace_prediction: bool = flag(True)
-    """Predict the opponents along the speed profile at their current pace ratio
-    (:class:`~sofar_env.stack.prediction.OpponentPredictor`) instead of at constant speed: the MIQP gets
-    the predicted positions, the MPC (constant-speed opponents) the mean speed over its horizon."""
-    lateral_prediction: bool = flag(True)
-    """Predict the opponents' lateral motion from the sensed lateral rate (the fourth column of the
-    rows given to :meth:`~sofar_env.stack.OvertakingStack.step`, e.g. the tracker estimate of
-    :mod:`sofar_env.sensing`; rows of three columns are predicted at a constant offset): over
-    ``lateral_prediction_time`` a car keeps moving at its rate less ``lateral_rate_deadband``, inside the
-    edges; the MPC's barrier rows get that motion, the MIQP and the follow logic the offset where it ends
-    (:func:`~sofar_env.stack.prediction.lateral_motion`)."""
-    lateral_prediction_plan: bool = flag(True)
-    """With ``lateral_prediction``: the MIQP and the follow logic see each car at the offset where its lateral
-    move ends (True), or where it is now (False); the MPC's barrier rows get the motion either way."""
-    lateral_prediction_time: float = real(1.5, gt=0.0, unit="s")
-    """How long a sensed lateral rate is carried forward [s], > 0: the MPC's horizon. A lateral move of
-    a racing car lasts about this long (a defensive move across 2 m at 1.5 m/s); carried further, a move
-    that has ended would still be extrapolated across the track."""
-    lateral_rate_deadband: float = real(0.3, ge=0.0, unit="m/s")
-    """Lateral rates are shrunk toward zero by this much before they are used [m/s], >= 0 (a soft
-    threshold, continuous in the rate): about the rate noise of the default sensor's tracker (0.33 m/s),
-    so a car on a steady line is not predicted to wander, while a defensive move (1.5 m/s) is."""
-    footprint_edges: bool = flag(True)
-    """Give the planners the narrowest edge within the car's length, and tighten the MPC's by
-    the heading error (:mod:`sofar_env.stack.edges`). With ``mpc.track_rows = "ends"`` the MPC bounds
-    the car's ends in its QP instead (also with ``"recoverable"``), and its edges are not tightened by
-    the heading error."""
-    mpc: MPCConfig = nested(MPCConfig)
-    """The low-level MPC-DCBF."""
-    miqp: MIQPConfig = nested(MIQPConfig, factory=lambda: MIQPConfig(closing_decel=BarrierParams().a_brake))
-    """The passing-side planner (its closing-speed window sized by the barrier's a_brake: the
-    consistent clearances of this module's docstring)."""
-    reference_numerics: ReferenceNumerics | None = nested(ReferenceNumerics, default=None, optional="the MPC-DCBF")
-    """None (every preset but one): the MPC-DCBF of :mod:`sofar_env.control.mpc`. Set: the low-level
-    controller is the **bug-compatible** MPC of :mod:`sofar_env.control.refnum`, which reproduces the
-    numerical defects of the paper's reference implementation (phantom opponents, soft barrier rows
-    bounded at -1e9, HPIPM's iteration cap, a zero command on failure). Only the preset
-    ``"reference-numerics"`` sets it; ``mpc`` then gives its time grid and weights."""
-
-    def __post_init__(self) -> None:
-        """Check every field's domain (:mod:`sofar_env.domains`), then the checks that relate fields; raises
-        :class:`~sofar_env.errors.ConfigError` naming the key."""
-        check_fields(self, "stack")
-        if not self.follow_release_slack <= self.follow_slack:
-            raise ConfigError(f"stack.follow_release_slack must lie in [0, follow_slack = {self.follow_slack}] "
-                              f"[m], got {self.follow_release_slack!r}")
-        if not 0.0 < self.parked_window <= self.miqp.safe_lon:
-            raise ConfigError(f"stack.parked_window must lie in (0, miqp.safe_lon = {self.miqp.safe_lon}] [m], "
-                              f"got {self.parked_window!r}")
-        if not 0.0 < self.parked_clearance <= self.miqp.safe_lat:
-            raise ConfigError(f"stack.parked_clearance must lie in (0, miqp.safe_lat = {self.miqp.safe_lat}] [m], "
-                              f"got {self.parked_clearance!r}")
-
-
-STACK_PRESETS: tuple[str, ...] = ("sofar", "paper", "sofar-ends", "sofar-recover", "reference-numerics",
-                                  "reference-numerics-no-phantoms")
-"""Names accepted by :func:`stack_preset` (and by the environments' ``stack=`` key)."""
+STACK_PRESETS = NameView(STACK_PRESET_REGISTRY)
+"""Names accepted by :func:`stack_preset` (and by the environments' ``stack=`` key), in registration order:
+``"sofar"``, ``"paper"``, ``"sofar-ends"``, ``"sofar-recover"``, ``"reference-numerics"``,
+``"reference-numerics-no-phantoms"``. A live view of the registry that compares equal to the tuple of these
+names."""
 
 
 def stack_preset(name: str) -> StackConfig:
-    """The controller of a named preset.
+    """The controller of a named preset (a frozen :class:`StackConfig`; case and surrounding spaces ignored).
 
-    ``"sofar"`` (the default of every environment) is :class:`StackConfig` as it is:
-    the paper's Algorithm 1 plus the additions described in :mod:`sofar_env.stack`.
-
-    ``"paper"`` is the paper's Algorithm 1 as written, every addition of ours off:
-
-    * ``follow=False``: no pass-or-follow decision; the MIQP always plans a pass of
-      every opponent it sees (the paper has no following mode);
-    * ``parked_pass=False``: a near-stationary opponent is planned around with the same clearance
-      as any other (it only matters with the follow mode, which is off anyway);
-    * ``pace_prediction=False``: opponents are predicted at constant speed along the
-      track, the paper's constant-velocity model;
-    * ``lateral_prediction=False``: at a constant lateral offset, whatever lateral rate is sensed;
-    * ``footprint_edges=False``: the planners' track edges are the edges at the
-      predicted reference point, not the narrowest within the car's length, and the MPC's
-      are not tightened by the heading error;
-    * ``miqp.closing_decel=0``: the MIQP's side constraints use the plain longitudinal
-      window ``|gap| < safe_lon``, as in the paper's eq. (8), without the braking-distance
-      extension.
-
-    ``"sofar-ends"`` is ``"sofar"`` with the MPC bounding both ends of the car in its QP
-    (``mpc.track_rows = "ends"``) instead of tightening its edges by the heading error of the
-    previous plan. That tightening is frozen over the horizon: a car standing at an angle near an
-    edge sees its edges pulled in by ``l |sin e|`` at every stage, even at the stages where turning
-    back to the track's direction would have brought its ends in, and may find no plan that moves
-    forward (a *stall*). The end rows let the plan trade heading against offset.
-
-    ``"sofar-recover"`` is ``"sofar-ends"`` with room kept for turning back (``mpc.track_rows =
-    "recoverable"``): the front end's rows bound the largest offset it reaches while the car turns
-    back to the track's direction at full lock (:mod:`sofar_env.control.mpc.ends`). A car turned
-    towards an edge by more than 0.31 rad cannot drive forward without its front end moving further
-    out; with no reverse gear, one standing near the edge is stuck. These rows keep it out of such
-    states.
-
-    Both are candidate fixes of the stalls, measured against ``"sofar"`` in the results;
-    ``"sofar"`` stays as it is, so the tables made with it stay valid.
-
-    ``"reference-numerics"`` is a **bug-compatible** controller, never a default: ``"paper"`` with the
-    low-level MPC replaced by :class:`~sofar_env.control.refnum.ReferenceNumericsMPC`, which reproduces
-    the numerical defects of the paper's reference code (``StackConfig.reference_numerics``): every
-    opponent slot filled, with "phantom" opponents 99999 m away; soft barrier rows with a lower bound
-    of -1e9; no DCBF on the first transition; HPIPM's dense solver with acados' options; throttle 0
-    and steering 0 when the solve fails. It exists to explain the paper's Table I (the collapse of
-    gamma 0.05 and 0.95), not to race with. ``"reference-numerics-no-phantoms"`` is the same controller
-    with one defect removed, the phantom opponents (slots without an opponent on the target line get no
-    rows): the control experiment that attributes a difference to the phantoms.
-
-    Where the paper leaves a choice open, both presets make the same one (so the
-    difference between them is only the list above): the MIQP runs every second control
-    step over 76 nodes 0.15 s apart; its side windows are ``safe_lon`` = 8 m and
-    ``safe_lat`` = 3.75 m; it keeps the previous decision with a switching cost (500) and
-    links opponents closer than 10 m along the track into one side decision; the MPC is
-    solved as one SQP real-time iteration per step with the DCBF imposed at every stage
-    (the paper's "at each prediction step", including the first transition), soft track
-    and barrier constraints with L1 + L2 slack, and the velocity-aware barrier ellipse
-    ``a = a0 + max(0, v - v_i)^2 / (2 a_brake)``. Episodes, the plant and the opponents are
-    those of the world, not of the controller.
+    The presets and what each one is: ``STACK_PRESET_REGISTRY[name].doc``
+    (:mod:`sofar_env.configs.registry`). ``"sofar"`` is the default of every environment; ``"paper"`` is the
+    paper's Algorithm 1 as written (the *controller* meaning of "paper", independent of the world
+    ``scenario="paper"`` and the observation layout ``observation="paper"``). Raises ``ValueError`` listing the
+    presets for an unknown name.
     """
-    if isinstance(name, str):
-        key = name.strip().lower()
-        if key == "sofar":
-            return StackConfig()
-        if key == "paper":
-            base = StackConfig()
-            return dataclasses.replace(base, follow=False, parked_pass=False, pace_prediction=False,
-                                       lateral_prediction=False, footprint_edges=False,
-                                       miqp=dataclasses.replace(base.miqp, closing_decel=0.0))
-        if key in ("reference-numerics", "reference-numerics-no-phantoms"):
-            paper = stack_preset("paper")
-            grid = dataclasses.replace(paper.mpc, first_step=paper.mpc.ts)  # the reference's uniform grid
-            numerics = ReferenceNumerics(phantoms=key == "reference-numerics")
-            return dataclasses.replace(paper, mpc=grid, reference_numerics=numerics)
-        if key in ("sofar-ends", "sofar-recover"):
-            base = StackConfig()
-            rows = "ends" if key == "sofar-ends" else "recoverable"
-            return dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, track_rows=rows))
-    raise ValueError(f"unknown stack preset {name!r}; valid presets: {', '.join(STACK_PRESETS)}")
+    return _stack_preset(name)

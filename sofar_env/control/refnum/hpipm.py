@@ -21,16 +21,12 @@ from __future__ import annotations
 
 import ctypes
 import os
-from dataclasses import dataclass
 
 import numpy as np
 
-from ...domains import check_fields, choice, integer, real
+from ...configs.refnum import MODES, HPIPMOptions
 
 __all__ = ["HPIPMUnavailable", "HPIPMOptions", "acados_options", "DenseQP", "STATUS_NAMES", "library_path"]
-
-MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
-"""HPIPM's ``enum hpipm_mode``."""
 
 STATUS_NAMES = {0: "success", 1: "max_iter", 2: "min_step", 3: "nan", 4: "inconsistent_eq"}
 """HPIPM's ``enum hpipm_status``."""
@@ -40,29 +36,6 @@ class HPIPMUnavailable(RuntimeError):
     """CasADi's build of HPIPM could not be found or loaded."""
 
 
-@dataclass(frozen=True)
-class HPIPMOptions:
-    """Options of HPIPM's dense interior-point method (``d_dense_qp_ipm_arg``)."""
-
-    mode: str = choice("balance", tuple(MODES))
-    """Preset the other options start from: ``speed_abs``, ``speed``, ``balance`` or ``robust``."""
-    iter_max: int = integer(50, ge=1)
-    """Iteration cap; HPIPM returns status ``max_iter`` when it is reached [-]."""
-    mu0: float = real(1.0, gt=0.0)
-    """Initial barrier parameter [-]."""
-    alpha_min: float = real(1e-8, gt=0.0)
-    """Smallest step; a shorter step ends the solve with status ``min_step`` [-]."""
-    tol_stat: float = real(1e-6, gt=0.0)
-    """Tolerance on the stationarity residual [-]."""
-    tol_eq: float = real(1e-8, gt=0.0)
-    """Tolerance on the equality residual [-]."""
-    tol_ineq: float = real(1e-8, gt=0.0)
-    """Tolerance on the inequality residual [-]."""
-    tol_comp: float = real(1e-8, gt=0.0)
-    """Tolerance on the complementarity residual [-]."""
-
-    def __post_init__(self) -> None:
-        check_fields(self, "stack.reference_numerics.qp")
 
 
 def acados_options() -> HPIPMOptions:

@@ -1,0 +1,253 @@
+"""The named configurations: controller presets and worlds, as frozen values with their documentation.
+
+Two registries, each a mapping ``name -> Entry(value, doc)``:
+
+* :data:`STACK_PRESET_REGISTRY`: the controllers the ``stack`` key names; each value is a frozen
+  :class:`~sofar_env.configs.stack.StackConfig`. :func:`sofar_env.stack.stack_preset` and
+  :data:`sofar_env.stack.STACK_PRESETS` are views of it. A new preset is one entry
+  (:func:`register_stack_preset`).
+* :data:`WORLD_REGISTRY`: the worlds the ``scenario`` key names; each value is a frozen :class:`World`, the
+  overrides of :class:`~sofar_env.configs.env.EnvConfig` the world applies (:mod:`sofar_env.scenarios` has the
+  full description of each world).
+
+How the entries combine with each other and with the user's keys is :mod:`sofar_env.configs.resolve`.
+
+**The three meanings of "paper".** The word names three independent things, each after the paper the project
+reproduces:
+
+* the *world* ``scenario="paper"`` (the default, the ``SOfAR-<Circuit>-v0`` ids): the paper's race, a
+  kinematic plant, perfect sensing, opponents on fixed offsets at a fixed pace ratio;
+* the *controller preset* ``stack="paper"``: the paper's Algorithm 1 as written, every addition of the
+  project off (the default controller is ``"sofar"``);
+* the *observation layout* ``observation="paper"``: the paper's 12 observation values (the default of the
+  paper world; the interactive worlds default to ``"extended"``).
+
+Each can be chosen without the others (``scenario="interactive", stack="paper", observation="paper"``). The
+names are public keys used by scripts and committed results, so they stay.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any, NamedTuple
+
+from .refnum import ReferenceNumerics
+from .stack import StackConfig
+
+__all__ = ["Entry", "World", "STACK_PRESET_REGISTRY", "WORLD_REGISTRY", "OBSERVATION_LAYOUTS", "NameView",
+           "register_stack_preset", "stack_preset", "world", "world_overrides"]
+
+
+class Entry(NamedTuple):
+    """One named configuration: its frozen value and what it is."""
+
+    value: Any
+    doc: str
+
+
+def _freeze(value: Any) -> Any:
+    """A read-only deep copy of nested mappings (lists become tuples)."""
+    if isinstance(value, Mapping):
+        return MappingProxyType({k: _freeze(v) for k, v in value.items()})
+    if isinstance(value, list):
+        return tuple(_freeze(v) for v in value)
+    return value
+
+
+def _thaw(value: Any) -> Any:
+    """A plain, mutable deep copy of a frozen mapping."""
+    if isinstance(value, Mapping):
+        return {k: _thaw(v) for k, v in value.items()}
+    return copy.deepcopy(value)
+
+
+@dataclass(frozen=True)
+class World:
+    """A world: the overrides of :class:`~sofar_env.configs.env.EnvConfig` it applies, read-only.
+
+    ``overrides`` may hold ``race``, ``observation`` and ``stack`` keys (nested mappings of field overrides);
+    the ``stack`` part is the world's controller settings, applied on top of any named preset.
+    """
+
+    overrides: Mapping[str, Any]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "overrides", _freeze(self.overrides))
+
+    def as_overrides(self) -> dict[str, Any]:
+        """The overrides as a fresh nested dict (the caller may change it)."""
+        return _thaw(self.overrides)
+
+
+class NameView(Sequence):
+    """The names of a registry, in registration order, read live (a registered name shows at once).
+
+    Compares equal to the tuple of the same names, so code written for the former tuple constants
+    (``"paper" in STACK_PRESETS``, ``", ".join(STACK_PRESETS)``, argparse ``choices=``) keeps working.
+    """
+
+    def __init__(self, registry: Mapping[str, Entry]) -> None:
+        self._registry = registry
+
+    def __getitem__(self, index):  # type: ignore[override]
+        return tuple(self._registry)[index]
+
+    def __len__(self) -> int:
+        return len(self._registry)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(tuple(self._registry))
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._registry
+
+    def __eq__(self, other: object) -> bool:
+        return tuple(self) == (tuple(other) if isinstance(other, (tuple, NameView)) else other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return repr(tuple(self))
+
+
+# ------------------------------------------------------------------ controller presets
+def _paper() -> StackConfig:
+    base = StackConfig()
+    return dataclasses.replace(base, follow=False, parked_pass=False, pace_prediction=False, lateral_prediction=False,
+                               footprint_edges=False, miqp=dataclasses.replace(base.miqp, closing_decel=0.0))
+
+
+def _reference_numerics(phantoms: bool) -> StackConfig:
+    paper = _paper()
+    grid = dataclasses.replace(paper.mpc, first_step=paper.mpc.ts)  # the reference's uniform grid
+    return dataclasses.replace(paper, mpc=grid, reference_numerics=ReferenceNumerics(phantoms=phantoms))
+
+
+def _track_rows(rows: str) -> StackConfig:
+    base = StackConfig()
+    return dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, track_rows=rows))
+
+
+STACK_PRESET_REGISTRY: dict[str, Entry] = {
+    "sofar": Entry(StackConfig(), """The default controller of every environment: :class:`StackConfig` as it is, the
+paper's Algorithm 1 plus the project's additions (pass or follow, pace-ratio and lateral prediction,
+footprint-aware edges, consistent clearances; :mod:`sofar_env.stack`)."""),
+    "paper": Entry(_paper(), """The paper's Algorithm 1 as written (the *controller* meaning of "paper"), every
+addition off:
+
+* ``follow=False``: no pass-or-follow decision; the MIQP always plans a pass of every opponent it sees;
+* ``parked_pass=False``: a near-stationary opponent is planned around with the same clearance as any other;
+* ``pace_prediction=False``: opponents predicted at constant speed along the track;
+* ``lateral_prediction=False``: at a constant lateral offset, whatever lateral rate is sensed;
+* ``footprint_edges=False``: the planners' edges are those at the predicted reference point;
+* ``miqp.closing_decel=0``: the MIQP's side windows are the plain ``|gap| < safe_lon`` of the paper's eq. (8).
+
+Where the paper leaves a choice open, ``"sofar"`` and ``"paper"`` make the same one (MIQP every second step over
+76 nodes 0.15 s apart, ``safe_lon`` 8 m, ``safe_lat`` 3.75 m, switching cost 500, clusters of 10 m; one SQP
+real-time iteration per step with the DCBF at every stage; soft constraints with L1 + L2 slack; the
+velocity-aware barrier ellipse). Episodes, the plant and the opponents are the world's."""),
+    "sofar-ends": Entry(_track_rows("ends"), """``"sofar"`` with the MPC bounding both ends of the car in its QP
+(``mpc.track_rows = "ends"``) instead of tightening its edges by the heading error of the previous plan, a
+tightening frozen over the horizon that can leave a car standing at an angle near an edge with no plan that
+moves forward (a *stall*). A candidate fix of the stalls, measured against ``"sofar"`` in the results."""),
+    "sofar-recover": Entry(_track_rows("recoverable"), """``"sofar-ends"`` with room kept for turning back
+(``mpc.track_rows = "recoverable"``): the front end's rows bound the largest offset it reaches while the car
+turns back to the track's direction at full lock (:mod:`sofar_env.control.mpc.ends`), so a car never stands
+turned towards an edge it cannot drive away from. The other candidate fix of the stalls."""),
+    "reference-numerics": Entry(_reference_numerics(True), """A **bug-compatible** controller, never a default:
+``"paper"`` on the reference's uniform time grid with the low-level MPC replaced by
+:class:`~sofar_env.control.refnum.ReferenceNumericsMPC`, which reproduces the numerical defects of the paper's
+reference code (``StackConfig.reference_numerics``): phantom opponents 99999 m away in every empty slot, soft
+barrier rows bounded at -1e9, no DCBF on the first transition, HPIPM's dense solver with acados' options, a
+zero command on a failed solve. It explains the paper's Table I; it is not for racing."""),
+    "reference-numerics-no-phantoms": Entry(_reference_numerics(False), """``"reference-numerics"`` with one
+defect removed, the phantom opponents (slots without an opponent on the target line get no rows): the control
+experiment that attributes a difference to the phantoms."""),
+}
+"""The controller presets: name -> Entry(StackConfig, doc), in the order of ``STACK_PRESETS``."""
+
+
+def register_stack_preset(name: str, value: StackConfig, doc: str) -> None:
+    """Add the controller preset ``name`` (lower case, not yet registered): afterwards ``stack=name`` selects
+    ``value`` in every environment and it is listed in ``STACK_PRESETS``. Raises ``ValueError`` for a name
+    in use or not lower case, ``TypeError`` for a value that is not a :class:`StackConfig`."""
+    if not isinstance(value, StackConfig):
+        raise TypeError(f"a stack preset is a StackConfig, got {type(value).__name__}")
+    if not isinstance(name, str) or name != name.strip().lower() or not name:
+        raise ValueError(f"a preset name is a non-empty lower-case string without spaces around it, got {name!r}")
+    if name in STACK_PRESET_REGISTRY:
+        raise ValueError(f"stack preset {name!r} is already registered")
+    STACK_PRESET_REGISTRY[name] = Entry(value, doc)
+
+
+def stack_preset(name: str) -> StackConfig:
+    """The controller of preset ``name`` (case and surrounding spaces ignored); ``ValueError`` listing the
+    presets for an unknown name."""
+    key = name.strip().lower() if isinstance(name, str) else name
+    entry = STACK_PRESET_REGISTRY.get(key) if isinstance(key, str) else None
+    if entry is None:
+        raise ValueError(f"unknown stack preset {name!r}; valid presets: {', '.join(STACK_PRESET_REGISTRY)}")
+    return entry.value
+
+
+# ------------------------------------------------------------------ worlds
+_INTERACTIVE: dict[str, Any] = {
+    "observation": "extended",
+    "race": {
+        "sensor": {"enabled": True},
+        "opponents": {
+            "pace": {"spread": 0.1, "lift_rate": 1.0 / 60.0},
+            "lines": {"amplitude": 1.5},
+            "defence": {"enabled": True},
+        },
+    },
+}
+_DYNAMIC: dict[str, Any] = copy.deepcopy(_INTERACTIVE)
+_DYNAMIC["race"].update({
+    "plant": "dynamic",
+    "dynamic": {"yaw_rate_gain": 2.0},
+    "vehicle": {"lat_acc_max": 8.5, "a_min": -7.0},
+    "start_speed_fraction": (0.5, 0.7),
+})
+_DYNAMIC["stack"] = {"speed_factor": 0.7, "mpc": {"track_margin": 2.2, "q": (0.0, 20.0, 0.0, 2.5, 0.0),
+                                                  "r": (0.01, 50.0)}}
+
+WORLD_REGISTRY: dict[str, Entry] = {
+    "paper": Entry(World({}), """The paper's world (the *world* meaning of "paper"; the default, the
+``SOfAR-<Circuit>-v0`` ids): the MPC's own kinematic bicycle as the plant, exact sensing, opponents on a fixed
+lateral offset at a fixed pace ratio rho, blind to the ego. No overrides."""),
+    "interactive": Entry(World(_INTERACTIVE), """Opponents that race back (the ``-Interactive-v0`` ids): pace drawn
+per car and lifts, own smooth lines, one defensive move per approach; sensing with correlated noise and 0.2 s of
+latency; the extended 16-value observation. Kinematic plant."""),
+    "dynamic": Entry(World(_DYNAMIC), """The interactive world on the dynamic single-track plant with Pacejka tyres
+(the ``-Dynamic-v0`` ids), with what makes the kinematic controller fit it: the car's yaw-rate loop, limits
+inside the tyres' grip at the lowest mu, starts at 0.5-0.7 of the profile, and the controller settings
+``speed_factor`` 0.7, ``mpc.track_margin`` 2.2 m and calmer steering weights (applied on top of any preset)."""),
+}
+"""The worlds: name -> Entry(World, doc), in the order of ``SCENARIOS``."""
+
+
+def world(name: str) -> World:
+    """The world ``name`` (case and surrounding spaces ignored); ``ValueError`` listing the worlds otherwise."""
+    key = name.strip().lower() if isinstance(name, str) else name
+    entry = WORLD_REGISTRY.get(key) if isinstance(key, str) else None
+    if entry is None:
+        raise ValueError(f"unknown scenario {name!r}; valid scenarios: {', '.join(WORLD_REGISTRY)}")
+    return entry.value
+
+
+def world_overrides(name: str) -> dict[str, Any]:
+    """The configuration overrides of world ``name`` (a fresh nested dict)."""
+    return world(name).as_overrides()
+
+
+OBSERVATION_LAYOUTS: dict[str, str] = {
+    "paper": "The paper's 12 values (the *observation* meaning of \"paper\"; the paper world's default).",
+    "extended": "The 12 values plus the two nearest opponents' sensed lateral rates, the heading error and the "
+                "smallest barrier value (the interactive worlds' default).",
+}
+"""The observation layouts of ``EnvConfig.observation`` (:mod:`sofar_env.observation`): name -> doc."""
