@@ -82,15 +82,13 @@ from sofar_agents.pasta.self_play import make_self_play_race
 from sofar_agents.pasta.training_log import (check_out, code_commit, console_line, log_update, n_objectives,
                                              objective_names, run_folder)
 from sofar_env.compile import warm_up, world_of
+from sofar_env.configs.objectives import REFERENCE_PREFERENCE  # the objectives' registry
 from sofar_env.scenarios import SCENARIOS
 from sofar_env.stack.config import STACK_PRESETS
 from sofar_env.vector import async_vector_env, available_cpus
 
 logger = logging.getLogger("train.pasta")
 
-REFERENCE_PREFERENCE = (0.31, 0.45, 0.05, 0.04, 0.15)
-"""Deployment preference of the reference implementation, in the order of the SOfAR
-objectives (safety, overtakes, progress, barrier_margin, gamma_smoothness)."""
 
 QUICK_RUN = {"total_steps": 16384, "out": "runs/pasta_quick", "save_every": 8}
 """Run options of ``--quick`` (applied to the options not given on the command line)."""

@@ -50,12 +50,11 @@ from tqdm import tqdm
 from sofar_agents.cli_types import finite_float, float_in, nonneg_float, nonneg_int, positive_float, positive_int
 from sofar_agents.wrappers import RandomRhoReset, RescaleGammaAction
 from sofar_env.compile import warm_up, world_of
+from sofar_env.configs.objectives import REFERENCE_PREFERENCE  # the objectives' registry
 from sofar_env.vector import pinned_factories
 
 logger = logging.getLogger("train.ppo")
 
-REFERENCE_PREFERENCE = (0.31, 0.45, 0.05, 0.04, 0.15)
-"""Reference deployment preference over the five SOfAR objectives."""
 EPISODE_INFO = ("is_success", "overtakes", "laps", "collision", "off_track")
 
 
