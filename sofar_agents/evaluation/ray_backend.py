@@ -30,7 +30,7 @@ import warnings
 from collections.abc import Callable, Sequence
 
 from sofar_agents.evaluation.protocol import EpisodeTask
-from sofar_agents.evaluation.sweep import _EpisodeRunner
+from sofar_agents.evaluation.runner import EpisodeRunner as _EpisodeRunner
 from sofar_agents.ray_support import INSTALL_HINT, init_ray, require_ray  # noqa: F401  (re-exported)
 from sofar_agents.worker_lifetime import exit_with_process, process_start_time
 

@@ -17,14 +17,12 @@ import math
 import os
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
-from sofar_agents.evaluation.episode import make_env, run_episode
-from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
-from sofar_agents.evaluation.results import (EPISODE_COLUMNS, TRACE_COLUMNS, EpisodeResult, _AppendingCSV,
-                                             _row_key, read_episode_csv)
+from sofar_agents.evaluation.protocol import EpisodeTask
+from sofar_agents.evaluation.results import EPISODE_COLUMNS, TRACE_COLUMNS, _AppendingCSV, _row_key, read_episode_csv
+from sofar_agents.evaluation.runner import EpisodeRunner as _EpisodeRunner
 
 logger = logging.getLogger(__name__)
 
@@ -69,32 +67,6 @@ def _progress_bar(total: int, enabled: bool):
     from tqdm.auto import tqdm
 
     return tqdm(total=total, unit="ep", desc="episodes", disable=not enabled, dynamic_ncols=True, smoothing=0.05)
-
-
-class _EpisodeRunner:
-    """Runs tasks, building environments and policies on first use and keeping them."""
-
-    def __init__(self) -> None:
-        self.envs: dict[tuple, Any] = {}
-        self.policies: dict[Strategy, Callable] = {}
-
-    def run(self, task: EpisodeTask) -> tuple[EpisodeResult, list[tuple]]:
-        env = self.envs.get(task.env_key)
-        if env is None:
-            env = self.envs[task.env_key] = make_env(task.track, task.use_miqp, task.duration, task.stack,
-                                                                     task.scenario)
-        policy = self.policies.get(task.strategy)
-        if policy is None:
-            policy = self.policies[task.strategy] = task.strategy.build()
-        return run_episode(env, policy, task)
-
-    def close(self) -> None:
-        for env in self.envs.values():
-            try:
-                env.close()
-            except Exception:  # pragma: no cover
-                pass
-        self.envs.clear()
 
 
 def run_sweep(tasks: Sequence[EpisodeTask], csv_path: str | os.PathLike, *, workers: int | None = None,
