@@ -28,8 +28,8 @@ a time, so a sweep can attribute an effect to its cause. Use it through
 """
 
 from .config import ReferenceNumerics
-from .controller import STATUS_ZERO_COMMAND, ReferenceNumericsMPC, slot_rows
+from .controller import STATUS_ZERO_COMMAND, ReferenceNumericsMPC, condense, slot_rows
 from .hpipm import DenseQP, HPIPMOptions, HPIPMUnavailable
 
-__all__ = ["ReferenceNumerics", "ReferenceNumericsMPC", "STATUS_ZERO_COMMAND", "slot_rows", "DenseQP",
+__all__ = ["ReferenceNumerics", "ReferenceNumericsMPC", "STATUS_ZERO_COMMAND", "slot_rows", "condense", "DenseQP",
            "HPIPMOptions", "HPIPMUnavailable"]

@@ -33,7 +33,7 @@ from .config import PHANTOM_S, PHANTOM_SLOT_STEP, ReferenceNumerics
 from .hpipm import DenseQP
 from .ocp import ROWS_FIXED, linearisation
 
-__all__ = ["ReferenceNumericsMPC", "STATUS_ZERO_COMMAND", "slot_rows"]
+__all__ = ["ReferenceNumericsMPC", "STATUS_ZERO_COMMAND", "slot_rows", "condense"]
 
 logger = logging.getLogger(__name__)
 
@@ -65,6 +65,23 @@ def slot_rows(opponents: np.ndarray, v: float, rn: ReferenceNumerics, spacing: f
         else:
             rows[i] = (PHANTOM_S + PHANTOM_SLOT_STEP * i, 0.0, 0.0)
     return rows, real
+
+
+def condense(A: np.ndarray, B: np.ndarray, f: np.ndarray, x_next: np.ndarray,
+             dx0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Full condensing of the linearised dynamics ``dx_{k+1} = A_k dx_k + B_k du_k + f_k - x_next_k`` (k < N;
+    ``f_k`` the model's successor of the linearisation point, ``x_next_k`` the point's next state) from a fixed
+    ``dx_0``: ``(G, xoff)`` with ``dx_k = xoff_k + G_k du`` for the stacked input steps ``du``
+    (``G``: (N+1, nx, N nu))."""
+    n, nx, nu = B.shape
+    G = np.zeros((n + 1, nx, n * nu))
+    xoff = np.zeros((n + 1, nx))
+    xoff[0] = dx0
+    for k in range(n):
+        xoff[k + 1] = A[k] @ xoff[k] + f[k] - x_next[k]
+        G[k + 1] = A[k] @ G[k]
+        G[k + 1][:, nu * k:nu * (k + 1)] += B[k]
+    return G, xoff
 
 
 class ReferenceNumericsMPC:
@@ -170,49 +187,49 @@ class ReferenceNumericsMPC:
         x0, arrays, _, gamma = validate_arguments(x0, stage, rows, gamma, self._n)
         return self._solve(x0, arrays, rows, np.ones(len(rows), dtype=bool), gamma, t_start)
 
+    def _parameters(self, slots: np.ndarray, arrays: np.ndarray, gamma: float) -> np.ndarray:
+        """The OCP's stage parameters ``(kappa, n_max, n_min, (s_o, n_o, v_o) per slot, gamma)`` of the N
+        intervals, the slots predicted at constant speed along the track."""
+        rn, n = self.numerics, self._n
+        params = np.empty((4 + 3 * rn.slots, n))
+        params[0], params[1], params[2] = arrays[0, :n], arrays[4, :n], arrays[3, :n]
+        params[3:3 + 3 * rn.slots:3] = slots[:, 0:1] + slots[:, 2:3] * (np.arange(n) * self.config.ts)
+        params[4:4 + 3 * rn.slots:3] = slots[:, 1:2]
+        params[5:5 + 3 * rn.slots:3] = slots[:, 2:3]
+        params[3 + 3 * rn.slots] = gamma
+        return params
+
+    def _objective(self, G, xoff, xbar, ubar, arrays) -> tuple[np.ndarray, np.ndarray]:
+        """``(H, g)`` of the condensed QP: the weighted tracking of (n_ref, v_ref) (and of the other states
+        with their weights) at nodes 1..N, and the input weights, in the input steps."""
+        n, nv = self._n, 2 * self._n
+        xref = np.zeros((n + 1, 5))
+        xref[:, 1], xref[:, 3] = arrays[1], arrays[2]
+        xref[:, 4] = np.arctan(self.vehicle.wheelbase * arrays[0])
+        wq = self._w[1:, None] * self._q[None, :]  # (N, 5) weights of nodes 1..N
+        Gs = G[1:]
+        wr = np.tile(self._r, n) * np.repeat(self._w[:n], 2)
+        H = 2.0 * np.einsum("kiv,ki,kiw->vw", Gs, wq, Gs)
+        H[np.arange(nv), np.arange(nv)] += 2.0 * np.tile(self._r, n) * np.repeat(self._w[:n], 2)
+        g = 2.0 * np.einsum("kiv,ki->v", Gs, wq * (xbar[1:] + xoff[1:] - xref[1:])) + 2.0 * (wr * ubar.reshape(-1))
+        return H, g
+
     def _solve(self, x0, arrays, slots, real, gamma, t_start) -> MPCResult:
         """One real-time iteration on validated arguments and filled slots."""
         rn, n, cfg = self.numerics, self._n, self.config
         xbar, ubar = self._guess(x0, arrays, self.predicted_s(x0[3]))
-        ts = cfg.ts
-        k_idx = np.arange(n)
-        params = np.empty((4 + 3 * rn.slots, n))
-        params[0], params[1], params[2] = arrays[0, :n], arrays[4, :n], arrays[3, :n]
-        params[3:3 + 3 * rn.slots:3] = slots[:, 0:1] + slots[:, 2:3] * (k_idx * ts)
-        params[4:4 + 3 * rn.slots:3] = slots[:, 1:2]
-        params[5:5 + 3 * rn.slots:3] = slots[:, 2:3]
-        params[3 + 3 * rn.slots] = gamma
-        f, A, B, c, Cx, Cu = (np.asarray(a) for a in self._lin(xbar[:n].T, ubar.T, params))
-        A = A.reshape(5, n, 5).transpose(1, 0, 2)
-        B = B.reshape(5, n, 2).transpose(1, 0, 2)
+        f, A, B, c, Cx, Cu = (np.asarray(a) for a in self._lin(xbar[:n].T, ubar.T, self._parameters(slots, arrays, gamma)))
         nr = c.shape[0]
+        G, xoff = condense(A.reshape(5, n, 5).transpose(1, 0, 2), B.reshape(5, n, 2).transpose(1, 0, 2),
+                           f.T, xbar[1:], x0 - xbar[0])
         Cx = Cx.reshape(nr, n, 5).transpose(1, 0, 2)
         Cu = Cu.reshape(nr, n, 2).transpose(1, 0, 2)
-        # full condensing: dx_k = xoff_k + G_k du
-        nv = 2 * n
-        G = np.zeros((n + 1, 5, nv))
-        xoff = np.zeros((n + 1, 5))
-        xoff[0] = x0 - xbar[0]
-        for k in range(n):
-            xoff[k + 1] = A[k] @ xoff[k] + f[:, k] - xbar[k + 1]
-            G[k + 1] = A[k] @ G[k]
-            G[k + 1][:, 2 * k:2 * k + 2] += B[k]
-        xref = np.zeros((n + 1, 5))
-        xref[:, 1], xref[:, 3] = arrays[1], arrays[2]
-        xref[:, 4] = np.arctan(self.vehicle.wheelbase * arrays[0])
-        wq = self._w[1:, None] * self._q[None, :]                      # (N, 5) weights of nodes 1..N
-        Gs = G[1:]
-        H = 2.0 * np.einsum("kiv,ki,kiw->vw", Gs, wq, Gs)
-        H[np.arange(nv), np.arange(nv)] += 2.0 * np.tile(self._r, n) * np.repeat(self._w[:n], 2)
-        err = xbar[1:] + xoff[1:] - xref[1:]
-        g = 2.0 * np.einsum("kiv,ki->v", Gs, wq * err) + 2.0 * (np.tile(self._r, n) * np.repeat(self._w[:n], 2)
-                                                                  * ubar.reshape(-1))
+        H, g = self._objective(G, xoff, xbar, ubar, arrays)
         # rows: steering bound at nodes 1..N-1 (hard), then the soft rows
         nodes, rows = self._rows(real)
         dmax = self.vehicle.steer_max
-        C_delta = G[1:n, 4, :]
         base = xbar[1:n, 4] + xoff[1:n, 4]
-        C_soft = np.einsum("ri,riv->rv", Cx[nodes, rows], G[nodes]) if len(nodes) else np.zeros((0, nv))
+        C_soft = np.einsum("ri,riv->rv", Cx[nodes, rows], G[nodes]) if len(nodes) else np.zeros((0, 2 * n))
         C_soft[np.arange(len(nodes)), 2 * nodes] += Cu[nodes, rows, 0]
         C_soft[np.arange(len(nodes)), 2 * nodes + 1] += Cu[nodes, rows, 1]
         cbar = c[rows, nodes] + np.einsum("ri,ri->r", Cx[nodes, rows], xoff[nodes])
@@ -223,7 +240,7 @@ class ReferenceNumericsMPC:
         qp = self._dense_qp(len(nodes))
         v, status, iters = qp.solve(H, g, np.tile(self._u_lo, n) - ubar.reshape(-1),
                                     np.tile(self._u_hi, n) - ubar.reshape(-1),
-                                    np.vstack([C_delta, C_soft]),
+                                    np.vstack([G[1:n, 4, :], C_soft]),
                                     np.concatenate([-dmax - base, lo - cbar]),
                                     np.concatenate([dmax - base, hi - cbar]),
                                     zl[:, 1] * scale, zl[:, 0] * scale)
@@ -237,7 +254,8 @@ class ReferenceNumericsMPC:
         row_val = cbar + C_soft @ v
         is_real_cbf = (rows >= ROWS_FIXED) & real[np.maximum(rows - ROWS_FIXED, 0)]
         slack_cbf = float(max(row_val[is_real_cbf].max(), 0.0)) if is_real_cbf.any() else 0.0
-        first = float(max(row_val[is_real_cbf & (nodes <= 1)].max(), 0.0)) if (is_real_cbf & (nodes <= 1)).any() else 0.0
+        on_first = is_real_cbf & (nodes == 0)  # rows of the first transition (first_transition_dcbf only)
+        first = float(max(row_val[on_first].max(), 0.0)) if on_first.any() else 0.0
         slack = {"lat_acc": float(max(np.abs(row_val[rows == 0]).max(initial=0.0) - rn.lat_acc_max, 0.0)),
                  "track": float(max(row_val[(rows == 1) | (rows == 2)].max(initial=0.0), 0.0)),
                  "barrier": slack_cbf}

@@ -108,3 +108,18 @@ def test_closed_loop_the_failure_needs_phantoms_and_a_large_gamma(stack, gamma, 
             break
     assert (info["mpc_failures"] > 0) == expect_failures
     env.close()
+
+
+def test_condensing_reproduces_the_linear_rollout():
+    from sofar_env.control.refnum import condense
+
+    rng = np.random.default_rng(3)
+    n, nx, nu = 6, 5, 2
+    A, B = rng.normal(size=(n, nx, nx)) * 0.5, rng.normal(size=(n, nx, nu))
+    f, x_next, dx0, du = rng.normal(size=(n, nx)), rng.normal(size=(n, nx)), rng.normal(size=nx), rng.normal(size=n * nu)
+    G, xoff = condense(A, B, f, x_next, dx0)
+    dx = dx0
+    for k in range(n):
+        np.testing.assert_allclose(xoff[k] + G[k] @ du, dx, rtol=1e-12, atol=1e-12)
+        dx = A[k] @ dx + B[k] @ du[nu * k:nu * (k + 1)] + f[k] - x_next[k]
+    np.testing.assert_allclose(xoff[n] + G[n] @ du, dx, rtol=1e-12, atol=1e-12)
