@@ -16,6 +16,10 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
 * :mod:`~sofar_agents.evaluation.tables`: totals per group and the Markdown of Tables I/II;
 * :mod:`~sofar_agents.evaluation.experiments`: Tables I and II end to end (``run_table1``,
   ``run_miqp_ablation``);
+* :mod:`~sofar_agents.evaluation.configs`: the resolved configuration behind the rows: its hash per row,
+  ``config.json`` per results folder, the check that one strategy label holds one configuration;
+* :mod:`~sofar_agents.evaluation.manifest`: experiments as manifests (``experiments/NAME.toml``:
+  ``run_manifest``, ``check_manifest``; ``eval/manifest.py``);
 * :mod:`~sofar_agents.evaluation.pareto`: success against overtaking of fixed gammas and of a
   preference-conditioned policy, fronts and their hypervolumes (``run_pareto``; ``eval/pareto.py``);
 * :mod:`~sofar_agents.evaluation.headroom`: what an adaptive gamma could gain over the best fixed one,
@@ -34,6 +38,8 @@ Every public name is re-exported here: ``from sofar_agents import evaluation as 
 then ``ev.run_table1(...)``.
 """
 
+from sofar_agents.evaluation.configs import (check_one_config, episode_config, episode_config_hash, read_config_json,
+                                             write_config_json)
 from sofar_agents.evaluation.episode import make_env, run_episode, slack_active
 from sofar_agents.evaluation.experiments import TableReport, run_miqp_ablation, run_table1
 from sofar_agents.evaluation.figures import plot_gamma_figures
@@ -42,6 +48,7 @@ from sofar_agents.evaluation.headroom import (HeadroomRow, fixed_gamma_rows, for
 from sofar_agents.evaluation.interventions import (Intervention, InterventionResult,
                                                    default_interventions, failed_episodes, format_interventions,
                                                    run_interventions, summarize_interventions)
+from sofar_agents.evaluation.manifest import Manifest, check_manifest, load_manifest, run_manifest
 from sofar_agents.evaluation.latency import (PAPER_LATENCY_MS, format_latency, latency_stats, machine_info,
                                              measure_latency, write_json)
 from sofar_agents.evaluation.paired import PairedComparison, compare_to, format_paired, label_by_stack, paired_comparison
@@ -132,4 +139,13 @@ __all__ = [
     "find_event_dirs",
     "read_scalars",
     "plot_training_curves",
+    "episode_config",
+    "episode_config_hash",
+    "write_config_json",
+    "read_config_json",
+    "check_one_config",
+    "Manifest",
+    "load_manifest",
+    "run_manifest",
+    "check_manifest",
 ]

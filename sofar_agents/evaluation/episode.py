@@ -45,8 +45,16 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
 
     Returns the result and, when ``task.trace``, the per-step rows of :data:`TRACE_COLUMNS`.
     The episode ends at a termination (collision, leaving the track, stalling), at the environment's
-    truncation, or once the simulated time reaches ``task.duration``.
+    truncation, or once the simulated time reaches ``task.duration``. The result's ``config_hash`` is that of
+    ``env``'s configuration; a task with a hash (:attr:`EpisodeTask.config_hash`) in an environment of another
+    configuration raises ``RuntimeError`` before the reset (its row would name a configuration it did not run).
     """
+    env_hash = _env_config_hash(env)
+    wanted = getattr(task, "config_hash", None)
+    if wanted and env_hash != wanted:
+        raise RuntimeError(f"episode {task.track}/{task.strategy.name}: the environment's configuration has "
+                           f"config_hash {env_hash}, the task's is {wanted} (stack {task.stack!r}, scenario "
+                           f"{task.scenario!r}, duration {task.duration:g} s)")
     options: dict[str, Any] = {"rho": float(task.rho)}
     if task.n_opponents is not None:
         options["n_opponents"] = int(task.n_opponents)
@@ -89,6 +97,7 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
         episode=int(task.episode), use_miqp=bool(task.use_miqp), duration=float(task.duration),
         policy_id=task.strategy.policy_id, stack=task.stack, scenario=task.scenario,
         n_opponents="" if task.n_opponents is None else int(task.n_opponents), stalled=stalled,
+        config_hash=env_hash,
     )
     return result, trace
 
@@ -103,8 +112,16 @@ def make_env(track: str, use_miqp: bool = True, duration: float = DEFAULT_DURATI
 
     from sofar_env.race import RaceConfig
 
+    from sofar_agents.evaluation.configs import episode_env_mapping
+
     # the registered ids cap episodes at 2000 steps (200 s); follow the requested horizon instead
     steps = int(math.ceil(float(duration) / RaceConfig().dt - 1e-9)) + 1
     return gym.make(f"SOfAR-{track}-v0", max_episode_steps=steps, use_miqp=bool(use_miqp),
-                    config={"race": {"duration": float(duration)}, "stack": stack, "scenario": scenario},
-                    **kwargs)
+                    config=episode_env_mapping(duration, stack, scenario), **kwargs)
+
+
+def _env_config_hash(env) -> str:
+    """The configuration hash of ``env`` (wrapped or not)."""
+    from sofar_env.config_hash import config_hash
+
+    return config_hash(env.unwrapped.config)

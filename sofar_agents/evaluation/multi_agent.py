@@ -66,11 +66,23 @@ class RaceTask:
     scenario: str = "paper"
     opponents: int = 0
     """Scripted opponents in the race besides the controlled cars (a mixed field)."""
+    pinned_hash: str | None = None
+    """A configuration hash given instead of the resolved one (``""``: rows written before the column)."""
+
+    @property
+    def config_hash(self) -> str:
+        """The hash of the race's resolved configuration (:func:`~sofar_agents.evaluation.configs.race_config_hash`),
+        or :attr:`pinned_hash`. Part of the resume key."""
+        if self.pinned_hash is not None:
+            return self.pinned_hash
+        from sofar_agents.evaluation.configs import race_config_hash
+
+        return race_config_hash(self.stack, self.scenario, self.duration, self.opponents)
 
     @property
     def key(self) -> tuple:
         return (self.track, self.strategy.name, self.strategy.policy_id, int(self.seed), int(self.cars),
-                _fmt_float(self.duration), self.stack, self.scenario, int(self.opponents))
+                _fmt_float(self.duration), self.stack, self.scenario, int(self.opponents), self.config_hash)
 
 
 @dataclass
@@ -104,15 +116,21 @@ class RaceResult:
     wall_time: float
     opponents: int = 0
     """Scripted opponents in the race (0: controlled cars only; absent in CSVs written before the column)."""
+    config_hash: str = ""
+    """The hash of the race environment's configuration ("": CSVs written before the column)."""
 
     @property
     def key(self) -> tuple:
         return (self.track, self.strategy, self.policy_id, int(self.seed), int(self.cars),
-                _fmt_float(self.duration), self.stack, self.scenario, int(self.opponents))
+                _fmt_float(self.duration), self.stack, self.scenario, int(self.opponents), self.config_hash or "")
 
 
-RACE_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(RaceResult))
-"""Columns of the per-race CSV."""
+_FIELD_NAMES = [f.name for f in fields(RaceResult) if f.name != "config_hash"]
+RACE_COLUMNS: tuple[str, ...] = tuple(_FIELD_NAMES[:_FIELD_NAMES.index("stack") + 1] + ["config_hash"]
+                                      + _FIELD_NAMES[_FIELD_NAMES.index("stack") + 1:])
+"""Columns of the per-race CSV (``config_hash`` next to ``stack``)."""
+_RACE_ADDED = {"opponents": "0", "config_hash": ""}
+"""Columns that CSVs of older layouts lack, with the value their rows stand for."""
 
 
 def multi_agent_tasks(strategies: Sequence[Strategy], tracks: Sequence[str] = TRACKS, races: int = 4,
@@ -143,13 +161,21 @@ def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] 
              stack_overrides: dict[str, Any] | None = None) -> RaceResult:
     """Run one race; ``policy`` (obs -> gamma) defaults to ``task.strategy.build()``; ``race_overrides`` go
     into the ``race`` config (e.g. ``pace_range``), ``stack_overrides`` into the controller preset's
-    (e.g. ``{"miqp": {"alongside_gap": 6.0}}``)."""
+    (e.g. ``{"miqp": {"alongside_gap": 6.0}}``). The result's ``config_hash`` is that of the race's environment;
+    without overrides, one that differs from ``task.config_hash`` raises ``RuntimeError`` before the reset."""
     from sofar_env.config import apply_overrides, make_env_config
     from sofar_env.multi_agent import parallel_env
 
     policy = task.strategy.build() if policy is None else policy
     t0 = time.perf_counter()
     env = race_env(task, race_overrides, stack_overrides)
+    from sofar_env.config_hash import config_hash
+
+    env_hash = config_hash(env.config)
+    if task.config_hash and env_hash != task.config_hash and not (race_overrides or stack_overrides):
+        env.close()
+        raise RuntimeError(f"race {task.track}/{task.strategy.name}: the environment's config_hash is {env_hash}, "
+                           f"the task's {task.config_hash}")
     obs, _ = env.reset(seed=int(task.seed))
     last: dict[str, dict] = {}
     gamma_sum, decisions = 0.0, 0
@@ -169,7 +195,7 @@ def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] 
         off_track=count("off_track"), stalled=count("stalled"), success=count("is_success"),
         driven=sum(float(info["sim_time"]) for info in last.values()) / (task.cars * task.duration),
         mean_gamma=gamma_sum / max(decisions, 1), speed_factors=" ".join(f"{f:.4f}" for f in factors),
-        wall_time=time.perf_counter() - t0, opponents=int(task.opponents),
+        wall_time=time.perf_counter() - t0, opponents=int(task.opponents), config_hash=env_hash,
     )
 
 
@@ -191,7 +217,7 @@ def read_race_csv(path: str | os.PathLike) -> list[RaceResult]:
     out = []
     types = {f.name: f.type for f in fields(RaceResult)}
     text = [name for name, kind in types.items() if kind == "str"]  # may be empty (policy_id of a fixed gamma)
-    for row in read_csv_rows(path, RACE_COLUMNS, added={"opponents": "0"}, may_be_empty=text, kind="per-race CSV"):
+    for row in read_csv_rows(path, RACE_COLUMNS, added=_RACE_ADDED, may_be_empty=text, kind="per-race CSV"):
         try:
             values = {name: int(row[name]) if kind == "int" else float(row[name]) if kind == "float" else row[name]
                       for name, kind in types.items()}
@@ -303,6 +329,9 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
     out.mkdir(parents=True, exist_ok=True)
     csv_path = out / f"{prefix}_races.csv"
     tasks = multi_agent_tasks(strategies, tracks, races, base_seed, cars, duration, stack, scenario, opponents)
+    from sofar_agents.evaluation.configs import check_one_config, race_config, write_config_json
+
+    write_config_json(out, [race_config(stack, scenario, float(duration), int(opponents))])
     done = {r.key for r in read_race_csv(csv_path)}
     todo = [t for t in tasks if t.key not in done]
     t0 = time.perf_counter()
@@ -332,7 +361,11 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
     bar.close()
     elapsed = time.perf_counter() - t0
     wanted = {t.key for t in tasks}
-    rows = [r for r in read_race_csv(csv_path) if r.key in wanted]
+    all_rows = read_race_csv(csv_path)
+    rows = [r for r in all_rows if r.key in wanted]
+    check_one_config(rows, lambda r: r.strategy, str(csv_path))
+    by_rest = {k[:-1]: k[-1] for k in wanted}
+    other = sum(1 for r in all_rows if r.key[:-1] in by_rest and by_rest[r.key[:-1]] != r.key[-1])
     names = [s.name for s in strategies]
     labels = {s.name: s.label for s in strategies}
     field = f"{cars} cars" + (f" and {opponents} scripted opponents" if opponents else "")
@@ -349,6 +382,9 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
                  "the controlled cars involved") + "; success per car: cars that reached the duration.", "",
              format_multi_agent_table(rows, names, labels), "", "## Per circuit", "",
              format_per_circuit(rows, names, tracks, labels)]
+    if other:
+        parts += ["", f"**Left out:** {other} rows of {csv_path.name} with another configuration hash or none "
+                  "(written before the column): races of another configuration, not mixed with these."]
     missing = len(tasks) - len(rows)
     if missing:
         parts += ["", f"**Incomplete:** {missing} of {len(tasks)} races are missing; rerun the same command."]

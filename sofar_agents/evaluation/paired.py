@@ -75,6 +75,13 @@ def _episode_key(set_name: str, r: Mapping[str, Any]) -> tuple:
 
 
 def _outcomes(sets: Mapping[str, Sequence[Mapping[str, Any]]], strategy: str) -> dict[tuple, bool]:
+    """Success per episode of ``strategy`` over the seed sets. ``ValueError`` when its rows come from two
+    configurations (two ``config_hash`` values, or rows with one and rows without: files written before the
+    column), from two policies in one set, or hold an episode twice."""
+    from sofar_agents.evaluation.configs import check_one_config
+
+    check_one_config((r for rows in sets.values() for r in rows if str(r["strategy"]) == strategy),
+                     lambda r: strategy, "paired comparison")
     out: dict[tuple, bool] = {}
     for name, rows in sets.items():
         mine = [r for r in rows if str(r["strategy"]) == strategy]

@@ -14,7 +14,9 @@ Protocol (paper section V)
 
 This module describes *what* to run (:class:`Strategy`, :class:`EpisodeTask`, the
 task lists of Tables I and II); it runs nothing. An episode's resume key
-(:attr:`EpisodeTask.key`) holds every setting that changes the episode.
+(:attr:`EpisodeTask.key`) holds every setting that changes the episode, including the hash of the resolved
+configuration (:attr:`EpisodeTask.config_hash`), so that a default that moves makes new episodes instead of
+reusing rows of the old configuration.
 """
 
 from __future__ import annotations
@@ -181,23 +183,39 @@ class EpisodeTask:
     """World (``"paper"``, ``"interactive"`` or ``"dynamic"``, see :mod:`sofar_env.scenarios`)."""
     trace: bool = False
     """Record a per-step trace (gamma, nearest opponent, smallest barrier value)."""
+    pinned_hash: str | None = None
+    """A configuration hash given instead of the resolved one (``""``: the rows written before the hash);
+    None (the default): :attr:`config_hash` is resolved from ``stack``, ``scenario`` and ``duration``."""
+
+    @property
+    def config_hash(self) -> str:
+        """:func:`sofar_env.config_hash.config_hash` of the episode's resolved configuration (controller, world,
+        duration; not the circuit, rho or the MIQP switch:
+        :func:`~sofar_agents.evaluation.configs.episode_config_hash`), or :attr:`pinned_hash`. Part of the
+        resume key; the episode runner checks it against the environment it runs."""
+        if self.pinned_hash is not None:
+            return self.pinned_hash
+        from sofar_agents.evaluation.configs import episode_config_hash
+
+        return episode_config_hash(self.stack, self.scenario, self.duration)
 
     @property
     def key(self) -> tuple:
         return _key(self.track, self.strategy.name, self.strategy.policy_id, self.rho, self.seed, self.use_miqp,
-                    self.duration, self.stack, self.n_opponents, self.scenario)
+                    self.duration, self.stack, self.n_opponents, self.scenario, self.config_hash)
 
     @property
     def env_key(self) -> tuple:
         return (self.track, bool(self.use_miqp), float(self.duration), self.stack, self.scenario)
 
 
-def _key(track, strategy, policy_id, rho, seed, use_miqp, duration, stack, n_opponents, scenario="paper") -> tuple:
+def _key(track, strategy, policy_id, rho, seed, use_miqp, duration, stack, n_opponents, scenario="paper",
+         config_hash="") -> tuple:
     """The resume key: every setting that changes an episode (rows of older files: stack "sofar", the
-    default opponent count)."""
+    default opponent count, config hash "": none, which no task of this version has)."""
     n_opp = "" if n_opponents in (None, "") else str(int(float(n_opponents)))
     return (str(track), str(strategy), str(policy_id or ""), _fmt_float(rho), int(seed), bool(use_miqp),
-            _fmt_float(duration), str(stack or "sofar"), n_opp, str(scenario or "paper"))
+            _fmt_float(duration), str(stack or "sofar"), n_opp, str(scenario or "paper"), str(config_hash or ""))
 
 
 def episode_seed(base_seed: int, track: str, rho: float, episode: int) -> int:

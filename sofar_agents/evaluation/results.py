@@ -2,9 +2,11 @@
 
 A sweep appends one row of :data:`EPISODE_COLUMNS` per finished episode (and, when
 traced, rows of :data:`TRACE_COLUMNS` per control step). Files of an older format
-(without the ``stack``, ``n_opponents``, ``scenario`` or ``stalled`` columns) are read as
+(without the ``stack``, ``n_opponents``, ``scenario``, ``stalled`` or ``config_hash`` columns) are read as
 they are and migrated in place on the next append; their rows stand for the ``sofar``
-controller, the default opponent count and the paper's world.
+controller, the default opponent count and the paper's world, and carry no configuration hash
+(``""``): their resume keys match no task of this version (whose keys hold the hash), so a rerun
+runs those episodes again under the current configuration instead of reusing them.
 
 ``stalled`` of an older row is *unknown* (an empty field, read as None), not 0: those
 episodes ran without the stall rule, so none was ended by it, but whether the ego stood
@@ -41,7 +43,7 @@ logger = logging.getLogger(__name__)
 EPISODE_COLUMNS: tuple[str, ...] = (
     "track", "strategy", "rho", "seed", "success", "sim_time", "laps", "overtakes", "collision", "off_track",
     "slack_steps", "steps", "mean_gamma", "mpc_failures", "miqp_failures", "wall_time",
-    "episode", "use_miqp", "duration", "policy_id", "stack", "n_opponents", "scenario", "stalled",
+    "episode", "use_miqp", "duration", "policy_id", "stack", "config_hash", "n_opponents", "scenario", "stalled",
 )
 """Columns of the per-episode CSV (one row per episode)."""
 TRACE_COLUMNS: tuple[str, ...] = (
@@ -80,6 +82,9 @@ class EpisodeResult:
     """Opponent count of the episode ("" for the environment's default)."""
     stalled: bool | None = False
     """The stall rule ended the episode (the ego stood still too long); None: unknown (older rows)."""
+    config_hash: str = ""
+    """:func:`sofar_env.config_hash.config_hash` of the environment's configuration ("": rows written before
+    the column)."""
 
     def to_row(self) -> dict[str, Any]:
         row = asdict(self)
@@ -208,10 +213,10 @@ def write_markdown(path: str | os.PathLike, text: str) -> Path:
     return p
 
 
-_ADDED_COLUMNS = {"stack": "sofar", "n_opponents": "", "scenario": "paper", "stalled": ""}
+_ADDED_COLUMNS = {"stack": "sofar", "n_opponents": "", "scenario": "paper", "stalled": "", "config_hash": ""}
 """Columns added after the first format, with the value that rows of older files stand for ("" of
 ``stalled``: unknown, see the module docstring)."""
-_MAY_BE_EMPTY = {"policy_id", "n_opponents", "stalled"}
+_MAY_BE_EMPTY = {"policy_id", "n_opponents", "stalled", "config_hash"}
 
 
 def _is_older_header(header: Sequence[str], columns: Sequence[str]) -> bool:
@@ -284,11 +289,19 @@ class _AppendingCSV:
 def _row_key(row: Mapping[str, Any]) -> tuple:
     return _key(row["track"], row["strategy"], row.get("policy_id", ""), row["rho"], row["seed"],
                 _as_bool(row.get("use_miqp", True)), row.get("duration", DEFAULT_DURATION),
-                row.get("stack") or "sofar", row.get("n_opponents"), row.get("scenario") or "paper")
+                row.get("stack") or "sofar", row.get("n_opponents"), row.get("scenario") or "paper",
+                row.get("config_hash") or "")
 
 
 def select_rows(rows: Iterable[Mapping[str, Any]], tasks: Sequence[EpisodeTask]) -> list[dict[str, Any]]:
-    """The rows of ``rows`` that belong to ``tasks`` (a CSV may hold episodes of other runs)."""
+    """The rows of ``rows`` that belong to ``tasks`` (a CSV may hold episodes of other runs).
+
+    The resume key holds the configuration hash, so rows of another configuration (or without a hash) are
+    never selected for a task; tasks whose rows would put two hashes under one strategy name raise
+    ``ValueError`` naming both (:func:`~sofar_agents.evaluation.configs.check_one_config`).
+    """
+    from sofar_agents.evaluation.configs import check_one_config
+
     wanted = {t.key for t in tasks}
     out, seen = [], set()
     for r in rows:
@@ -296,6 +309,26 @@ def select_rows(rows: Iterable[Mapping[str, Any]], tasks: Sequence[EpisodeTask])
         if k in wanted and k not in seen:
             out.append(_parse_row(r))
             seen.add(k)
+    check_one_config(out, _config_label, "select_rows")
+    return out
+
+
+def _config_label(row: Mapping[str, Any]) -> str:
+    """The strategy label under which rows must share one configuration hash: strategy, controller preset,
+    world and duration (rows that differ in these are told apart by their own columns)."""
+    return (f"{row.get('stack') or 'sofar'}:{row['strategy']} ({row.get('scenario') or 'paper'}, "
+            f"{exact_text(float(row.get('duration', DEFAULT_DURATION)))} s)")
+
+
+def rows_of_other_configs(rows: Iterable[Mapping[str, Any]], tasks: Sequence[EpisodeTask]) -> dict[str, int]:
+    """``{hash: count}`` of the rows that would be rows of ``tasks`` but for their configuration hash (``""``:
+    rows written before the hash): episodes of another configuration, which the tables leave out and name."""
+    wanted = {t.key[:-1]: t.key[-1] for t in tasks}
+    out: dict[str, int] = {}
+    for r in rows:
+        k = _row_key(r)
+        if k[:-1] in wanted and wanted[k[:-1]] != k[-1]:
+            out[k[-1]] = out.get(k[-1], 0) + 1
     return out
 
 

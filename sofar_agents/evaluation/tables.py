@@ -178,14 +178,22 @@ def _markdown_blocks(first_header: str, blocks: Sequence[tuple[str, Sequence[tup
     return "\n".join(lines)
 
 
+def _one_config(rows: Sequence[Mapping[str, Any]]) -> None:
+    from sofar_agents.evaluation.configs import check_one_config
+
+    check_one_config(rows, lambda r: str(r["strategy"]), "table")
+
+
 def format_table1(rows: Iterable[Mapping[str, Any]], strategies: Sequence[Strategy] | None = None,
                   tracks: Sequence[str] | None = None, aggregate_row: bool = True) -> str:
     """Table I as Markdown: per track, one row per strategy; best **bold**, second <u>underlined</u>.
 
     Ranking is within each track (and within the aggregate block over all tracks) for success
-    rate, simulated time, laps and overtakes (higher is better).
+    rate, simulated time, laps and overtakes (higher is better). Rows of one strategy with two
+    configuration hashes (or with one and without) raise ``ValueError`` naming both.
     """
     rows = [_parse_row(r) for r in rows]
+    _one_config(rows)
     if tracks is None:
         tracks = [t for t in TRACKS if any(r["track"] == t for r in rows)]
         tracks += sorted({r["track"] for r in rows} - set(tracks))
@@ -209,8 +217,10 @@ def format_table1(rows: Iterable[Mapping[str, Any]], strategies: Sequence[Strate
 
 
 def format_table2(rows: Iterable[Mapping[str, Any]], strategies: Sequence[Strategy] | None = None) -> str:
-    """Table II as Markdown: with and without the MIQP layer; ranking over all four rows as in the paper."""
+    """Table II as Markdown: with and without the MIQP layer; ranking over all four rows as in the paper.
+    Rows of one strategy from two configurations raise ``ValueError`` as in :func:`format_table1`."""
     rows = [_parse_row(r) for r in rows]
+    _one_config(rows)
     names = [s.name for s in strategies] if strategies else list(dict.fromkeys(r["strategy"] for r in rows))
     labels = {s.name: s.label for s in strategies} if strategies else {n: n for n in names}
     per = aggregate(rows, ("use_miqp", "strategy"))

@@ -9,7 +9,9 @@ A checkpoint is a pair of files with a common stem (format_version 1):
   ``config.action_squashing``), ``activation`` (``"tanh"``), the deployment ``preference``, the agent's
   ``seed``, the PASTA ``config``, the ``state`` counters and the agent's numpy generator state, the
   ``rollout`` state to resume from (:mod:`sofar_agents.pasta.resume`; absent when the agent has not
-  collected yet) and ``training`` metadata (command, seed, env, code version, steps, wall time). Every
+  collected yet) and ``training`` metadata (command, seed, env, code version, steps, wall time; for an
+  agent trained by ``train/pasta.py``, the training environment's ``env_config_hash`` and resolved
+  ``env_config``: :mod:`sofar_agents.pasta.env_record`). Every
   field and its check: :mod:`sofar_agents.pasta.checkpoint_meta`.
 - ``<stem>.pt``: ``torch.save`` of a dict of tensors and state dicts only (``actor``,
   ``critic``, ``optimizer``, the return normaliser statistics, the utopia, the agent's torch
@@ -54,6 +56,7 @@ import numpy as np
 
 from sofar_agents.pasta.checkpoint_meta import FORMAT_VERSION, validate_metadata
 from sofar_agents.pasta.config import PASTAConfig
+from sofar_agents.pasta.env_record import training_env_record
 from sofar_agents.pasta.resume import RolloutState, check_rollout_meta
 
 if TYPE_CHECKING:
@@ -277,6 +280,7 @@ def save_agent(agent: PASTA, path: str | Path, metadata: dict[str, Any] | None =
         },
         "training": {
             **agent.metadata,
+            **training_env_record(agent.metadata),  # env_config_hash, env_config (pasta.env_record)
             "code_version": code_version,
             "torch_version": torch.__version__,
             "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),

@@ -44,7 +44,7 @@ def _result(task: ev.EpisodeTask) -> ev.EpisodeResult:
                             slack_steps=0, steps=10, mean_gamma=float(task.strategy.gamma), mpc_failures=0,
                             miqp_failures=0, wall_time=0.0, episode=task.episode, use_miqp=task.use_miqp,
                             duration=task.duration, policy_id=task.strategy.policy_id, stack=task.stack,
-                            scenario=task.scenario)
+                            scenario=task.scenario, config_hash=task.config_hash)
 
 
 # (what the CSV holds: gamma, rho, duration; what is asked: gamma, rho, duration; is it taken from the CSV?)
@@ -103,7 +103,7 @@ def test_the_multi_agent_table_takes_from_the_csv_only_the_same_settings(
         ran.append(task)
         return ma.RaceResult(task.track, task.strategy.name, task.strategy.policy_id, task.seed, task.cars,
                              task.duration, task.stack, task.scenario, 0, 0, 0, 0, task.cars, 1.0,
-                             float(task.strategy.gamma), "", 0.0, task.opponents)
+                             float(task.strategy.gamma), "", 0.0, task.opponents, task.config_hash)
 
     monkeypatch.setattr(ma, "run_race", fake_race)
 

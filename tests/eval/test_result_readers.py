@@ -20,7 +20,8 @@ def _episode_rows() -> tuple[list[str], list[dict]]:
     rows = [ev.EpisodeResult(track=t.track, strategy=t.strategy.name, rho=t.rho, seed=t.seed, success=True,
                              sim_time=20.0, laps=0.5, overtakes=1, collision=False, off_track=False, slack_steps=0,
                              steps=200, mean_gamma=0.05, mpc_failures=0, miqp_failures=0, wall_time=1.0,
-                             episode=t.episode, duration=t.duration).to_row() for t in tasks]
+                             episode=t.episode, duration=t.duration, config_hash=t.config_hash).to_row()
+            for t in tasks]
     return list(ev.EPISODE_COLUMNS), rows
 
 

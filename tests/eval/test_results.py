@@ -10,7 +10,7 @@ import pytest
 from sofar_agents import evaluation as ev
 from sofar_agents.evaluation.results import _AppendingCSV, _row_key
 
-OLD_COLUMNS = [c for c in ev.EPISODE_COLUMNS if c not in ("stack", "n_opponents")]
+OLD_COLUMNS = [c for c in ev.EPISODE_COLUMNS if c not in ("stack", "n_opponents", "config_hash")]
 
 
 def _task(**kw) -> ev.EpisodeTask:
@@ -25,7 +25,7 @@ def _result(task: ev.EpisodeTask, **kw) -> ev.EpisodeResult:
                   steps=2000, mean_gamma=0.5, mpc_failures=0, miqp_failures=1, wall_time=12.5,
                   episode=task.episode, use_miqp=task.use_miqp, duration=task.duration,
                   policy_id=task.strategy.policy_id, stack=task.stack,
-                  n_opponents="" if task.n_opponents is None else task.n_opponents)
+                  n_opponents="" if task.n_opponents is None else task.n_opponents, config_hash=task.config_hash)
     fields.update(kw)
     return ev.EpisodeResult(**fields)
 
@@ -70,7 +70,9 @@ def test_older_format_is_read_and_migrated_on_append(tmp_path):
     rows = ev.read_episode_csv(path)
     # rows of older files stand for the sofar controller and the default opponent count
     assert [(r["stack"], r["n_opponents"]) for r in rows] == [("sofar", ""), ("sofar", "3")]
-    assert [_row_key(r) for r in rows] == [_task().key, _task(n_opponents=3).key]
+    # the old row has no configuration hash: it resumes only a task without one, never a hashed task
+    assert [_row_key(r) for r in rows] == [_task(pinned_hash="").key, _task(n_opponents=3).key]
+    assert _row_key(rows[0]) != _task().key
 
 
 def test_torn_last_line_is_dropped_and_appending_starts_a_new_line(tmp_path):
@@ -117,7 +119,7 @@ def test_older_format_rows_resume_before_any_append(tmp_path):
         w.writerow({k: int(v) if isinstance(v, bool) else v for k, v in old.items()})
     rows = ev.read_episode_csv(path)
     assert len(rows) == 1 and rows[0]["stack"] == "sofar"
-    assert _row_key(rows[0]) == _task().key
+    assert _row_key(rows[0]) == _task(pinned_hash="").key  # read as written, hash "" (none)
 
 
 def _old_format_file(path, rows) -> None:

@@ -1,0 +1,124 @@
+"""Experiments as manifests (experiments/NAME.toml): run one, check them all, verify old rows.
+
+    python eval/manifest.py list                       # the manifests and the configuration hash of each
+    python eval/manifest.py run NAME [--workers N]     # run (or resume) it into its folder, write manifest.json
+    python eval/manifest.py check                      # every manifest resolves; committed rows carry its hash
+    python eval/manifest.py verify NAME [--rows 2]     # re-make its shortest rows per circuit in a temporary folder
+    python eval/manifest.py verify NAME --backfill     # ... and, when they match, give its rows the manifest's hash
+
+``check`` exits with status 1 when a committed CSV holds rows of another configuration hash than its
+manifest's (the defaults moved since: re-run the manifest into another folder, or restore the old
+defaults); rows without a hash (written before the column) are reported, not an error. ``verify`` exits
+with status 1 when a re-made row differs from the committed one in any column but ``wall_time``.
+The logic lives in sofar_agents.evaluation.manifest.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import tempfile
+from pathlib import Path
+
+from sofar_agents.cli_types import int_at_least
+from sofar_agents.evaluation import manifest as mf
+
+logger = logging.getLogger("manifest")
+
+ROOT = Path(__file__).resolve().parent.parent
+FOLDER = ROOT / "experiments"
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--folder", default=str(FOLDER), help="folder of the manifests (default experiments/)")
+    sub = p.add_subparsers(dest="command", required=True)
+    sub.add_parser("list", help="the manifests and their configuration hashes")
+    r = sub.add_parser("run", help="run a manifest into its results folder")
+    r.add_argument("name")
+    r.add_argument("--workers", type=int_at_least(1), default=None, help="worker processes (default: one per CPU)")
+    r.add_argument("--out", default=None, help="another results folder (default: the manifest's)")
+    r.add_argument("--no-progress", action="store_true")
+    sub.add_parser("check", help="compare every manifest's hash with the hashes its committed rows carry")
+    v = sub.add_parser("verify", help="re-make the shortest committed rows of a manifest and compare them")
+    v.add_argument("name")
+    v.add_argument("--rows", type=int_at_least(1), default=2, help="how many rows per circuit (the shortest episodes)")
+    v.add_argument("--backfill", action="store_true",
+                   help="when every re-made row matches, give the CSV's rows the manifest's hash: rows without one "
+                        "(written before the column), or rows of one other hash (a configuration whose hash moved "
+                        "without changing the episodes)")
+    p.add_argument("--log-level", default="INFO")
+    return p.parse_args(argv)
+
+
+def _load(folder: Path, name: str) -> mf.Manifest:
+    path = folder / (name if name.endswith(".toml") else f"{name}.toml")
+    if not path.is_file():
+        raise SystemExit(f"no manifest {path}; see: python eval/manifest.py list")
+    return mf.load_manifest(path)
+
+
+def shortest_rows(m: mf.Manifest, n: int, root: Path = ROOT) -> list[dict[str, str]]:
+    """The ``n`` committed rows of ``m`` with the fewest steps on each circuit (the cheapest to re-make)."""
+    rows = sorted(mf.raw_rows(root / m.out / m.csv_name), key=lambda r: (int(r["steps"]), r["strategy"]))
+    per_track: dict[str, list[dict[str, str]]] = {}
+    for r in rows:
+        mine = per_track.setdefault(r["track"], [])
+        if len(mine) < n:
+            mine.append(r)
+    return [r for track in sorted(per_track) for r in per_track[track]]
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    logging.basicConfig(level=args.log_level.upper(), format="%(message)s")
+    folder = Path(args.folder)
+    if args.command == "list":
+        for path in mf.manifest_paths(folder):
+            m = mf.load_manifest(path)
+            logger.info("%s: %s %s (stack %s, world %s) -> %s", m.name, m.kind, m.config_hash, m.stack, m.scenario,
+                        m.out)
+        return 0
+    if args.command == "check":
+        bad = 0
+        for path in mf.manifest_paths(folder):
+            result = mf.check_manifest(mf.load_manifest(path), ROOT)
+            (logger.error if result.status == "mismatch" else logger.info)("%s", result.line())
+            bad += result.status == "mismatch"
+        return 1 if bad else 0
+    m = _load(folder, args.name)
+    if args.command == "run":
+        report = mf.run_manifest(m, ROOT, workers=args.workers, out=args.out, progress=not args.no_progress)
+        logger.info("%s", report.markdown)
+        return 0
+    rows = shortest_rows(m, args.rows)
+    if not rows:
+        logger.error("%s: no committed rows in %s", m.name, ROOT / m.out / m.csv_name)
+        return 1
+    with tempfile.TemporaryDirectory() as tmp:
+        diffs = mf.rerun_rows(m, ROOT, rows, tmp)
+    for d in diffs:
+        logger.error("%s", d)
+    if diffs:
+        logger.error("%s: %d differences; the committed rows are not re-made by the current code", m.name, len(diffs))
+        return 1
+    logger.info("%s: %d rows re-made bit for bit (config_hash %s)", m.name, len(rows), m.config_hash)
+    if args.backfill:
+        check = mf.check_manifest(m, ROOT)
+        if len(check.hashes) != 1 or check.status == "ok":
+            logger.error("%s: not back-filled (%s)", m.name, check.line())
+            return 1
+        (old,) = check.hashes
+        path = ROOT / m.out / m.csv_name
+        n = mf.restamp_hash(path, old, m.config_hash) if old else mf.backfill_hash(path, m.config_hash)
+        from sofar_agents.evaluation.configs import episode_config, write_config_json
+
+        write_config_json(ROOT / m.out, [episode_config(m.stack, m.scenario, m.duration)])
+        logger.info("%s: %d rows now carry config_hash %s (before: %s)", m.name, n, m.config_hash, old or "none")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,386 @@
+"""Experiments as manifests: ``experiments/NAME.toml`` says what a results folder holds and how to make it.
+
+A manifest is a TOML file (``tomllib``, in the standard library from Python 3.11; on 3.10 the ``tomli``
+package if installed). TOML rather than JSON: it holds comments (why a table exists, what it is compared
+with) and reads like the command line it replaces. Keys (:class:`Manifest`):
+
+==============  ===========================================================================================
+``kind``        ``"table1"`` (:func:`~sofar_agents.evaluation.experiments.run_table1`), ``"table2"``
+                (:func:`~sofar_agents.evaluation.experiments.run_miqp_ablation`) or ``"multi-agent"``
+                (:func:`~sofar_agents.evaluation.multi_agent.run_multi_agent_table`); required
+``out``         the results folder, relative to the repository root; required
+``stack``       controller preset (default ``"sofar"``); ``scenario``: world (default ``"paper"``)
+``seed``        base seed of the paired episode seeds (default 0)
+``episodes``    per (track, rho) for table1, per (setting, strategy) for table2, races per circuit for
+                multi-agent (defaults 5, 10, 4)
+``duration``    episode horizon [s] (default 200)
+``tracks``,     circuits and pace ratios (defaults: the paper's; ``track``: table2's circuit, default
+``rhos``        LagunaSeca)
+``gammas``      the fixed gammas (default: the paper's six; table2: [0.5])
+``adaptive``    also the shipped PASTA policy of ``stack``/``scenario`` (default true); ``policy``: another
+                checkpoint, relative to the repository root
+``opponents``   table1: opponents per episode (default: the environment's); multi-agent: scripted opponents
+``cars``        multi-agent: controlled cars (default 4)
+``prefix``      file prefix in ``out`` (default ``table1``, ``table2``, ``multi_agent``)
+``description`` free text
+==============  ===========================================================================================
+
+:func:`run_manifest` runs a manifest into its folder (resuming, as the table scripts do) and writes
+``manifest.json`` there: the manifest, its configuration hash, the code commit, the machine, its CPU flags
+and the wall time. :func:`check_manifest` compares the hash a manifest resolves to with the hashes the
+rows of its committed CSV carry. :func:`rerun_rows` re-makes chosen committed rows in another folder and
+compares them field by field (every column but ``wall_time`` and ``config_hash``), which is what justifies
+giving rows written before the hash column the manifest's hash (:func:`backfill_hash`), or rows of a hash
+that moved without changing the episodes the new one (:func:`restamp_hash`).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import logging
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sofar_agents.evaluation.configs import episode_config_hash, race_config_hash, row_hash
+from sofar_agents.evaluation.protocol import DEFAULT_DURATION, FIXED_GAMMAS, RHOS, TRACKS, Strategy, build_strategies
+from sofar_agents.evaluation.results import EPISODE_COLUMNS, read_csv_rows
+
+__all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths", "run_manifest", "check_manifest",
+           "ManifestCheck", "raw_rows", "rerun_rows", "backfill_hash",
+           "restamp_hash"]
+
+logger = logging.getLogger(__name__)
+
+KINDS = ("table1", "table2", "multi-agent")
+"""Command kinds a manifest may name."""
+_NOT_COMPARED = ("wall_time", "config_hash")
+"""Columns that :func:`rerun_rows` does not compare (the wall time varies; old rows have no hash)."""
+
+
+def _toml_load(path: Path) -> dict[str, Any]:
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        try:
+            import tomli as tomllib  # type: ignore[no-redef]
+        except ModuleNotFoundError as err:
+            raise RuntimeError("reading experiment manifests on Python 3.10 needs the tomli package "
+                               "(pip install tomli); Python >= 3.11 reads them without it") from err
+    with open(path, "rb") as f:
+        return tomllib.load(f)
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """One experiment (the module docstring lists the keys)."""
+
+    name: str
+    kind: str
+    out: str
+    stack: str = "sofar"
+    scenario: str = "paper"
+    seed: int = 0
+    episodes: int | None = None
+    duration: float = DEFAULT_DURATION
+    tracks: tuple[str, ...] = TRACKS
+    rhos: tuple[float, ...] = RHOS
+    track: str = "LagunaSeca"
+    gammas: tuple[float, ...] | None = None
+    adaptive: bool = True
+    policy: str | None = None
+    opponents: int | None = None
+    cars: int = 4
+    prefix: str | None = None
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"manifest {self.name}: kind {self.kind!r} is not one of {', '.join(KINDS)}")
+
+    @property
+    def csv_name(self) -> str:
+        """The file of its rows in ``out``."""
+        if self.kind == "multi-agent":
+            return f"{self.prefix or 'multi_agent'}_races.csv"
+        return f"{self.prefix or self.kind}_episodes.csv"
+
+    @property
+    def config_hash(self) -> str:
+        """The configuration hash its rows carry (:mod:`sofar_agents.evaluation.configs`)."""
+        if self.kind == "multi-agent":
+            return race_config_hash(self.stack, self.scenario, self.duration, int(self.opponents or 0))
+        return episode_config_hash(self.stack, self.scenario, self.duration)
+
+    def strategies(self, root: str | os.PathLike) -> list[Strategy]:
+        """Its strategies: the adaptive policy (``policy``, else the shipped one) when ``adaptive``, then the
+        fixed gammas. A missing shipped policy raises ``FileNotFoundError`` (a manifest does not silently
+        drop a row)."""
+        default = (0.5,) if self.kind == "table2" else FIXED_GAMMAS
+        gammas = default if self.gammas is None else self.gammas
+        policy = None
+        if self.adaptive:
+            from sofar_agents.evaluation.protocol import resolve_policy_path
+
+            policy = resolve_policy_path(Path(root) / self.policy if self.policy else None, stack=self.stack,
+                                         scenario=self.scenario)
+            if policy is None:
+                raise FileNotFoundError(f"manifest {self.name}: no adaptive policy for stack {self.stack!r}")
+        return build_strategies(gammas, policy=policy, adaptive=self.adaptive)
+
+
+def manifest_paths(folder: str | os.PathLike) -> list[Path]:
+    """The manifests of ``folder`` (``*.toml``), sorted by name."""
+    return sorted(Path(folder).glob("*.toml"))
+
+
+def load_manifest(path: str | os.PathLike) -> Manifest:
+    """Read and check ``path``; ``ValueError`` naming the file for an unknown key or a wrong value."""
+    p = Path(path)
+    data = _toml_load(p)
+    names = {f.name for f in dataclasses.fields(Manifest)} - {"name"}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ValueError(f"{p}: unknown keys {unknown}; valid keys: {', '.join(sorted(names))}")
+    for key in ("tracks", "rhos", "gammas"):
+        if key in data:
+            data[key] = tuple(data[key])
+    for key in ("kind", "out"):
+        if key not in data:
+            raise ValueError(f"{p}: the key {key!r} is required")
+    try:
+        return Manifest(name=p.stem, **data)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{p}: {err}") from err
+
+
+def _git_commit(root: Path) -> str:
+    try:
+        out = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                             check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, check=True).stdout.strip()
+        return out + ("-dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def _cpu() -> dict[str, Any]:
+    """Model name and flags of the first CPU in ``/proc/cpuinfo`` (empty where there is none)."""
+    info: dict[str, Any] = {"count": os.cpu_count()}
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return info
+    for line in text.splitlines():
+        key, _, value = line.partition(":")
+        key = key.strip()
+        if key == "model name" and "model" not in info:
+            info["model"] = value.strip()
+        elif key in ("flags", "Features") and "flags" not in info:
+            info["flags"] = value.split()
+    return info
+
+
+def _write_json_atomically(path: Path, data: dict[str, Any]) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(data, f, indent=1, sort_keys=True)
+            f.write("\n")
+        os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+
+
+def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = None,
+                 out: str | os.PathLike | None = None, progress: bool = True, tasks_filter=None) -> Any:
+    """Run ``m`` into ``root/m.out`` (or ``out``), resuming from its CSV, and write ``manifest.json`` there.
+
+    Returns the table's report. ``tasks_filter`` (for :func:`rerun_rows`) limits the episodes run.
+    """
+    root = Path(root)
+    folder = Path(out) if out is not None else root / m.out
+    folder.mkdir(parents=True, exist_ok=True)
+    strategies = m.strategies(root)
+    t0 = time.perf_counter()
+    if m.kind == "multi-agent":
+        from sofar_agents.evaluation.multi_agent import run_multi_agent_table
+
+        report = run_multi_agent_table(strategies, folder, tracks=m.tracks, races=m.episodes or 4,
+                                       base_seed=m.seed, cars=m.cars, duration=m.duration, stack=m.stack,
+                                       scenario=m.scenario, workers=workers, progress=progress,
+                                       opponents=int(m.opponents or 0), prefix=m.prefix or "multi_agent")
+    elif m.kind == "table2":
+        from sofar_agents.evaluation.experiments import run_miqp_ablation
+
+        report = run_miqp_ablation(strategies, folder, episodes=m.episodes or 10, rhos=m.rhos, track=m.track,
+                                   base_seed=m.seed, duration=m.duration, workers=workers, progress=progress,
+                                   prefix=m.prefix or "table2", stack=m.stack, scenario=m.scenario,
+                                   tasks_filter=tasks_filter)
+    else:
+        from sofar_agents.evaluation.experiments import run_table1
+
+        report = run_table1(strategies, folder, tracks=m.tracks, rhos=m.rhos, episodes=m.episodes or 5,
+                            base_seed=m.seed, duration=m.duration, workers=workers, progress=progress,
+                            prefix=m.prefix or "table1", stack=m.stack, scenario=m.scenario,
+                            n_opponents=m.opponents, tasks_filter=tasks_filter)
+    record = {"manifest": m.name, "settings": {k: v for k, v in dataclasses.asdict(m).items() if k != "name"},
+              "config_hash": [m.config_hash], "commit": _git_commit(root),
+              "machine": {"node": platform.node(), "platform": platform.platform(), "python": sys.version.split()[0],
+                          "cpu": _cpu()},
+              "wall_time_s": round(time.perf_counter() - t0, 3), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    _write_json_atomically(folder / "manifest.json", record)
+    return report
+
+
+@dataclass
+class ManifestCheck:
+    """What :func:`check_manifest` found."""
+
+    name: str
+    config_hash: str
+    csv_path: Path
+    rows: int = 0
+    hashes: dict[str, int] = field(default_factory=dict)
+    """Rows per hash the CSV carries (``""``: rows without one)."""
+
+    @property
+    def status(self) -> str:
+        """``"ok"`` (every row carries the manifest's hash), ``"unhashed"`` (rows without a hash, none with
+        another), ``"missing"`` (no rows) or ``"mismatch"`` (rows with another hash)."""
+        if not self.rows:
+            return "missing"
+        if any(h and h != self.config_hash for h in self.hashes):
+            return "mismatch"
+        return "unhashed" if "" in self.hashes else "ok"
+
+    def line(self) -> str:
+        counts = ", ".join(f"{n} rows {h or 'without a hash'}" for h, n in sorted(self.hashes.items()))
+        return f"{self.name}: {self.status} (manifest {self.config_hash}; {self.csv_path}: {counts or 'no rows'})"
+
+
+def check_manifest(m: Manifest, root: str | os.PathLike) -> ManifestCheck:
+    """Resolve ``m``'s hash and count the hashes the rows of its CSV (``root/m.out``) carry."""
+    path = Path(root) / m.out / m.csv_name
+    check = ManifestCheck(m.name, m.config_hash, path)
+    if path.is_file():
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                h = row_hash(row)
+                check.hashes[h] = check.hashes.get(h, 0) + 1
+                check.rows += 1
+    return check
+
+
+def raw_rows(path: str | os.PathLike) -> list[dict[str, str]]:
+    """The complete rows of an episode CSV as written (strings), with ``config_hash`` "" where it has none."""
+    return read_csv_rows(path, EPISODE_COLUMNS, added={"config_hash": ""},
+                         may_be_empty=("policy_id", "n_opponents", "stalled", "config_hash"))
+
+
+def _row_id(row: dict[str, str]) -> tuple:
+    return (row["track"], row["strategy"], row["rho"], row["seed"], row["use_miqp"])
+
+
+def rerun_rows(m: Manifest, root: str | os.PathLike, rows: Sequence[dict[str, str]], out: str | os.PathLike,
+               workers: int | None = 1) -> list[str]:
+    """Run the episodes of the committed ``rows`` (strings, as :func:`~sofar_agents.evaluation.results.
+    read_csv_rows` gives them) through ``m`` into ``out`` and compare every column but ``wall_time`` and
+    ``config_hash`` as written. Returns the differences (empty: the rows are re-made bit for bit); a row
+    whose episode ``m`` does not hold is a difference too. Table kinds only."""
+    if m.kind == "multi-agent":
+        raise ValueError("rerun_rows takes the episode tables (table1, table2)")
+    wanted = {_row_id(r) for r in rows}
+
+    def keep(task) -> bool:
+        from sofar_agents.evaluation.protocol import exact_text
+
+        return (task.track, task.strategy.name, exact_text(task.rho), str(task.seed),
+                str(int(task.use_miqp))) in wanted
+
+    run_manifest(m, root, workers=workers, out=out, progress=False, tasks_filter=keep)
+    made = {_row_id(r): r for r in raw_rows(Path(out) / m.csv_name)}
+    diffs = []
+    for r in rows:
+        new = made.get(_row_id(r))
+        if new is None:
+            diffs.append(f"{_row_id(r)}: not re-made (not an episode of manifest {m.name})")
+            continue
+        for c in EPISODE_COLUMNS:
+            if c not in _NOT_COMPARED and r.get(c, "") != new.get(c, ""):
+                diffs.append(f"{_row_id(r)}: {c} {r.get(c)!r} committed, {new.get(c)!r} re-made")
+        if new.get("config_hash") != m.config_hash:
+            diffs.append(f"{_row_id(r)}: re-made with config_hash {new.get('config_hash')}, manifest {m.config_hash}")
+    return diffs
+
+
+def restamp_hash(path: str | os.PathLike, old: str, new: str) -> int:
+    """Replace the ``config_hash`` ``old`` by ``new`` in every row of the episode CSV ``path`` that has it,
+    changing no other byte; atomic. For a configuration whose hash moved without changing the episodes (a
+    field added with a default that keeps the behaviour), once :func:`rerun_rows` has shown that the rows are
+    re-made under ``new``. Returns the number of rows changed."""
+    p = Path(path)
+    lines = p.read_bytes().decode("utf-8").splitlines(keepends=True)
+    header = lines[0].rstrip("\r\n").split(",")
+    if "config_hash" not in header:
+        raise ValueError(f"{p}: no config_hash column")
+    at, changed, out = header.index("config_hash"), 0, [lines[0]]
+    for line in lines[1:]:
+        body = line.rstrip("\r\n")
+        fields = body.split(",")
+        if len(fields) == len(header) and fields[at] == old:
+            fields[at] = new
+            changed += 1
+        out.append(",".join(fields) + line[len(body):])
+    _replace_text(p, "".join(out))
+    return changed
+
+
+def _replace_text(p: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(text.encode("utf-8"))
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, p)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+
+
+def backfill_hash(path: str | os.PathLike, config_hash: str) -> int:
+    """Give every row of the episode CSV ``path`` (written before the ``config_hash`` column) the hash
+    ``config_hash``: the column goes in after ``stack``, every other byte of the file stays as it is (values,
+    line endings). The file is replaced atomically. Only for rows shown to be re-made by the configuration of
+    that hash (:func:`rerun_rows`). Returns the number of rows; ``ValueError`` for a file that already has the
+    column, lacks ``stack`` or holds quoted values."""
+    p = Path(path)
+    data = p.read_bytes().decode("utf-8")
+    if '"' in data:
+        raise ValueError(f"{p}: quoted values; not rewritten")
+    lines = data.splitlines(keepends=True)
+    header = lines[0].rstrip("\r\n").split(",")
+    if "config_hash" in header or "stack" not in header:
+        raise ValueError(f"{p}: has a config_hash column already or no stack column")
+    at = header.index("stack") + 1
+    out = []
+    for i, line in enumerate(lines):
+        body = line.rstrip("\r\n")
+        end = line[len(body):]
+        fields = body.split(",")
+        if len(fields) != len(header) or not end:
+            raise ValueError(f"{p}: line {i + 1} is incomplete; not rewritten")
+        fields.insert(at, "config_hash" if i == 0 else config_hash)
+        out.append(",".join(fields) + end)
+    _replace_text(p, "".join(out))
+    return len(lines) - 1
