@@ -17,7 +17,8 @@ from pathlib import Path
 from mkdocs.structure.files import File
 
 ROOT = Path(__file__).resolve().parents[2]
-FIGURES = ("results/figures", "results/paper_stack/figures", "results/interactive_dense/figures")
+FIGURES = ("results/figures", "results/paper_stack/figures", "results/interactive_dense/figures",
+           "results/reference_numerics")
 """Folders of ``results/`` whose PNG files the site publishes."""
 INCLUDE = re.compile(r"^<!-- include: (?P<path>\S+)(?: level=(?P<level>[1-6]))? -->$", re.M)
 CONFIG_MARKER = "<!-- config-reference -->"

@@ -23,7 +23,9 @@ reproduced here is a numerical artefact of the reference code, not a property of
 
 :class:`ReferenceNumericsMPC` runs the same HPIPM (the build that ships with CasADi, :mod:`.hpipm`) on
 the same condensed QP with the same options; :class:`ReferenceNumerics` switches each defect off, one at
-a time, so a sweep can attribute an effect to its cause. Use it through
+a time, so a sweep can attribute an effect to its cause. Why HPIPM from CasADi's wheel rather than acados
+or a solver of ours, and how it was checked against acados: ``docs/decisions/reference-numerics-solver.md``.
+Use it through
 ``stack_preset("reference-numerics")`` (``stack="reference-numerics"`` in the environments).
 """
 
