@@ -61,8 +61,12 @@ def _load(folder: Path, name: str) -> mf.Manifest:
 
 
 def shortest_rows(m: mf.Manifest, n: int, root: Path = ROOT) -> list[dict[str, str]]:
-    """The ``n`` committed rows of ``m`` with the fewest steps on each circuit (the cheapest to re-make)."""
-    rows = sorted(mf.raw_rows(root / m.out / m.csv_name), key=lambda r: (int(r["steps"]), r["strategy"]))
+    """The ``n`` committed rows of ``m`` with the fewest steps on each circuit (the cheapest to re-make); rows of
+    the CSV that are not episodes of ``m`` (other runs into the same folder) are not candidates."""
+    ids = mf.episode_ids(m, root)
+    rows = sorted((r for r in mf.raw_rows(root / m.out / m.csv_name)
+                   if (r["track"], r["strategy"], r["rho"], r["seed"], r["use_miqp"]) in ids),
+                  key=lambda r: (int(r["steps"]), r["strategy"]))
     per_track: dict[str, list[dict[str, str]]] = {}
     for r in rows:
         mine = per_track.setdefault(r["track"], [])
@@ -112,6 +116,12 @@ def main(argv=None) -> int:
             return 1
         (old,) = check.hashes
         path = ROOT / m.out / m.csv_name
+        from sofar_agents.evaluation.protocol import exact_text
+
+        settings = {(r["stack"], r["scenario"], r["duration"]) for r in mf.raw_rows(path)}
+        if settings != {(m.stack, m.scenario, exact_text(m.duration))}:
+            logger.error("%s: not back-filled: %s holds rows of other settings %s", m.name, path, sorted(settings))
+            return 1
         n = mf.restamp_hash(path, old, m.config_hash) if old else mf.backfill_hash(path, m.config_hash)
         from sofar_agents.evaluation.configs import episode_config, write_config_json
 

@@ -56,7 +56,7 @@ from sofar_agents.evaluation.protocol import DEFAULT_DURATION, FIXED_GAMMAS, RHO
 from sofar_agents.evaluation.results import EPISODE_COLUMNS, read_csv_rows
 
 __all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths", "run_manifest", "check_manifest",
-           "ManifestCheck", "raw_rows", "rerun_rows", "backfill_hash",
+           "ManifestCheck", "episode_ids", "raw_rows", "rerun_rows", "backfill_hash",
            "restamp_hash"]
 
 logger = logging.getLogger(__name__)
@@ -136,6 +136,23 @@ class Manifest:
             if policy is None:
                 raise FileNotFoundError(f"manifest {self.name}: no adaptive policy for stack {self.stack!r}")
         return build_strategies(gammas, policy=policy, adaptive=self.adaptive)
+
+
+def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple[str, str, str, str, str]]:
+    """``(track, strategy, rho, seed, use_miqp)`` as written in a CSV, of every episode of the table ``m``
+    (a CSV may hold rows of other runs too)."""
+    from sofar_agents.evaluation.protocol import exact_text, miqp_ablation_tasks, table1_tasks
+
+    strategies = m.strategies(root)
+    if m.kind == "table2":
+        tasks = miqp_ablation_tasks(strategies, m.episodes or 10, m.rhos, m.track, m.seed, m.duration, stack=m.stack,
+                                    scenario=m.scenario)
+    elif m.kind == "table1":
+        tasks = table1_tasks(strategies, m.tracks, m.rhos, m.episodes or 5, m.seed, m.duration, stack=m.stack,
+                             scenario=m.scenario, n_opponents=m.opponents)
+    else:
+        raise ValueError("episode_ids takes the episode tables (table1, table2)")
+    return {(t.track, t.strategy.name, exact_text(t.rho), str(t.seed), str(int(t.use_miqp))) for t in tasks}
 
 
 def manifest_paths(folder: str | os.PathLike) -> list[Path]:
