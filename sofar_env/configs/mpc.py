@@ -94,8 +94,10 @@ class MPCConfig:
     """DCBF inactivity margin of the rule above [-]."""
     barrier: BarrierParams = nested(BarrierParams)
     """Barrier function parameters."""
-    qp_solver: str = choice("piqp", ("piqp", "osqp"))
-    """QP backend: "piqp" (accurate, default) or "osqp" (less accurate, comparison only)."""
+    qp_solver: str = choice("piqp", ("piqp", "osqp", "daqp"))
+    """QP backend: "piqp" (sparse interior point, accurate, the default), "daqp" (the same QP condensed onto
+    the 2 N input steps, slacks as soft rows with their own weights, DAQP's dense active set; agrees with
+    PIQP to PIQP's tolerance) or "osqp" (less accurate, comparison only)."""
     compile: bool = flag(True)
     """Compile the CasADi stage function to C (cached on disk); falls back to CasADi evaluation."""
     cache_dir: str | None = text(None, optional="the default cache")

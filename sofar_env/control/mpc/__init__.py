@@ -13,7 +13,7 @@ order the data flow:
 * :mod:`.warmstart` - the initial guess: the previous plan shifted in time, or a cold guess;
 * :mod:`.linearisation` - the compiled stage Jacobians at all stages, evaluated into numpy arrays;
 * :mod:`.layout` - the QP's variables and rows, its fixed sparsity and how it is filled;
-* :mod:`.backends` - the QP solvers (PIQP, OSQP);
+* :mod:`.backends` - the QP solvers (PIQP, OSQP; DAQP on the condensed QP, :mod:`.condensed`);
 * :mod:`.rti` - :class:`MPCDCBF`, the real-time iteration and its failure handling;
 * :mod:`.reference` - the same NLP solved to convergence with IPOPT
   (:meth:`MPCDCBF.solve_converged`), for validation.

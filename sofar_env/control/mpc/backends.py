@@ -1,4 +1,4 @@
-"""QP backends of the real-time iteration: PIQP (default) and OSQP (comparison only).
+"""QP backends of the real-time iteration: PIQP (default), DAQP (condensed, dense) and OSQP (comparison only).
 
 * ``"piqp"``: proximal interior point, eps_abs 1e-7; on the 600-step closed loop of
   ``eval/bench_mpc.py`` its first control differs from a 1e-11-tolerance solve from the
@@ -8,7 +8,11 @@
 * ``"osqp"``: ADMM (eps 1e-4, warm-started, at most 4000 iterations). With the slack
   scaling its first control errs by 4e-4 m/s^2 (p95) but up to 0.07 m/s^2, its solve
   time is heavy-tailed (p95 about 10x the median), and with an active barrier from a
-  cold start it can hit the iteration limit (-> fallback). For comparison only.
+  cold start it can hit the iteration limit (-> fallback). For comparison only;
+* ``"daqp"``: the same QP condensed onto its 2 N input steps, slacks as DAQP's soft rows with
+  their own weights (explicit variables where one slack serves rows with different coefficients),
+  solved by DAQP's dual active-set method (:mod:`.condensed`). Its model is warm-started with the
+  previous active set of the same pattern; it is not carried by a copied structure.
 
 Each :class:`~.layout.QPStructure` keeps its own solver instance, set up once and
 refreshed with ``update()`` (the pattern is fixed; a left-out bound is an infinite entry
@@ -41,6 +45,11 @@ def solve_qp(qs: QPStructure, data: tuple, cfg: MPCConfig) -> tuple[np.ndarray |
     try:
         if qs.backend == "piqp":
             z, iters, status = _solve_piqp(qs, data, cfg)
+        elif qs.backend == "daqp":
+            if qs.solver is None:
+                from .condensed import CondensedDAQP  # imported on use, as is the daqp package
+                qs.solver = CondensedDAQP(qs)
+            z, iters, status = qs.solver.solve(qs, data)
         else:
             z, iters, status = _solve_osqp(qs, data)
     except (RuntimeError, ValueError, ArithmeticError) as exc:

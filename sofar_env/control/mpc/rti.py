@@ -9,8 +9,8 @@ iteration re-linearises at the new iterate: with an opponent close, one RTI step
 less distance than the converged solution. A cold start (first solve, after
 :meth:`MPCDCBF.reset` or a brake fallback) runs ``cold_start_iterations`` iterations.
 The linearisation is one compiled C call (:mod:`.linearisation`), the QP matrices are
-gathered into a fixed pattern (:mod:`.layout`) and solved by PIQP or OSQP
-(:mod:`.backends`). :meth:`MPCDCBF.solve_converged` solves the very same NLP to
+gathered into a fixed pattern (:mod:`.layout`) and solved by PIQP, by DAQP after condensing
+(:mod:`.condensed`) or by OSQP (:mod:`.backends`). :meth:`MPCDCBF.solve_converged` solves the very same NLP to
 convergence with IPOPT, for validation (:mod:`.reference`).
 
 QP size (PIQP backend). Constraints far from the linearisation point are left out of
@@ -347,7 +347,8 @@ class MPCDCBF:
         out is checked by :meth:`_rows_violated` (for the box: per column).
         """
         if self.config.qp_solver != "piqp":
-            # OSQP's solutions (eps 1e-4) miss the 1e-6 check often: re-solves cost more than they save
+            # OSQP's solutions (eps 1e-4) miss the 1e-6 check often: re-solves cost more than they save;
+            # DAQP (active set) solves the full QP: rows far from activity cost it little
             return [True, True, True]
         return [*self._rows_near, False]
 
