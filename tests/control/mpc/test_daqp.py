@@ -79,14 +79,68 @@ def test_daqp_agrees_with_piqp_and_a_tight_reference(bench, cache_dir, track_row
     assert slack < 1e-5
 
 
-def test_daqp_solves_an_opponent_qp_like_piqp(cache_dir):
-    """From identical states: the whole solve (several SQP iterations with an active barrier)."""
+def test_condensed_qp_is_the_sparse_qp_on_the_inputs(bench, cache_dir):
+    """The compiled condensing against the sparse QP: for inputs v (and explicit slacks), the states from
+    the condensing satisfy the equality rows, the condensed cost differs from the sparse cost (soft slacks
+    at 0) by a constant, each condensed row is its row of G, and the soft weights are c / g and g^2 / p."""
+    rng = np.random.default_rng(0)
+    qps = bench.record_qps(steps=30, cfg=MPCConfig(cache_dir=cache_dir, track_rows="ends"))
+    qps = sorted(qps, key=lambda qd: (qd[0].m, qd[0].lat))[-3:]  # the ones with the most rows
+    assert qps[-1][0].m > 0
+    for qs, data in qps:
+        cd = condensed.CondensedDAQP(qs)
+        c, b = data[0], data[1]
+        hess, f, amat, bu, bl, rho, w, sol, go, gabs = cd.condense(qs, data)
+        nu, nx, nh, nv = len(cd.u_cols), len(cd.x_cols), len(cd.hard_rows), cd.nv
+        assert len(cd.expl_cols) == cfg_horizon(qs) and len(cd.soft_cols) > 0
+
+        def z_of(v):
+            z = np.zeros(qs.nz)
+            z[cd.u_cols], z[cd.expl_cols] = v[:nu], v[nu:]
+            z[cd.x_cols] = sol[:, :nu] @ v[:nu] + sol[:, nu]
+            return z
+
+        def sparse_cost(z):
+            return 0.5 * z @ (qs.P @ z) + c @ z
+
+        vs = [rng.normal(size=nv) for _ in range(3)]
+        zs = [z_of(v) for v in vs]
+        for v, z in zip(vs, zs):
+            np.testing.assert_allclose(qs.A @ z, b, atol=1e-9)
+            gz = qs.G @ z
+            np.testing.assert_allclose(amat[nx:nx + nh] @ v + go[cd.hard_rows], gz[cd.hard_rows], atol=1e-9)
+            np.testing.assert_allclose(amat[nx + nh:] @ v + go[cd.soft_up], gz[cd.soft_up], atol=1e-9)
+            np.testing.assert_allclose(amat[:nx] @ v, z[cd.x_cols] - sol[:, nu], atol=1e-9)
+        dq = [0.5 * v @ hess @ v + f @ v for v in vs]
+        dj = [sparse_cost(z) for z in zs]
+        np.testing.assert_allclose(np.diff(dq), np.diff(dj), rtol=1e-9, atol=1e-9)
+        g = qs.G.toarray()[cd.soft_up, cd.soft_cols]
+        np.testing.assert_allclose(gabs, np.abs(g))
+        np.testing.assert_allclose(w[nv + nx + nh:], c[cd.soft_cols] / np.abs(g))
+        np.testing.assert_allclose(rho[nv + nx + nh:], g * g / qs.P.diagonal()[cd.soft_cols])
+
+
+def cfg_horizon(qs) -> int:
+    return qs.nz // qs.nb
+
+
+@pytest.mark.parametrize("tight", [False, True])
+def test_daqp_solves_an_opponent_qp_like_piqp(cache_dir, tight):
+    """From identical states: the whole solve (several SQP iterations with an active barrier); ``tight``:
+    on a narrow curved road the track and lateral-acceleration rows are in the QP too, with slack."""
     x0, opp = np.array([0.0, 0.3, 0.0, 40.0, 0.0]), np.array([[20.0, 0.5, 35.0]])
+    stage = make_stage(n_ref=1.5, kappa=0.02, half_width=2.0) if tight else make_stage()
     res = {}
     for name in ("piqp", "daqp"):
         mpc = MPCDCBF(MPCConfig(cache_dir=cache_dir, qp_solver=name))
-        res[name] = mpc.solve(x0, make_stage(), opp, 0.5)
+        res[name] = mpc.solve(x0, stage, opp, 0.5)
         assert res[name].success and res[name].n_opponents == 1
+        if tight:
+            assert any(qs.lat and qs.trk for qs in mpc._qp.values())
+            assert res[name].slack["track"] > 0.0 and res[name].slack["lat_acc"] > 0.0
+    if tight:
+        for key in ("track", "lat_acc", "barrier"):
+            assert res["daqp"].slack[key] == pytest.approx(res["piqp"].slack[key], rel=1e-3, abs=1e-6)
     np.testing.assert_allclose(res["daqp"].u, res["piqp"].u, atol=1e-4)
     np.testing.assert_allclose(res["daqp"].x_pred, res["piqp"].x_pred, atol=1e-3)
 
