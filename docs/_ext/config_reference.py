@@ -2,7 +2,8 @@
 
 Every configuration dataclass of ``sofar_env`` and ``sofar_agents`` (a dataclass whose name ends in
 ``Config``, ``Params`` or ``Weights``) gets a section with one table row per field: key, type, default,
-unit, accepted values and the field's docstring. The environment's classes come first, in the order of
+unit, accepted values and the field's docstring (its pointer to a decision page, ``docs/decisions/NAME.md``,
+as a link). The environment's classes come first, in the order of
 the ``config`` mapping (``EnvConfig`` and the sub-configurations below it, each with its key path); the
 others (``PASTAConfig``, the track builder's ``BuildConfig``, ...) follow. The unit is the field's
 declared unit, else the first bracketed unit of its docstring (``[m/s]``); the accepted values are the
@@ -27,6 +28,8 @@ from typing import Any
 PACKAGES = ("sofar_env", "sofar_agents")
 SUFFIXES = ("Config", "Params", "Weights")
 ROLE = re.compile(r":(?:py:)?[a-z]+:`~?\.?([^`]+)`")
+DECISION = re.compile(r"``docs/decisions/([a-z0-9-]+)\.md``")
+"""A docstring's pointer to its decision page (``docs/decisions/NAME.md``), linked from the reference page."""
 UNIT = re.compile(r"\[((?:1/)?[A-Za-z%°][A-Za-z0-9/^*%°.]*|-)\]")
 
 
@@ -130,9 +133,10 @@ def _value(value: Any) -> str:
 
 
 def _text(doc: str) -> str:
-    """A docstring as one table cell: roles as code, one line, pipes escaped."""
+    """A docstring as one table cell: roles as code, decision pages as links, one line, pipes escaped."""
     doc = ROLE.sub(lambda m: f"`{m.group(1).rsplit('.', 1)[-1] if m.group(0).find('~') >= 0 else m.group(1)}`",
                    doc)
+    doc = DECISION.sub(lambda m: f"[{m.group(1)}](../decisions/{m.group(1)}.md)", doc)
     return " ".join(doc.split()).replace("|", "\\|")
 
 

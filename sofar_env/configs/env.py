@@ -104,14 +104,12 @@ class EnvConfig:
     initial_gamma: float = real(0.5, gt=0.0, le=1.0)
     """gamma_{t-1} assumed at the first step of an episode (for the smoothness term) [-]."""
     stall_speed: float = real(1.0, ge=0.0, unit="m/s")
-    """A controlled car slower than this is standing still, for the stall rule [m/s] (walking pace; the
-    slowest opponent of the paper's world at the lowest pace ratio of Table I moves at 1.75 m/s)."""
+    """A controlled car slower than this is standing still, for the stall rule [m/s], >= 0. Decision:
+    ``docs/decisions/stall-rule.md``."""
     stall_seconds: float | None = real(20.0, ge=0.0, optional="off", unit="s")
     """The stall rule: a car that stays slower than ``stall_speed`` for this long without interruption
-    terminates its episode with ``info["stalled"] = True`` and ``is_success = False`` [s]. 20 s is a
-    tenth of the 200 s race: far longer than any stop the controller makes to let a car clear, so it only
-    fires when the car is stuck (behind a car it cannot pass, or in a barrier deadlock). ``None`` or 0
-    turns the rule off."""
+    terminates its episode with ``info["stalled"] = True`` and ``is_success = False`` [s], >= 0. ``None``
+    or 0 turns the rule off. Decision: ``docs/decisions/stall-rule.md``."""
     timing_info: bool = flag(False)
     """Also report the wall-clock solve times ``mpc_time_ms`` / ``miqp_time_ms`` in ``info``. Off by default:
     they are the only info values that differ between two runs with the same seed, and conformance checks

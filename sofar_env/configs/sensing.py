@@ -29,11 +29,11 @@ class SensorConfig:
     latency_steps: int = integer(2, ge=0)
     """Delay of the output in control steps [-], >= 0."""
     tracker_alpha: float = real(0.3, gt=0.0, le=1.0)
-    """Position gain of the alpha-beta tracker of the lateral offset [-], in (0, 1]."""
+    """Position gain of the alpha-beta tracker of the lateral offset [-], in (0, 1]. Decision:
+    ``docs/decisions/lateral-prediction.md``."""
     tracker_beta: float = real(0.05, gt=0.0, lt=2.0)
-    """Rate gain of the alpha-beta tracker [-], in (0, 2). With alpha 0.3 at 0.1 s steps: a constant
-    lateral rate is picked up within about 2 s, and the default noise leaves a rate error of about
-    0.33 m/s (std); higher gains react faster and are noisier (0.5 / 0.1: 1.5 s, 0.44 m/s)."""
+    """Rate gain of the alpha-beta tracker [-], in (0, 2); higher gains react faster and are noisier.
+    Decision: ``docs/decisions/lateral-prediction.md``."""
     jump_distance: float = real(50.0, gt=0.0, unit="m")
     """A true arc-length change above this between two calls restarts the identity's track [m], > 0."""
     latency_compensation: bool = flag(True)

@@ -45,23 +45,19 @@ class StackConfig:
     """Follow an opponent that cannot be passed instead of forcing the pass (:mod:`sofar_env.stack.follow`)."""
     follow_slack: float = real(0.5, ge=0.0, unit="m")
     """A passing plan that violates the clearance of an opponent ahead by more than this is
-    not attempted: the ego follows that opponent [m]. With 0.5 m a pass is planned with at
-    least 3.25 m lateral clearance (safe_lat 3.75 m), 0.55 m more than the barrier's lateral
-    semi-axis b = 2.7 m: a pass planned at about b stalls alongside the opponent (the barrier
-    is near 0 there and, for small gamma, may only decay slowly), and a looser 0.8 m led to
-    exactly that, and a collision, on Kentucky at rho = 0.1, gamma = 0.05."""
+    not attempted: the ego follows that opponent [m], >= 0. A pass is planned with at least
+    ``miqp.safe_lat - follow_slack`` lateral clearance. Decision: ``docs/decisions/follow-clearance.md``."""
     follow_release_slack: float = real(0.1, ge=0.0, unit="m")
-    """Hysteresis of the follow decision [m]: while following, an opponent ahead stays blocked
-    until the passing plan violates its clearance by at most this (entering takes
-    ``follow_slack``). Without it the decision can flicker every MIQP call near the threshold,
-    and each flicker trades braking for a pass attempt (Laguna Seca, last corner)."""
+    """Hysteresis of the follow decision [m], in [0, ``follow_slack``]: while following, an opponent ahead
+    stays blocked until the passing plan violates its clearance by at most this (entering takes
+    ``follow_slack``). Decision: ``docs/decisions/follow-clearance.md``."""
     follow_recheck: int = integer(2, ge=1)
     """While following, the passing plan is re-examined at every this-many-th MIQP call (1: at
     every call). In between, only the follow plan is re-solved, for the same followed cars
     (matched by their predicted positions); a follow plan that then violates the clearance of a
     car it passes by more than ``follow_slack``, or a followed car that is no longer found, falls
-    back to the full pass-or-follow decision. It halves the second MIQP solve of most calls while
-    following; resuming a pass waits at most ``(follow_recheck - 1) miqp_interval`` more steps."""
+    back to the full pass-or-follow decision. Resuming a pass waits at most
+    ``(follow_recheck - 1) miqp_interval`` more steps [-], >= 1. Decision: ``docs/decisions/follow-clearance.md``."""
     follow_gap: float = real(12.0, ge=0.0, unit="m")
     """Arc-length distance kept behind a followed opponent [m] (the barrier's a0 = 7 m plus 5 m)."""
     follow_decel: float = real(5.0, gt=0.0, unit="m/s^2")
@@ -84,24 +80,16 @@ class StackConfig:
     against the edges' directions (:meth:`~sofar_env.stack.edges.TrackEdges.for_mpc`). Only with
     ``follow``, and only when every opponent the passing plan has to clear is near-stationary."""
     parked_speed: float = real(1.0, ge=0.0, unit="m/s")
-    """An opponent slower than this counts as near-stationary (parked) [m/s]. Below the slowest opponent of
-    the paper's world at the lowest pace ratio of Table I (0.1 x Monza's 17.5 m/s profile minimum = 1.75 m/s),
-    so moving fields never trigger the parked pass; equal to the environment's default ``stall_speed``, so a
-    car slow enough to stall the ego when followed is one the stack tries to pass."""
+    """An opponent slower than this counts as near-stationary (parked) [m/s], >= 0. Decision:
+    ``docs/decisions/parked-pass.md``."""
     parked_clearance: float = real(3.0, unit="m")
     """Lateral semi-axis [m] of the passing plan's elliptic window around a near-stationary opponent (instead
-    of the box window ``miqp.safe_lat``): the barrier's lateral semi-axis b = 2.7 m plus 0.3 m, the margin the
-    plan aims for; the decision to follow only needs b. A parked car does not move towards the ego, so the
-    margin of ``safe_lat`` for a moving car (``follow_slack``) is not needed; 3.0 m leaves 1.1 m between the
-    two 1.9 m wide footprints."""
+    of the box window ``miqp.safe_lat``), in (0, ``miqp.safe_lat``]; the decision to follow only needs the
+    barrier's own ellipse. Decision: ``docs/decisions/parked-pass.md``."""
     parked_window: float = real(7.0, unit="m")
     """Longitudinal semi-axis [m] of that window at zero closing speed (it grows by the braking distance of
-    the closing speed, ``miqp.closing_decel``, on the approach): the barrier's a0 = 7 m, so the plan has the
-    shape of the ellipse the MPC keeps the ego out of. A box window (the full clearance over ``|gap| <
-    3 m``, and at both end nodes of every node interval touching it) asked for the full clearance up to a
-    node spacing beyond the cars' overlap, where the barrier needs 0.9 b or less: in a chicane, whose edges
-    converge on the raceline by up to 0.5 m per metre, that stopped the ego behind cars with room beside
-    them (rho = 0, 4 circuits x seeds 0-5: Monza seed 5)."""
+    the closing speed, ``miqp.closing_decel``, on the approach), in (0, ``miqp.safe_lon``]. Decision:
+    ``docs/decisions/parked-pass.md``."""
     pace_prediction: bool = flag(True)
     """Predict the opponents along the speed profile at their current pace ratio
     (:class:`~sofar_env.stack.prediction.OpponentPredictor`) instead of at constant speed: the MIQP gets
@@ -117,13 +105,11 @@ class StackConfig:
     """With ``lateral_prediction``: the MIQP and the follow logic see each car at the offset where its lateral
     move ends (True), or where it is now (False); the MPC's barrier rows get the motion either way."""
     lateral_prediction_time: float = real(1.5, gt=0.0, unit="s")
-    """How long a sensed lateral rate is carried forward [s], > 0: the MPC's horizon. A lateral move of
-    a racing car lasts about this long (a defensive move across 2 m at 1.5 m/s); carried further, a move
-    that has ended would still be extrapolated across the track."""
+    """How long a sensed lateral rate is carried forward [s], > 0. Decision:
+    ``docs/decisions/lateral-prediction.md``."""
     lateral_rate_deadband: float = real(0.3, ge=0.0, unit="m/s")
     """Lateral rates are shrunk toward zero by this much before they are used [m/s], >= 0 (a soft
-    threshold, continuous in the rate): about the rate noise of the default sensor's tracker (0.33 m/s),
-    so a car on a steady line is not predicted to wander, while a defensive move (1.5 m/s) is."""
+    threshold, continuous in the rate). Decision: ``docs/decisions/lateral-prediction.md``."""
     footprint_edges: bool = flag(True)
     """Give the planners the narrowest edge within the car's length, and tighten the MPC's by
     the heading error (:mod:`sofar_env.stack.edges`). With ``mpc.track_rows = "ends"`` the MPC bounds

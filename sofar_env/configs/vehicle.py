@@ -60,66 +60,55 @@ AV21 = VehicleParams()
 class DynamicParams:
     """Dynamic parameters of the AV-21 (geometry and actuator limits are in ``VehicleParams``).
 
-    The full AV-21 set is confidential; the public sets disagree. Mass, inertia, aerodynamics,
-    brake bias and actuator bandwidths are taken from one source, the AV-21R model of
-    tier4/AWSIM (``docs/RacingSim/VehicleDynamics``), the only public set whose axle distances
-    (lf 1.6785 m, lr 1.2933 m) match the kinematic model's. AWSIM publishes no tyre or
-    CoG-height data; those come from TUM's AV-21 set ("TUMRT": the file
-    ``data/vehicle_params/params_dallaraAV21.yml`` of TUMRT/sampling_based_3D_local_planning).
-    "Open-Car-Dynamics" is TUMFTM/Open-Car-Dynamics' generic single-seater configuration
-    (``OCD_Vehicle_RWD_LSD__PT1__SINGLE_TRACK__MF_SIMPLE__DEFAULT.json``), quoted for comparison.
+    Mass, inertia, aerodynamics, brake bias and actuator bandwidths from tier4/AWSIM's AV-21R model, tyres and
+    the centre-of-gravity height from TUM's AV-21 set. The source of every value, and the alternatives:
+    ``docs/decisions/dynamic-plant-parameters.md``.
     """
 
     mass: float = real(815.11, gt=0.0, unit="kg")
-    """m [kg]. AWSIM AV-21R (TUMRT: 750 kg; AWSIM chosen for consistency with lf/lr, Iz)."""
+    """m [kg], > 0."""
     yaw_inertia: float = real(800.0, gt=0.0, unit="kg m^2")
-    """Iz [kg m^2]. AWSIM AV-21R (the Open-Car-Dynamics generic single-seater uses 1000)."""
+    """Iz, yaw moment of inertia [kg m^2], > 0."""
     cg_height: float = real(0.275, ge=0.0, unit="m")
-    """h, height of the centre of gravity [m]. TUMRT AV-21 set (AWSIM gives none)."""
+    """h, height of the centre of gravity [m], >= 0."""
     gravity: float = real(9.81, gt=0.0, unit="m/s^2")
     """g [m/s^2]."""
     air_density: float = real(1.225, gt=0.0, unit="kg/m^3")
-    """rho [kg/m^3], ISA sea level (also TUMRT's value)."""
+    """rho, air density [kg/m^3], > 0 (ISA sea level)."""
     drag_area: float = real(0.8581, ge=0.0, unit="m^2")
-    """c_d A [m^2]: AWSIM C_d 0.8581 with frontal area 1.0 m^2 (TUMRT: 0.725)."""
+    """c_d A, drag coefficient times frontal area [m^2], >= 0."""
     lift_area: float = real(1.83, ge=0.0, unit="m^2")
-    """c_l A [m^2], downforce: AWSIM C_lf + C_lr = 0.65 + 1.18 with A = 1.0 m^2 (TUMRT: 1.556)."""
+    """c_l A, downforce coefficient times frontal area [m^2], >= 0."""
     aero_front: float = real(0.65 / 1.83, ge=0.0, le=1.0)
-    """Share of the downforce on the front axle [-]: AWSIM C_lf / (C_lf + C_lr) = 0.355."""
+    """Share of the downforce on the front axle [-], in [0, 1]."""
     brake_bias_front: float = real(0.54, ge=0.0, le=1.0)
-    """Share of the braking force on the front axle [-]. AWSIM (54 % front); traction is all on
-    the rear axle (AWSIM: rear differential, rear-wheel drive)."""
+    """Share of the braking force on the front axle [-], in [0, 1]; traction is all on the rear axle."""
     B_f: float = real(10.9, gt=0.0, unit="1/rad")
-    """Front lateral stiffness factor [1/rad]. From TUMRT's Magic-Formula 5.2 set at the tyre's
-    nominal load N0 = 3114 N: B = K_y / (C D Fz) with K_y = p_Ky1 N0 sin(2 atan(Fz / (p_Ky2 N0)))
-    (p_Ky1 = 53.05, p_Ky2 = 4.1265); B varies only 10.82-10.90 over the static wheel loads, so it
-    is taken load-independent (Open-Car-Dynamics' generic simple MF uses 10)."""
+    """Front lateral stiffness factor B of the Magic Formula [1/rad], > 0, load-independent. Source:
+    ``docs/decisions/dynamic-plant-parameters.md``."""
     C_f: float = real(1.603, gt=0.0)
-    """Front lateral shape factor [-]: TUMRT p_Cy1 (Open-Car-Dynamics: 1.6)."""
+    """Front lateral shape factor C [-], > 0."""
     D_f: float = real(1.389, gt=0.0)
-    """Front peak lateral friction coefficient at mu = 1 [-]: TUMRT p_Dy1 lambda_muy =
-    1.654 x 0.84 at the nominal load (its load sensitivity p_Dy2 is neglected). Chosen over
-    Open-Car-Dynamics' generic 1.7 because it is fitted to the AV-21; it is the conservative one."""
+    """Front peak lateral friction coefficient D at mu = 1 [-], > 0 (no load sensitivity). Source:
+    ``docs/decisions/dynamic-plant-parameters.md``."""
     E_f: float = real(-1.409, le=1.0)
-    """Front lateral curvature factor [-]: TUMRT p_Ey1 (peak at about 5.8 deg of slip)."""
+    """Front lateral curvature factor E [-], <= 1."""
     B_r: float = real(10.9, gt=0.0, unit="1/rad")
-    """Rear lateral stiffness factor [1/rad]; same tyre as the front (TUMRT uses one set)."""
+    """Rear lateral stiffness factor B [1/rad], > 0."""
     C_r: float = real(1.603, gt=0.0)
-    """Rear lateral shape factor [-]: TUMRT p_Cy1."""
+    """Rear lateral shape factor C [-], > 0."""
     D_r: float = real(1.389, gt=0.0)
-    """Rear peak lateral friction coefficient at mu = 1 [-]: TUMRT p_Dy1 lambda_muy."""
+    """Rear peak lateral friction coefficient D at mu = 1 [-], > 0."""
     E_r: float = real(-1.409, le=1.0)
-    """Rear lateral curvature factor [-]: TUMRT p_Ey1."""
+    """Rear lateral curvature factor E [-], <= 1."""
     D_x: float = real(1.597, gt=0.0)
-    """Peak longitudinal friction coefficient at mu = 1 [-], the friction ellipse's
-    longitudinal semi-axis: TUMRT p_Dx1 lambda_mux = 1.7168 x 0.93."""
+    """Peak longitudinal friction coefficient at mu = 1 [-], > 0: the friction ellipse's longitudinal
+    semi-axis."""
     tau_steer: float = real(1.0 / (2.0 * math.pi * 3.0), gt=0.0, unit="s")
-    """Steering first-order lag [s]: AWSIM's steering-motor bandwidth 3 Hz, 1/(2 pi 3 Hz) =
-    0.053 s (AWSIM's 0.04 s pure delay is not modelled; Open-Car-Dynamics uses a 0.06 s PT1)."""
+    """Time constant of the steering's first-order lag [s], > 0 (no pure delay). Source:
+    ``docs/decisions/dynamic-plant-parameters.md``."""
     tau_accel: float = real(0.1, gt=0.0, unit="s")
-    """Powertrain/brake first-order lag [s]. AWSIM's brake-by-wire has a 0.04 s delay plus a
-    5 Hz bandwidth (0.032 s), about 0.07 s lumped; no public engine-torque figure exists and a
-    combustion engine through a gearbox responds more slowly than the brakes, hence 0.1 s."""
+    """Time constant of the powertrain / brake first-order lag [s], > 0. Source: ``docs/decisions/dynamic-plant-parameters.md``."""
     v_blend_low: float = real(3.0, ge=0.0, unit="m/s")
     """Below this forward speed the model is purely kinematic [m/s]."""
     v_blend_high: float = real(6.0, gt=0.0, unit="m/s")
@@ -134,15 +123,10 @@ class DynamicParams:
     ``delta_cmd + K L / max(vx, v_blend_high) (r_ref - r)``, clipped to +-steer_max, where
     ``r_ref = v cos(beta) tan(delta_cmd) / L`` (``beta = atan(lr/L tan delta_cmd)``, ``v = |(vx, vy)|``)
     is the yaw rate the kinematic bicycle has at the commanded angle. ``K L / vx`` makes K the
-    dimensionless loop gain at the kinematic yaw gain ``vx / L``. The loop is what makes a car that
-    slides behave like the kinematic bicycle a kinematic MPC plans with: it adds yaw damping and
-    takes out most of the under- or oversteer, as the low-level lateral controllers of the
-    Indy Autonomous Challenge stacks do below their trajectory planners."""
+    dimensionless loop gain at the kinematic yaw gain ``vx / L``, >= 0. Why: ``docs/decisions/dynamic-plant-parameters.md``."""
     mu_range: tuple[float, float] = reals((0.8, 1.0), size=2, gt=0.0, ordered=True)
-    """Range [-] from which a world should draw the per-episode friction factor mu (uniform).
-    The nominal tyre set (mu = 1) already carries TUM's fitted scaling lambda_muy = 0.84 of a
-    dry, rubbered-in track; 0.8 represents a cold or green track. Lower values (wet) are outside
-    what slick tyres are raced on."""
+    """Range [-] from which a world should draw the per-episode friction factor mu (uniform), > 0, ordered;
+    mu scales the tyres' peak friction coefficients. Decision: ``docs/decisions/dynamic-plant-parameters.md``."""
 
     def __post_init__(self) -> None:
         check_fields(self, "race.dynamic")
