@@ -7,7 +7,7 @@ of them, merges their answers and only then sends the next actions. Between two 
 idle, and the operating system is free to wake it on another CPU than the one it ran on, away from its
 caches; it also has to find an idle CPU for it first, while the main process is still running. Pinning
 worker ``i`` to CPU ``i`` (``os.sched_setaffinity``) removes both. On a 2-core virtual machine,
-``eval/bench_vector.py`` measured, for two workers running ``SOfAR-LagunaSeca-v0`` (10 rounds, medians),
+``bench/bench_vector.py`` measured, for two workers running ``SOfAR-LagunaSeca-v0`` (10 rounds, medians),
 that the time from the main process's ``step`` call to the start of the worker waited for falls from 0.38
 to 0.17 ms, and the vector env's throughput rises by 1.23x (per round 1.01x to 1.33x; in
 ``eval/bench_env.py --vector``, whose passes run in separate processes, the gain was within the noise).

@@ -1,4 +1,4 @@
-"""Numeric flags of the eval/ and train/ scripts: a value outside what the flag means (0 or a negative count, a
+"""Numeric flags of the eval/, bench/ and train/ scripts: a value outside what the flag means (0 or a negative count, a
 zero duration, a gamma outside the action range, nan) is a usage error, exit status 2, found while parsing, before
 any work; 0 never stands for "not given". Each script's parser is caught as it parses (nothing runs)."""
 
@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = sorted(str(p.relative_to(ROOT)) for d in ("eval", "train") for p in (ROOT / d).glob("*.py")
+SCRIPTS = sorted(str(p.relative_to(ROOT)) for d in ("eval", "bench", "train") for p in (ROOT / d).glob("*.py")
                  if "parse_args(" in p.read_text())
 _MODULES: dict[str, object] = {}
 
@@ -30,7 +30,7 @@ def _script(path: str):
         spec = importlib.util.spec_from_file_location(f"_flags_{Path(path).stem}_{Path(path).parent.name}", ROOT / path)
         module = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = module  # dataclasses in the script look their module up
-        sys.path.insert(0, str((ROOT / path).parent))  # the eval scripts import their siblings
+        sys.path.insert(0, str((ROOT / path).parent))  # the eval and bench scripts import their siblings
         try:
             spec.loader.exec_module(module)
         finally:
@@ -61,7 +61,8 @@ def test_no_numeric_flag_takes_a_bare_int_or_float(path, parse_only):
     """Every number goes through an argument type of sofar_agents.cli_types (or its own check), never int/float."""
     argv = {"eval/plot_training.py": ["run"], "eval/headroom.py": ["x.csv"], "eval/paired.py": ["x.csv"],
             "eval/interventions.py": ["x.csv"], "eval/trajectories.py": ["record", "--out", "x.npz"],
-            "eval/bench_train.py": ["--compare", "HEAD"], "eval/reference_numerics.py": ["sweep"]}.get(path, [])
+            "eval/bench_train.py": ["--compare", "HEAD"], "eval/reference_numerics.py": ["sweep"],
+            "eval/manifest.py": ["list"]}.get(path, [])
     parser = _run(path, argv).parser
     actions = list(parser._actions)
     for sub in (a for a in parser._actions if isinstance(a, argparse._SubParsersAction)):
@@ -90,12 +91,12 @@ USAGE_ERRORS = [  # (script, argv, the flag named in the message)
     ("eval/pareto.py", ["--workers", "-1"], "--workers"),
     ("eval/bench_env.py", ["--steps", "0"], "--steps"),
     ("eval/bench_env.py", ["--repeats", "0"], "--repeats"),
-    ("eval/bench_miqp.py", ["--repeat", "0"], "--repeat"),
-    ("eval/bench_miqp.py", ["-n", "0"], "-n/--instances"),
-    ("eval/bench_mpc.py", ["--steps", "0"], "--steps"),
+    ("bench/bench_miqp.py", ["--repeat", "0"], "--repeat"),
+    ("bench/bench_miqp.py", ["-n", "0"], "-n/--instances"),
+    ("bench/bench_mpc.py", ["--steps", "0"], "--steps"),
     ("eval/bench_train.py", ["--compare", "HEAD", "--rounds", "0"], "--rounds"),
-    ("eval/bench_vector.py", ["--workers", "0"], "--workers"),
-    ("eval/bench_vector.py", ["--work-ms", "0"], "--work-ms"),
+    ("bench/bench_vector.py", ["--workers", "0"], "--workers"),
+    ("bench/bench_vector.py", ["--work-ms", "0"], "--work-ms"),
     ("eval/contacts.py", ["--heading-extent", "-1"], "--heading-extent"),
     ("eval/interventions.py", ["x.csv", "--workers", "0"], "--workers"),
     ("eval/interventions.py", ["x.csv", "--limit", "0"], "--limit"),

@@ -129,7 +129,7 @@ def test_bench_train_reads_the_collection_time_from_the_tensorboard_log(tmp_path
 
 def test_bench_vector_reports_the_synthetic_ceiling(tmp_path):
     out = tmp_path / "vector.json"
-    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_vector.py"), "--no-sofar", "--steps", "20",
+    subprocess.run([sys.executable, str(ROOT / "bench" / "bench_vector.py"), "--no-sofar", "--steps", "20",
                     "--rounds", "2", "--work-ms", "0.5", "--json", str(out)],
                    check=True, capture_output=True, text=True, timeout=300)
     result = json.loads(out.read_text())
@@ -155,11 +155,11 @@ def test_bench_vector_reports_the_synthetic_ceiling(tmp_path):
 
 
 def test_split_lockstep_on_known_stamps():
-    sys.path.insert(0, str(ROOT / "eval"))
+    sys.path.insert(0, str(ROOT / "bench"))
     try:
         from bench_vector import split_lockstep
     finally:
-        sys.path.remove(str(ROOT / "eval"))
+        sys.path.remove(str(ROOT / "bench"))
     # two vector steps [s]: the main process calls at 0 and 10, each worker starts 1 later, works 3 or 5
     calls = np.array([[0.0, 8.0], [10.0, 17.0]])
     stamps = [np.array([[1.0, 4.0], [11.0, 14.0]]), np.array([[1.0, 6.0], [12.0, 15.0]])]
@@ -178,11 +178,11 @@ def test_split_lockstep_on_known_stamps():
 
 
 def test_synthetic_env_burns_the_cpu_time_it_is_given():
-    sys.path.insert(0, str(ROOT / "eval"))
+    sys.path.insert(0, str(ROOT / "bench"))
     try:
         from bench_vector import SyntheticEnv
     finally:
-        sys.path.remove(str(ROOT / "eval"))
+        sys.path.remove(str(ROOT / "bench"))
     env = SyntheticEnv(work_ms=20.0, info_keys=5)
     obs, _ = env.reset(seed=0)
     assert env.observation_space.contains(obs)
@@ -197,6 +197,6 @@ def test_synthetic_env_burns_the_cpu_time_it_is_given():
 @pytest.mark.parametrize("bad", [["--workers", "0"], ["--steps", "0"], ["--rounds", "0"], ["--work-ms", "0"],
                                  ["--info-keys", "-1"]])
 def test_bench_vector_rejects_bad_options(bad):
-    proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_vector.py"), "--no-sofar", *bad],
+    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "bench_vector.py"), "--no-sofar", *bad],
                           check=False, capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0 and bad[0] in proc.stderr

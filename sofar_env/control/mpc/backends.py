@@ -1,7 +1,7 @@
 """QP backends of the real-time iteration: PIQP (default), DAQP (condensed, dense) and OSQP (comparison only).
 
 * ``"piqp"``: proximal interior point, eps_abs 1e-7; on the 600-step closed loop of
-  ``eval/bench_mpc.py`` its first control differs from a 1e-11-tolerance solve from the
+  ``bench/bench_mpc.py`` its first control differs from a 1e-11-tolerance solve from the
   same warm start by 1e-5 m/s^2 (p95), at most 1.2e-3 m/s^2; with ``qp_eps_rel = 1e-9``
   by 4e-7 (p95), at most 3.4e-5 m/s^2, for about 0.5 more interior-point iterations per
   solve (5-6 median);

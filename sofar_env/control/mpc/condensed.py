@@ -30,7 +30,7 @@ optimal (1) or soft-optimal (2), data outside this contract (ValueError) or a no
 the model (the next solve sets up afresh) and are reported as a failure (-> fallback), as with the other
 backends (:func:`~.backends.solve_qp`).
 
-Accuracy and cost (``eval/bench_qp_backends.py``, 309 QPs of a 300-step closed loop, against PIQP at
+Accuracy and cost (``bench/bench_qp_backends.py``, 309 QPs of a 300-step closed loop, against PIQP at
 tolerances 1e-11): first input within 4e-8, plan within 3e-7 (PIQP at its defaults: 5e-6 and 5e-3);
 CPU time per solve median 0.18 ms against PIQP's 0.16 ms (p95 0.26 against 0.29 ms): about 0.05 ms the
 condensing (one compiled kernel, :func:`_condense`, compiled on first use and cached as the package's other

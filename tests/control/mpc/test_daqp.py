@@ -1,6 +1,6 @@
 """The DAQP backend (``qp_solver = "daqp"``): the condensed QP with soft rows is the sparse QP.
 
-Agreement is checked on the QPs of short closed loops (the ring road of ``eval/bench_mpc.py``; the
+Agreement is checked on the QPs of short closed loops (the ring road of ``bench/bench_mpc.py``; the
 reference-point track rows and, with ``track_rows = "ends"``, the explicit track slack) against a
 tight reference (PIQP, fresh set-up, tolerances 1e-11). DAQP's active-set solution is exact up to
 rounding and its primal tolerance 1e-9, so it must sit much closer to the reference than PIQP at its
@@ -23,16 +23,16 @@ from sofar_env.errors import ConfigError
 
 from .scenarios import make_stage
 
-EVAL = Path(__file__).resolve().parents[3] / "eval"
+BENCH = Path(__file__).resolve().parents[3] / "bench"
 
 
 @pytest.fixture(scope="module")
 def bench():
-    sys.path.insert(0, str(EVAL))
+    sys.path.insert(0, str(BENCH))
     try:
         yield importlib.import_module("bench_qp_backends")
     finally:
-        sys.path.remove(str(EVAL))
+        sys.path.remove(str(BENCH))
 
 
 def test_config_accepts_daqp():

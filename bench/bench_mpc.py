@@ -15,7 +15,7 @@ machine load affects them alike:
 
 Usage::
 
-    python eval/bench_mpc.py [--steps 600] [--gamma 0.3] [--seed 0] [--json out.json]
+    python bench/bench_mpc.py [--steps 600] [--gamma 0.3] [--seed 0] [--json out.json]
 
 Writes a table of per-solve wall-clock times (median, p95, mean, std in ms), QP and
 SQP iterations, failures, the smallest barrier value and the number of collisions.

@@ -9,11 +9,11 @@ loop. Both solvers must choose the same sides and reach the same objective. The 
 twice: as configured (``daqp``: starting from the incumbent of ``MIQPConfig.incumbent``) and without the
 incumbent (``daqp-plain``); the two must return the same plans to the bit.
 
-    python eval/bench_miqp.py                 # 300 instances
-    python eval/bench_miqp.py -n 100 --json out.json
-    python eval/bench_miqp.py --mode snapshot     # independent states, opponents alongside
-    python eval/bench_miqp.py --closing-decel 10  # braking-distance window as in the stack
-    python eval/bench_miqp.py --from-env paper --steps 3000   # the branch-and-bound calls of the env
+    python bench/bench_miqp.py                 # 300 instances
+    python bench/bench_miqp.py -n 100 --json out.json
+    python bench/bench_miqp.py --mode snapshot     # independent states, opponents alongside
+    python bench/bench_miqp.py --closing-decel 10  # braking-distance window as in the stack
+    python bench/bench_miqp.py --from-env paper --steps 3000   # the branch-and-bound calls of the env
 
 ``--from-env WORLD`` times the problems the stack's planner hands to DAQP in a seeded closed loop of
 ``SOfAR-LagunaSeca-v0`` (``paper`` or ``interactive`` world, 4 opponents at ``--rho``, gamma 0.5): the run

@@ -1,6 +1,6 @@
 """The MPC's QP backends on the same QPs: PIQP (sparse, default) against DAQP (condensed, dense).
 
-Records the QPs of a closed loop of ``eval/bench_mpc.py``'s ring road (PIQP in the loop), then
+Records the QPs of a closed loop of ``bench/bench_mpc.py``'s ring road (PIQP in the loop), then
 solves each recorded QP with both backends, interleaved (PIQP, DAQP, PIQP, ...), each keeping
 one solver per pattern as in the controller, and with a tight reference (PIQP, fresh set-up,
 tolerances 1e-11). Reports the per-solve CPU time (``time.thread_time``) and the largest
@@ -9,7 +9,7 @@ differences to the reference of the first input ``du_0`` and of the plan (all ``
 
 Usage::
 
-    python eval/bench_qp_backends.py [--steps 300] [--gamma 0.3] [--seed 0] [--repeat 3]
+    python bench/bench_qp_backends.py [--steps 300] [--gamma 0.3] [--seed 0] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_mpc import World, stage_data  # noqa: E402
 
+from sofar_agents.cli_types import gamma_value, nonneg_int, positive_int  # noqa: E402
 from sofar_env.control import MPCConfig, MPCDCBF  # noqa: E402
 from sofar_env.control.mpc import backends, rti  # noqa: E402
 
@@ -101,10 +102,10 @@ def accuracy(qps: list[tuple], sol: dict, name: str, other: str = "ref") -> dict
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=300)
-    parser.add_argument("--gamma", type=float, default=0.3)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--repeat", type=int, default=3, help="timing passes over the recorded QPs")
+    parser.add_argument("--steps", type=positive_int, default=300, help="closed-loop steps recorded (default 300)")
+    parser.add_argument("--gamma", type=gamma_value, default=0.3, help="DCBF decay (default 0.3)")
+    parser.add_argument("--seed", type=nonneg_int, default=0)
+    parser.add_argument("--repeat", type=positive_int, default=3, help="timing passes over the recorded QPs")
     args = parser.parse_args(argv)
     qps = record_qps(args.steps, args.gamma, args.seed)
     sol = solve_all(qps)

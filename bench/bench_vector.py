@@ -2,7 +2,7 @@
 
 Usage::
 
-    python eval/bench_vector.py [--workers 2] [--steps 600] [--rounds 3] [--work-ms 1.0]
+    python bench/bench_vector.py [--workers 2] [--steps 600] [--rounds 3] [--work-ms 1.0]
                                 [--info-keys 18] [--no-sofar] [--json PATH]
 
 A vector env of N workers steps in lock-step: the main process sends every worker its action,
