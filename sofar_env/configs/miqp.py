@@ -74,7 +74,8 @@ class MIQPConfig:
     this now keeps the ego on the side of it where the ego is (its cluster's binary is fixed to
     that side): two cars alongside cannot swap sides through each other; and two such cars on
     either side of the ego are never linked into one cluster (the ego is already between them).
-    0 (the default) turns the lock off."""
+    0 (the default) turns the lock off; multi-car races set it through ``race.side_lock``. Decision:
+    ``docs/decisions/multi-car-defaults.md``."""
     solver: str = choice("daqp", ("daqp", "enumerate"))
     """"daqp" (DAQP branch-and-bound) or "enumerate" (one QP per side pattern)."""
     incumbent: bool = flag(True)

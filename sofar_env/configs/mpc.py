@@ -31,10 +31,9 @@ class BarrierParams:
     heading_extent: float = real(0.0, ge=0.0, unit="m")
     """Widening of the lateral semi-axis with the heading error e of the ego to the track and the course
     angle c of the opponent: ``b + heading_extent (|sin e|_eps + |sin c|_eps)``, with the smooth
-    ``|x|_eps = sqrt(x^2 + eps^2) - eps``, eps = 0.01. A car turned by e reaches ``(length / 2) |sin e|``
-    further across the track than an aligned one, so half the car length (2.45 m) covers both cars'
-    rotation (the opponent's where it is known, see :func:`barrier_expr`). 0 (the default): the ellipse
-    of aligned cars [m]."""
+    ``|x|_eps = sqrt(x^2 + eps^2) - eps``, eps = 0.01 (the opponent's course angle where it is known, see
+    :func:`barrier_expr`). 0 (the default): the ellipse of aligned cars [m], >= 0. Multi-car races set it
+    through ``race.heading_extent``; decision: ``docs/decisions/multi-car-defaults.md``."""
 
     def __post_init__(self) -> None:
         check_fields(self, "stack.mpc.barrier")
@@ -121,7 +120,7 @@ class MPCConfig:
     """A warm-started solve whose largest DCBF slack exceeds this is solved once more from a cold guess
     (constant lateral offset, never through an opponent ahead), and the result with the smaller DCBF
     slack is kept (:mod:`.rti`, "Restart"). inf: never (the default; multi-car races set it through
-    ``race.mpc_restart_slack``) [-]."""
+    ``race.mpc_restart_slack``) [-], > 0. Decision: ``docs/decisions/multi-car-defaults.md``."""
 
     def __post_init__(self) -> None:
         check_fields(self, "stack.mpc")

@@ -78,7 +78,8 @@ class RaceConfig:
     """Multi-car races: the controlled cars' passing-side planners keep the side of every car within this
     arc-length gap, i.e. alongside (``stack.miqp.alongside_gap``, see :mod:`sofar_env.planning.miqp`), unless
     the user's keys set that gap themselves (the multi-car layer,
-    :func:`~sofar_env.configs.resolve.multi_car_overrides`); 0 turns it off. No effect in single-car races [m]."""
+    :func:`~sofar_env.configs.resolve.multi_car_overrides`); 0 turns it off. No effect in single-car races [m],
+    >= 0. Decision: ``docs/decisions/multi-car-defaults.md``."""
     lateral_rates: str = choice("mpc", LATERAL_RATES)
     """Multi-car races: what the controllers do with the other cars' lateral rates n_dot (the true rates, or
     the sensor's estimates with ``race.sensor`` on). ``"mpc"``: each controller's MPC gets them (its barrier
@@ -86,19 +87,19 @@ class RaceConfig:
     (``stack.lateral_prediction_plan`` False); ``"all"``: the planners also see each car where its move ends;
     ``"off"``: without a sensor, rows (s, n, v) only, as in single-car races of the paper's world. The user's
     own ``stack.lateral_prediction_plan`` wins. No effect in single-car races and with ``stack.lateral_prediction``
-    off (the paper preset)."""
+    off (the paper preset). Decision: ``docs/decisions/multi-car-defaults.md``."""
     mpc_restart_slack: float = real(0.05, gt=0.0, inf="off")
     """Multi-car races: the controlled cars' MPCs solve once more from a cold guess when a warm-started solve
     needs more DCBF slack than this, and keep the better solution (``stack.mpc.restart_slack``, see
     :mod:`sofar_env.control.mpc.rti`), unless the user's keys set ``stack.mpc.restart_slack``; inf turns it off.
-    No effect in single-car races [-]."""
+    No effect in single-car races [-], > 0. Decision: ``docs/decisions/multi-car-defaults.md``."""
     heading_extent: float = real(2.45, ge=0.0, unit="m")
     """Multi-car races: the controlled cars' barrier widens its lateral semi-axis with the car's own heading
     error to the track and the other car's course angle (from its lateral rate; ``stack.mpc.barrier.
-    heading_extent``, see :mod:`sofar_env.control.barrier`; half the car length covers a car's rotation),
-    unless the user's keys set ``stack.mpc.barrier.heading_extent``; 0 turns it off. The rewards and the
-    observation measure the barrier without this widening (:class:`~sofar_env.core.ControlledRace`). No effect
-    in single-car races [m]."""
+    heading_extent``, see :mod:`sofar_env.control.barrier`), unless the user's keys set
+    ``stack.mpc.barrier.heading_extent``; 0 turns it off. The rewards and the observation measure the barrier
+    without this widening (:class:`~sofar_env.core.ControlledRace`). No effect in single-car races [m], >= 0.
+    Decision: ``docs/decisions/multi-car-defaults.md``."""
     vehicle: VehicleParams = nested(VehicleParams, default=AV21)
     """Parameters of every car."""
     opponents: OpponentConfig = nested(OpponentConfig)
