@@ -98,11 +98,8 @@ class ReferenceNumerics:
     a_brake: float = real(10.0, gt=0.0, unit="m/s^2")
     """Braking deceleration of the barrier's closing-speed term ``max(0, v - v_o)^2 / (2 a_brake)`` [m/s^2]."""
     track_margin: float = real(1.2, ge=0.0, unit="m")
-    """Distance kept between the reference point and the track edges [m]. The reference keeps 0.85 m, with
-    an edge rule that lets the car's centre pass 0.75 m beyond the edge; in the project's worlds a car off
-    the track by any part of its footprint is out, so the project's margin (``MPCConfig.track_margin``) is
-    kept: with 0.85 m the car clips the edge on narrow straights whatever gamma, a difference of the world's
-    rules, not of the numerics."""
+    """Distance kept between the reference point and the track edges [m], >= 0 (the project's margin,
+    ``MPCConfig.track_margin``, not the reference's). Decision: ``docs/decisions/reference-numerics-track-margin.md``."""
     lat_acc_max: float = real(15.0, gt=0.0, unit="m/s^2")
     """Bound on |a_lat| [m/s^2] (soft)."""
     rk_steps: int = integer(4, ge=1)
