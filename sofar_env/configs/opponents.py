@@ -15,12 +15,7 @@ all off by default so that the default field is the paper's:
   when any behaviour is on: with equal paces and fixed offsets, as in the paper,
   cars never close on each other).
 
-The numbers follow the opponent models of racing research: the reactive blocking
-opponents of the game-racer project (wulemao/game-racer) vary a speed factor on
-the raceline speed in [0.85, 1.1] and a blocking weight in [0, 1], which suggests
-a pace spread of 10-15 % and an aggressiveness drawn per car; the defence follows
-the etiquette commonly modelled (one defensive move per approach, no move once
-the attacker is alongside).
+Where the numbers come from: ``docs/decisions/interactive-opponents.md``.
 """
 
 from __future__ import annotations
