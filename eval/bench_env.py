@@ -4,7 +4,7 @@ Usage::
 
     python eval/bench_env.py [--steps 1000] [--track LagunaSeca] [--rho 0.5] [--opponents 4]
                              [--gamma 0.5] [--seed 0] [--repeats 3] [--vector N] [--json PATH]
-                             [--scenario paper|interactive] [--compare REV [--rounds 5]]
+                             [--scenario paper|interactive] [--compare REV | --compare-stack JSON [--rounds 5]]
 
 Two passes over the same seeded episodes:
 
@@ -27,8 +27,12 @@ processes (the set-up ``train/pasta.py`` uses: each worker pinned to a CPU of it
 With ``--compare REV`` the script instead runs an interleaved A/B against the git revision
 ``REV`` (see :mod:`bench_compare`, next to this script): the revision is exported into a
 temporary directory, and rounds of one timed pass of the old code and one of the working
-tree alternate, each in a fresh subprocess whose ``PYTHONPATH`` selects the package; the
-medians, spreads, per-component breakdowns and their ratio are reported.
+tree alternate, each in a fresh subprocess (:mod:`bench_pass`) whose ``PYTHONPATH`` selects the
+package and which makes the env through the public constructor only (``gymnasium.make`` of the
+registered id), so revisions from before this script's own imports run too; the medians and
+spreads of the CPU time (``time.process_time``) and the wall time per step, and their ratios,
+are reported. ``--compare-stack JSON`` runs the same A/B in the working tree between the default
+controller and the controller overrides JSON (e.g. ``'{"mpc": {"qp_solver": "daqp"}}'``).
 
 The host's 1-minute load average and the time of a fixed reference workload
 (:func:`reference_workload_ms`, independent of the package) are printed and stored: on
@@ -178,7 +182,7 @@ def run_vector(args: argparse.Namespace) -> dict:
     Worker i runs the benchmark's env seeded ``args.seed + i``; episodes that end are reset by the
     vector env (next-step autoreset), and the steps that only reset are not counted. The workers are
     pinned to a CPU each (:mod:`sofar_env.vector`) unless ``--no-pin``, or when the package predates
-    that module (the old side of ``--compare``: its vector env never pinned).
+    that module (older revisions: their vector env never pinned).
     """
     import functools
 
@@ -256,7 +260,8 @@ def _load_average() -> float | None:
         return None
 
 
-def main(argv: list[str] | None = None) -> dict:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of this script."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=positive_int, default=1000, help="timed env steps per pass (default 1000)")
     parser.add_argument("--track", default="LagunaSeca")
@@ -279,18 +284,41 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
                         help=f"the controller preset, one of {', '.join(STACK_PRESETS)} (default sofar)")
     parser.add_argument("--compare", default=None, metavar="REV",
-                        help="interleaved A/B against the git revision REV instead of a plain run "
-                             "(each pass in a fresh subprocess; see eval/bench_compare.py)")
+                        help="interleaved A/B against the git revision REV instead of a plain run: CPU and wall "
+                             "time per step, each pass in a fresh subprocess (see eval/bench_compare.py)")
+    parser.add_argument("--compare-stack", default=None, metavar="JSON",
+                        help="interleaved A/B in the working tree instead of a plain run: the default controller "
+                             "against these controller overrides, e.g. '{\"mpc\": {\"qp_solver\": \"daqp\"}}'")
     parser.add_argument("--rounds", type=positive_int, default=5,
-                        help="with --compare: rounds of one pass of each revision, alternating (default 5)")
+                        help="with --compare or --compare-stack: rounds of one pass of each side, alternating "
+                             "(default 5)")
     parser.add_argument("--no-breakdown", action="store_true",
                         help="skip the instrumented pass (per-component breakdown)")
     parser.add_argument("--json", default=None, help="also write the results to this JSON file")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = build_parser()
     args = parser.parse_args(argv)
+    if args.compare is not None and args.compare_stack is not None:
+        parser.error("--compare and --compare-stack are two modes: give one")
+    if args.compare_stack is not None:
+        try:
+            stack = json.loads(args.compare_stack)
+        except json.JSONDecodeError as exc:
+            parser.error(f"--compare-stack must be a JSON object: {exc}")
+        if not isinstance(stack, dict):
+            parser.error("--compare-stack must be a JSON object of controller overrides")
+        if args.stack != "sofar":
+            parser.error("--compare-stack compares with the default controller: leave out --stack")
+        from bench_compare import compare_stacks
+
+        return compare_stacks(args, stack)
     if args.compare is not None:
         from bench_compare import compare_revisions
 
-        return compare_revisions(args, argv if argv is not None else sys.argv[1:])
+        return compare_revisions(args)
 
     def make() -> SOfARRaceEnv:
         env = SOfARRaceEnv(track=args.track, rho=args.rho, n_opponents=args.opponents, timing_info=True,

@@ -1,0 +1,106 @@
+"""eval/bench_env.py --compare and --compare-stack (eval/bench_compare.py, eval/bench_pass.py): the passes are made
+through the public constructor only, time CPU and wall time, and the table reports their ratios."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _eval_module(name: str):
+    sys.path.insert(0, str(ROOT / "eval"))
+    try:
+        return __import__(name)
+    finally:
+        sys.path.remove(str(ROOT / "eval"))
+
+
+def test_compare_builds_passes_through_the_public_constructor(tmp_path):
+    """A pass of --compare is gymnasium.make of the registered id with keys every revision accepts; the world
+    and the controller are added only where they are not the defaults, the comparison's own options stay out."""
+    bench_env, bench_compare = _eval_module("bench_env"), _eval_module("bench_compare")
+    args = bench_env.build_parser().parse_args(["--compare", "2e40063", "--steps", "50", "--rounds=3",
+                                                "--json", "x.json", "--repeats", "2"])
+    env_id, kwargs = bench_compare.env_spec(args)
+    assert env_id == "SOfAR-LagunaSeca-v0"
+    assert kwargs == {"rho": 0.5, "n_opponents": 4, "timing_info": False}
+    cmd = bench_compare.pass_command(env_id, kwargs, args, tmp_path / "p.json")
+    assert cmd[1] == str(ROOT / "eval" / "bench_pass.py")
+    options = dict(zip(cmd[2::2], cmd[3::2]))
+    assert options == {"--env-id": env_id, "--kwargs": json.dumps(kwargs), "--steps": "50", "--gamma": "0.5",
+                       "--seed": "0", "--json": str(tmp_path / "p.json")}
+    args = bench_env.build_parser().parse_args(["--compare", "main", "--scenario", "interactive", "--stack", "paper",
+                                                "--opponents", "2", "--rho", "0.7", "--track", "Monza",
+                                                "--vector", "2"])
+    env_id, kwargs = bench_compare.env_spec(args)
+    assert env_id == "SOfAR-Monza-v0"
+    assert kwargs == {"rho": 0.7, "n_opponents": 2, "timing_info": False, "scenario": "interactive",
+                      "stack": "paper"}
+    assert bench_compare.pass_command(env_id, kwargs, args, tmp_path / "p.json")[-2:] == ["--vector", "2"]
+    # --compare-stack: the overrides replace the preset on the new side only
+    overrides = {"mpc": {"qp_solver": "daqp"}}
+    assert bench_compare.env_spec(bench_env.build_parser().parse_args([]), stack=overrides)[1]["stack"] == overrides
+
+
+def _pass(cpu_ms: float, wall_ms: float) -> dict:
+    return {"cpu_ms_per_step": cpu_ms, "wall_ms_per_step": wall_ms, "steps_per_s": 1e3 / wall_ms,
+            "step_ms": {"median": wall_ms}, "episodes_ended": 0, "reference_workload_ms": {"after": 10.0},
+            "load_average_1min": {"after": 1.0}}
+
+
+def test_compare_table_reports_cpu_and_wall_time_ratios(capsys):
+    bench_compare = _eval_module("bench_compare")
+    old = [_pass(2.0, 3.0), _pass(2.2, 5.0), _pass(1.8, 2.5)]
+    new = [_pass(1.0, 2.0), _pass(1.0, 2.5), _pass(1.2, 2.0)]
+    side = bench_compare._side_summary(old)
+    assert side["cpu_ms_per_step"]["median"] == pytest.approx(2.0)
+    assert (side["cpu_ms_per_step"]["min"], side["cpu_ms_per_step"]["max"]) == pytest.approx((1.8, 2.2))
+    assert side["wall_ms_per_step"]["median"] == pytest.approx(3.0)
+    ratio = bench_compare.ratios(old, new)
+    assert ratio["cpu_ms_per_step"]["of_medians"] == pytest.approx(1.0 / 2.0)
+    # per round: each new pass over the old pass of its round
+    assert ratio["cpu_ms_per_step"]["per_round"]["values"] == pytest.approx([0.5, 1.0 / 2.2, 1.2 / 1.8])
+    assert ratio["cpu_ms_per_step"]["per_round"]["median"] == pytest.approx(0.5)
+    assert ratio["wall_ms_per_step"]["of_medians"] == pytest.approx(2.0 / 3.0)
+    assert ratio["steps_per_s"]["of_medians"] == pytest.approx(1.5)
+    result = {"track": "LagunaSeca", "scenario": "paper", "stack": "sofar", "rho": 0.5, "opponents": 4,
+              "gamma": 0.5, "steps": 10, "rounds": 3, "seed": 0, "cpu_count": 2, "ratio": ratio,
+              "old": {"rev": "2e40063", "commit": "2e40063" + "0" * 33, **side},
+              "new": {"rev": "working tree", "commit": "f" * 40, "dirty": True,
+                      **bench_compare._side_summary(new)}}
+    bench_compare._print(result)
+    out = capsys.readouterr().out
+    assert "old 2e40063 (2e4006300): 2.000 ms CPU per step median [1.800, 2.200], 3.000 ms wall" in out
+    assert "new working tree (fffffffff, modified): 1.000 ms CPU per step median" in out
+    assert "CPU time per step new/old: 0.500 of the medians; per round median 0.500 [0.455, 0.667]" in out
+    assert "wall time per step new/old: 0.667 of the medians" in out
+
+
+@pytest.mark.parametrize("argv", [
+    ["--compare", "HEAD", "--compare-stack", "{}"],                   # two modes
+    ["--compare-stack", "[1]"],                                        # not an object
+    ["--compare-stack", "{mpc"],                                       # not JSON
+    ["--compare-stack", '{"mpc": {"qp_solver": "daqp"}}', "--stack", "paper"],  # overrides of the default only
+])
+def test_compare_stack_rejects_bad_arguments(argv):
+    proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), *argv],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "--compare" in proc.stderr
+
+
+def test_a_pass_times_cpu_and_wall_time_of_the_package_it_imports(tmp_path):
+    out = tmp_path / "pass.json"
+    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_pass.py"), "--kwargs",
+                    '{"n_opponents": 1, "timing_info": false}', "--steps", "5", "--warm-up", "1", "--json", str(out)],
+                   check=True, capture_output=True, text=True, timeout=300, cwd=str(tmp_path))
+    res = json.loads(out.read_text())
+    assert res["steps"] == 5 and res["env_id"] == "SOfAR-LagunaSeca-v0"
+    assert res["cpu_ms_per_step"] > 0 and res["wall_ms_per_step"] > 0
+    assert res["cpu_s"] == pytest.approx(5e-3 * res["cpu_ms_per_step"])
+    assert Path(res["package"]) == ROOT / "sofar_env"
