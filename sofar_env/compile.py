@@ -11,10 +11,14 @@ Usage::
 
     python -m sofar_env.compile                       # every world
     python -m sofar_env.compile --worlds paper        # only the paper world
+    python -m sofar_env.compile --qp-solvers          # without the optional QP backends' kernels
 
-A warm-up races two short races per world on one circuit, with opponents close enough for
+A warm-up races short races per world on one circuit, with opponents close enough for
 every part of the controller to run (the MPC's barrier rows, the passing-side planner), and
-changes nothing else: the environments built afterwards behave exactly as without it.
+changes nothing else: the environments built afterwards behave exactly as without it. The
+MPC's optional QP backends that have kernels of their own (:data:`QP_SOLVERS`: DAQP's
+condensing, ``MPCConfig.qp_solver="daqp"``) are compiled by one more short race each, in the
+first world warmed up.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ import numpy as np
 
 from .scenarios import SCENARIOS
 
-__all__ = ["WARM_UP_RACES", "warm_up", "world_of", "main"]
+__all__ = ["WARM_UP_RACES", "QP_SOLVERS", "warm_up", "world_of", "main"]
 
 logger = logging.getLogger(__name__)
 
@@ -37,31 +41,52 @@ WARM_UP_RACES: tuple[tuple[float, ...], ...] = ((12.0, 25.0, 40.0, 300.0), (12.0
 """Opponent gaps ahead of the ego [m] of the warm-up races: every opponent in the MPC's window, then one."""
 _STEPS = 3
 """Control steps per warm-up race."""
+QP_SOLVERS: tuple[str, ...] = ("daqp",)
+"""The MPC's QP backends (``MPCConfig.qp_solver``) other than the default whose kernels the warm-up compiles:
+``"daqp"``, the condensing of :mod:`sofar_env.control.mpc.condensed`."""
 
 
-def warm_up(worlds: Iterable[str] = SCENARIOS, track: str = "LagunaSeca", multi_agent: bool = True) -> dict[str, float]:
+def _race(track: str, world: str, gaps: tuple[float, ...], **kwargs: Any) -> None:
+    """A few control steps of one warm-up race with opponents at ``gaps`` ahead."""
+    from .env import SOfARRaceEnv
+
+    opponents = {"n_opponents": len(gaps), "gaps": gaps, "offsets": (0.0, 1.0, -1.0, 0.0)}
+    env = SOfARRaceEnv(track=track, scenario=world, race={"duration": 1.0, "opponents": opponents}, **kwargs)
+    env.reset(seed=0)
+    for _ in range(_STEPS):
+        env.step(np.array([0.5], np.float32))
+    env.close()
+
+
+def warm_up(worlds: Iterable[str] = SCENARIOS, track: str = "LagunaSeca", multi_agent: bool = True,
+            qp_solvers: Iterable[str] = QP_SOLVERS) -> dict[str, float]:
     """Compile (or load from the cache) the per-step kernels of ``worlds`` by racing a few steps of each.
 
     ``multi_agent`` adds a few steps of a 2-car PettingZoo race (the kernels only several controlled
-    cars use). Returns the wall time per world (and ``"multi-agent"``) [s]: tens of seconds where the
+    cars use); ``qp_solvers`` (of :data:`QP_SOLVERS`) a short race per QP backend with the MPC on that
+    backend, in the first of ``worlds`` (the paper world where none is given). Returns the wall time per
+    world (and ``"multi-agent"``, and per QP backend, e.g. ``"daqp"``) [s]: tens of seconds where the
     kernels were compiled, well under one second where they were cached. The first kernel compiled in
     a process logs one INFO line (:mod:`sofar_env._jit`).
     """
-    from .env import SOfARRaceEnv
-
-    times: dict[str, float] = {}
+    worlds, qp_solvers = list(worlds), list(qp_solvers)
     for world in worlds:
         if world not in SCENARIOS:
             raise ValueError(f"unknown world {world!r}; valid worlds: {', '.join(SCENARIOS)}")
+    for solver in qp_solvers:
+        if solver not in QP_SOLVERS:
+            raise ValueError(f"no kernels to compile for QP solver {solver!r}; solvers with kernels: "
+                             f"{', '.join(QP_SOLVERS)}")
+    times: dict[str, float] = {}
+    for world in worlds:
         t0 = time.perf_counter()
         for gaps in WARM_UP_RACES:
-            opponents = {"n_opponents": len(gaps), "gaps": gaps, "offsets": (0.0, 1.0, -1.0, 0.0)}
-            env = SOfARRaceEnv(track=track, scenario=world, race={"duration": 1.0, "opponents": opponents})
-            env.reset(seed=0)
-            for _ in range(_STEPS):
-                env.step(np.array([0.5], np.float32))
-            env.close()
+            _race(track, world, gaps)
         times[world] = time.perf_counter() - t0
+    for solver in qp_solvers:
+        t0 = time.perf_counter()
+        _race(track, worlds[0] if worlds else "paper", WARM_UP_RACES[0], stack={"mpc": {"qp_solver": solver}})
+        times[solver] = time.perf_counter() - t0
     if multi_agent:
         from .multi_agent import parallel_env
 
@@ -99,11 +124,16 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                         help=f"worlds to compile, of {', '.join(SCENARIOS)} (default: all)")
     parser.add_argument("--track", default="LagunaSeca", help="circuit of the warm-up races (default LagunaSeca)")
     parser.add_argument("--no-multi-agent", action="store_true", help="leave out the PettingZoo race")
+    parser.add_argument("--qp-solvers", nargs="*", choices=QP_SOLVERS, default=list(QP_SOLVERS),
+                        help=f"optional MPC QP backends whose kernels to compile, of {', '.join(QP_SOLVERS)} "
+                             "(default: all; none after the flag: none)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    times = warm_up(args.worlds, track=args.track, multi_agent=not args.no_multi_agent)
-    for world, seconds in times.items():
-        logger.info("%s: kernels ready in %.1f s", world if world == "multi-agent" else f"{world} world", seconds)
+    times = warm_up(args.worlds, track=args.track, multi_agent=not args.no_multi_agent, qp_solvers=args.qp_solvers)
+    for name, seconds in times.items():
+        label = (f"{name} world" if name in SCENARIOS else "multi-agent" if name == "multi-agent"
+                 else f"MPC QP solver {name}")
+        logger.info("%s: kernels ready in %.1f s", label, seconds)
     return times
 
 

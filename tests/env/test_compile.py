@@ -4,21 +4,23 @@ from __future__ import annotations
 
 import logging
 import math
+import subprocess
+import sys
 
 import numba
 import pytest
 
 import sofar_env  # noqa: F401  (registers the ids)
 from sofar_env import _jit
-from sofar_env.compile import main, warm_up, world_of
+from sofar_env.compile import QP_SOLVERS, main, warm_up, world_of
 from sofar_env.scenarios import SCENARIOS
 
 
 def test_warm_up_races_a_few_steps_of_every_world() -> None:
     times = warm_up(SCENARIOS)
-    assert set(times) == {*SCENARIOS, "multi-agent"}
+    assert set(times) == {*SCENARIOS, "multi-agent", *QP_SOLVERS}
     assert all(math.isfinite(t) and t > 0.0 for t in times.values())
-    assert set(warm_up(["paper"], multi_agent=False)) == {"paper"}
+    assert set(warm_up(["paper"], multi_agent=False, qp_solvers=())) == {"paper"}
     with pytest.raises(ValueError, match="valid worlds"):
         warm_up(["moon"])
 
@@ -27,6 +29,26 @@ def test_the_command_line_logs_each_world(caplog) -> None:
     with caplog.at_level(logging.INFO, logger="sofar_env.compile"):
         main(["--worlds", "paper", "--no-multi-agent"])
     assert any("paper world: kernels ready in" in r.getMessage() for r in caplog.records)
+    assert any("MPC QP solver daqp: kernels ready in" in r.getMessage() for r in caplog.records)
+
+
+def test_warm_up_compiles_the_daqp_condensing_kernel() -> None:
+    """The DAQP backend's condensing kernel is compiled (or loaded from the cache) by the warm-up, in a race with
+    the MPC on DAQP, and only then (a fresh process: no kernel loaded before)."""
+    code = """
+from sofar_env.compile import warm_up
+from sofar_env.control.mpc import condensed
+assert not condensed._condense.signatures
+warm_up(["paper"], multi_agent=False, qp_solvers=())
+assert not condensed._condense.signatures, "compiled without the DAQP race"
+times = warm_up([], multi_agent=False)
+assert set(times) == {"daqp"}, times
+assert condensed._condense.signatures, "not compiled by the warm-up"
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    with pytest.raises(ValueError, match="solvers with kernels: daqp"):
+        warm_up([], multi_agent=False, qp_solvers=["osqp"])
 
 
 def test_the_first_compilation_in_a_process_logs_one_line(caplog, monkeypatch) -> None:
