@@ -21,6 +21,7 @@ both ends of gamma and writes ``road.md``, next to what acados' own solver gave 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import sys
 from pathlib import Path
@@ -157,8 +158,29 @@ def run_table(args) -> str:
                 comparisons.append(ev.paired_comparison(pooled, f"{STACK}:{Strategy.fixed(g).name}", mid))
             except ValueError:
                 continue
-    lines += ["\n## Paired tests (exact McNemar, episodes matched by circuit, rho and seed)\n",
-              ev.format_paired(comparisons)]
+    groups = {"road courses": ("LagunaSeca", "Monza"), "ovals": ("Indianapolis", "Kentucky")}
+    by_group = []
+    for group, tracks in groups.items():
+        sub = {"all": [r for r in pooled["all"] if r["track"] in tracks]}
+        for g in (0.05, 0.95):
+            for mid in mids:
+                try:
+                    c = ev.paired_comparison(sub, f"{STACK}:{Strategy.fixed(g).name}", mid)
+                except ValueError:
+                    continue
+                by_group.append(dataclasses.replace(c, a=f"{c.a}, {group}"))
+    refnum = [r for r in rows if (r.get("stack") or "sofar") == STACK]
+    points = th.sweep_points(refnum)
+    lines += ["\n## Solver failures under the bug-compatible controller\n",
+              "| γ | episodes | success [%] | episodes with a failed solve | failed episodes with a failed solve |",
+              "|---:|---:|---:|---:|---:|",
+              *(f"| {p.gamma:g} | {p.episodes} | {100 * p.success_rate:.0f} | {p.solver_failure_episodes} "
+                f"| {p.failed_with_solver_failure} of {p.failed} |" for p in points),
+              "\n## Paired tests (exact McNemar, episodes matched by circuit, rho and seed)\n",
+              ev.format_paired(comparisons),
+              "\n### The extremes against the middle gammas: road courses (Laguna Seca, Monza) and ovals "
+              "(Indianapolis, Kentucky)\n",
+              ev.format_paired(by_group)]
     text = "\n".join(lines)
     ev.write_markdown(Path(args.out) / "table1_compare.md", text)
     return text
