@@ -69,7 +69,11 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="Table I episodes of stack='paper' on the same seed")
     t.add_argument("--sofar-csv", default="results/table1_episodes.csv",
                    help="Table I episodes of stack='sofar' on the same seed")
-    t.add_argument("--summarize", action="store_true", help="run nothing; re-make table1_compare.md")
+    t.add_argument("--gammas", nargs="+", type=gamma_value, default=list(FIXED_GAMMAS), help="fixed gammas")
+    t.add_argument("--tracks", nargs="+", choices=TRACKS, default=list(TRACKS), help="circuits")
+    t.add_argument("--folder", default="table1",
+                   help="subfolder of --out for the episodes; the comparison goes to <folder>_compare.md")
+    t.add_argument("--summarize", action="store_true", help="run nothing; re-make <folder>_compare.md")
     r = sub.add_parser("road", help="the synthetic-road loop at both ends of gamma, beside acados' failures")
     r.add_argument("--out", default="results/reference_numerics", help="results folder")
     for q in (s, t):
@@ -112,9 +116,10 @@ def run_sweep(args) -> str:
 
 
 def run_table(args) -> str:
-    out = Path(args.out) / "table1"
+    out = Path(args.out) / args.folder
+    gammas = tuple(args.gammas)
     if not args.summarize:
-        ev.run_table1(ev.build_strategies(FIXED_GAMMAS, adaptive=False), out, base_seed=args.seed,
+        ev.run_table1(ev.build_strategies(gammas, adaptive=False), out, tracks=args.tracks, base_seed=args.seed,
                       workers=args.workers, progress=not args.no_progress, stack=STACK)
     sets = {"refnum": ev.read_episode_csv(out / "table1_episodes.csv")}
     for name, path in (("paper", args.paper_csv), ("sofar", args.sofar_csv)):
@@ -125,33 +130,34 @@ def run_table(args) -> str:
     stacks = [s for s in (STACK, "paper", "sofar") if any((r.get("stack") or "sofar") == s for r in rows)]
     lines = ["# Table I under the bug-compatible controller, beside the paper's and the project's controllers\n",
              f"Success [%] per circuit and fixed γ; the project's rows on the same seeded episodes (base seed "
-             f"{args.seed}, 25 per circuit and γ).\n",
+             f"{args.seed}, 25 per circuit and γ; `all`: the circuits of this run).\n",
              "| Track | γ | paper's Table I | " + " | ".join(f"`{s}`" for s in stacks) + " |",
              "|---|---:|---:|" + "---:|" * len(stacks)]
-    for track in [*TRACKS, "all"]:
-        for g in FIXED_GAMMAS:
+    for track in [*args.tracks, "all"]:
+        for g in gammas:
             strategy = Strategy.fixed(g).name
             cells = []
             for s in stacks:
                 if track == "all":
-                    hits = [r for r in rows if (r.get("stack") or "sofar") == s and r["strategy"] == strategy]
+                    hits = [r for r in rows if (r.get("stack") or "sofar") == s and r["strategy"] == strategy
+                            and r["track"] in args.tracks]
                     cells.append(f"{100 * sum(bool(r['success']) for r in hits) / len(hits):.0f}" if hits else "–")
                 else:
                     summ = per.get((track, f"{s}:{strategy}"))
                     cells.append(f"{summ.success_rate:.0f}" if summ else "–")
-            paper = (sum(ev.PAPER_TABLE1_SUCCESS[t][g] for t in TRACKS) / len(TRACKS) if track == "all"
+            paper = (sum(ev.PAPER_TABLE1_SUCCESS[t][g] for t in args.tracks) / len(args.tracks) if track == "all"
                      else ev.PAPER_TABLE1_SUCCESS[track][g])
             lines.append(f"| {track} | {g:g} | {paper:.0f} | " + " | ".join(cells) + " |")
     pooled = ev.label_by_stack({"all": rows})
     comparisons = []
-    for g in FIXED_GAMMAS:
+    for g in gammas:
         strategy = Strategy.fixed(g).name
         for other in stacks[1:]:
             try:
                 comparisons.append(ev.paired_comparison(pooled, f"{STACK}:{strategy}", f"{other}:{strategy}"))
             except ValueError:
                 continue
-    mids = [f"{STACK}:{Strategy.fixed(g).name}" for g in FIXED_GAMMAS if 0.1 < g < 0.9]
+    mids = [f"{STACK}:{Strategy.fixed(g).name}" for g in gammas if 0.1 < g < 0.9]
     for g in (0.05, 0.95):
         for mid in mids:
             try:
@@ -182,7 +188,7 @@ def run_table(args) -> str:
               "(Indianapolis, Kentucky)\n",
               ev.format_paired(by_group)]
     text = "\n".join(lines)
-    ev.write_markdown(Path(args.out) / "table1_compare.md", text)
+    ev.write_markdown(Path(args.out) / f"{args.folder}_compare.md", text)
     return text
 
 
