@@ -229,7 +229,7 @@ def main(argv=None) -> int:
                              "and without the incumbent (instead of the random instances)")
     parser.add_argument("--steps", type=positive_int, default=3000, help="env steps of --from-env")
     parser.add_argument("--rho", type=nonneg_float, default=0.5,
-                        help="opponents' pace of --from-env (eval/bench_env.py's default; the env's is 0.3)")
+                        help="opponents' pace of --from-env (bench/bench_env.py's default; the env's is 0.3)")
     parser.add_argument("--json", metavar="PATH", help="also write the numbers as JSON")
     args = parser.parse_args(argv)
     if args.from_env:

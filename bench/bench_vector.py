@@ -17,7 +17,7 @@ This script separates the two. Each round measures, in this order:
    lock-step (send N requests, wait for N replies), without gymnasium's pickling of actions,
    shared-memory observations and info merging;
 3. ``sofar`` (unless ``--no-sofar``): ``SOfAR-LagunaSeca-v0`` (4 opponents, rho 0.5, gamma 0.5):
-   one process, then an ``AsyncVectorEnv`` of N workers, as in ``eval/bench_env.py --vector``;
+   one process, then an ``AsyncVectorEnv`` of N workers, as in ``bench/bench_env.py --vector``;
 4. ``independent``: N processes, each stepping its own env with no messages at all, at the same
    time (they start together after their warm-up, and each stops when the first one is done), for
    the synthetic env and for SOfAR. Their summed throughput is what N workers can give on this host

@@ -10,7 +10,7 @@ arithmetic for short arrays (10 us against 30-37 us per call on the planner's 76
 Used where an env step differentiates along a fixed time grid: the closing speeds of
 :mod:`sofar_env.planning.clearance` (0.6 calls per env step) and the followed cars'
 speeds of :meth:`sofar_env.stack.follow.PassOrFollow.speed_cap` (0.45 calls per env step
-of the ``eval/bench_env.py`` scenario).
+of the ``bench/bench_env.py`` scenario).
 """
 
 from __future__ import annotations

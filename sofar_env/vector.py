@@ -10,7 +10,7 @@ worker ``i`` to CPU ``i`` (``os.sched_setaffinity``) removes both. On a 2-core v
 ``bench/bench_vector.py`` measured, for two workers running ``SOfAR-LagunaSeca-v0`` (10 rounds, medians),
 that the time from the main process's ``step`` call to the start of the worker waited for falls from 0.38
 to 0.17 ms, and the vector env's throughput rises by 1.23x (per round 1.01x to 1.33x; in
-``eval/bench_env.py --vector``, whose passes run in separate processes, the gain was within the noise).
+``bench/bench_env.py --vector``, whose passes run in separate processes, the gain was within the noise).
 Pinning changes where the workers run, never what they compute: seeded results are the same.
 
 A worker is pinned only where the platform can (Linux: ``os.sched_setaffinity``) and only when there are

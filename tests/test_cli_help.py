@@ -23,8 +23,8 @@ SCRIPTS = {  # script: its options that name a preset or a world
     "eval/table.py": ("--stack", "--scenario"),
     "eval/figures.py": ("--stack", "--scenario"),
     "eval/pareto.py": ("--stack", "--scenario"),
-    "eval/bench_env.py": ("--stack", "--scenario"),
-    "eval/bench_train.py": ("--scenario",),
+    "bench/bench_env.py": ("--stack", "--scenario"),
+    "bench/bench_train.py": ("--scenario",),
 }
 
 

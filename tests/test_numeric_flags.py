@@ -61,7 +61,7 @@ def test_no_numeric_flag_takes_a_bare_int_or_float(path, parse_only):
     """Every number goes through an argument type of sofar_agents.cli_types (or its own check), never int/float."""
     argv = {"eval/plot_training.py": ["run"], "eval/headroom.py": ["x.csv"], "eval/paired.py": ["x.csv"],
             "eval/interventions.py": ["x.csv"], "eval/trajectories.py": ["record", "--out", "x.npz"],
-            "eval/bench_train.py": ["--compare", "HEAD"], "eval/reference_numerics.py": ["sweep"],
+            "bench/bench_train.py": ["--compare", "HEAD"], "eval/reference_numerics.py": ["sweep"],
             "eval/manifest.py": ["list"]}.get(path, [])
     parser = _run(path, argv).parser
     actions = list(parser._actions)
@@ -89,12 +89,12 @@ USAGE_ERRORS = [  # (script, argv, the flag named in the message)
     ("eval/pareto.py", ["--episodes", "0"], "--episodes"),
     ("eval/pareto.py", ["--duration", "0"], "--duration"),
     ("eval/pareto.py", ["--workers", "-1"], "--workers"),
-    ("eval/bench_env.py", ["--steps", "0"], "--steps"),
-    ("eval/bench_env.py", ["--repeats", "0"], "--repeats"),
+    ("bench/bench_env.py", ["--steps", "0"], "--steps"),
+    ("bench/bench_env.py", ["--repeats", "0"], "--repeats"),
     ("bench/bench_miqp.py", ["--repeat", "0"], "--repeat"),
     ("bench/bench_miqp.py", ["-n", "0"], "-n/--instances"),
     ("bench/bench_mpc.py", ["--steps", "0"], "--steps"),
-    ("eval/bench_train.py", ["--compare", "HEAD", "--rounds", "0"], "--rounds"),
+    ("bench/bench_train.py", ["--compare", "HEAD", "--rounds", "0"], "--rounds"),
     ("bench/bench_vector.py", ["--workers", "0"], "--workers"),
     ("bench/bench_vector.py", ["--work-ms", "0"], "--work-ms"),
     ("eval/contacts.py", ["--heading-extent", "-1"], "--heading-extent"),
@@ -136,7 +136,7 @@ VALID = [  # (script, argv, attribute, value): the values the flags mean still p
     ("eval/table.py", ["--gammas", "0.05", "1"], "gammas", [0.05, 1.0]),
     ("eval/table.py", ["--rhos", "0", "0.8"], "rhos", [0.0, 0.8]),
     ("eval/pareto.py", ["--duration", "12.5"], "duration", 12.5),
-    ("eval/bench_env.py", ["--vector", "0"], "vector", 0),
+    ("bench/bench_env.py", ["--vector", "0"], "vector", 0),
     ("eval/plot_training.py", ["run", "--smoothing", "0"], "smoothing", 0.0),
     ("train/ppo.py", ["--save-every", "0"], "save_every", 0),
     ("train/pasta.py", ["--save-every", "0", "--total-steps", "16"], "total_steps", 16),

@@ -248,7 +248,7 @@ class Track:
         ``slope * (s - s_i) + f_i``, this ``f_i + w (f_{i+1} - f_i)``, and the two differ in the
         last bit at about 1 point in 3000, which changes seeded trajectories. (It also saves
         about 1.4 % of an env step, measured with cProfile call counts over 1,000 steps of the
-        ``eval/bench_env.py`` scenario, 20 scalar calls per step, times 1.1 us per call from
+        ``bench/bench_env.py`` scenario, 20 scalar calls per step, times 1.1 us per call from
         timeit, against a 1.55 ms step.)
         """
         s = s % self.length

@@ -1,4 +1,4 @@
-"""eval/bench_env.py --compare and --compare-stack (eval/bench_compare.py, eval/bench_pass.py): the passes are made
+"""bench/bench_env.py --compare and --compare-stack (bench/bench_compare.py, bench/bench_pass.py): the passes are made
 through the public constructor only, time CPU and wall time, and the table reports their ratios."""
 
 from __future__ import annotations
@@ -13,25 +13,25 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _eval_module(name: str):
-    sys.path.insert(0, str(ROOT / "eval"))
+def _bench_module(name: str):
+    sys.path.insert(0, str(ROOT / "bench"))
     try:
         return __import__(name)
     finally:
-        sys.path.remove(str(ROOT / "eval"))
+        sys.path.remove(str(ROOT / "bench"))
 
 
 def test_compare_builds_passes_through_the_public_constructor(tmp_path):
     """A pass of --compare is gymnasium.make of the registered id with keys every revision accepts; the world
     and the controller are added only where they are not the defaults, the comparison's own options stay out."""
-    bench_env, bench_compare = _eval_module("bench_env"), _eval_module("bench_compare")
+    bench_env, bench_compare = _bench_module("bench_env"), _bench_module("bench_compare")
     args = bench_env.build_parser().parse_args(["--compare", "2e40063", "--steps", "50", "--rounds=3",
                                                 "--json", "x.json", "--repeats", "2"])
     env_id, kwargs = bench_compare.env_spec(args)
     assert env_id == "SOfAR-LagunaSeca-v0"
     assert kwargs == {"rho": 0.5, "n_opponents": 4, "timing_info": False}
     cmd = bench_compare.pass_command(env_id, kwargs, args, tmp_path / "p.json")
-    assert cmd[1] == str(ROOT / "eval" / "bench_pass.py")
+    assert cmd[1] == str(ROOT / "bench" / "bench_pass.py")
     options = dict(zip(cmd[2::2], cmd[3::2]))
     assert options == {"--env-id": env_id, "--kwargs": json.dumps(kwargs), "--steps": "50", "--gamma": "0.5",
                        "--seed": "0", "--json": str(tmp_path / "p.json")}
@@ -55,7 +55,7 @@ def _pass(cpu_ms: float, wall_ms: float) -> dict:
 
 
 def test_compare_table_reports_cpu_and_wall_time_ratios(capsys):
-    bench_compare = _eval_module("bench_compare")
+    bench_compare = _bench_module("bench_compare")
     old = [_pass(2.0, 3.0), _pass(2.2, 5.0), _pass(1.8, 2.5)]
     new = [_pass(1.0, 2.0), _pass(1.0, 2.5), _pass(1.2, 2.0)]
     side = bench_compare._side_summary(old)
@@ -89,14 +89,14 @@ def test_compare_table_reports_cpu_and_wall_time_ratios(capsys):
     ["--compare-stack", '{"mpc": {"qp_solver": "daqp"}}', "--stack", "paper"],  # overrides of the default only
 ])
 def test_compare_stack_rejects_bad_arguments(argv):
-    proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), *argv],
+    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "bench_env.py"), *argv],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "--compare" in proc.stderr
 
 
 def test_a_pass_times_cpu_and_wall_time_of_the_package_it_imports(tmp_path):
     out = tmp_path / "pass.json"
-    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_pass.py"), "--kwargs",
+    subprocess.run([sys.executable, str(ROOT / "bench" / "bench_pass.py"), "--kwargs",
                     '{"n_opponents": 1, "timing_info": false}', "--steps", "5", "--warm-up", "1", "--json", str(out)],
                    check=True, capture_output=True, text=True, timeout=300, cwd=str(tmp_path))
     res = json.loads(out.read_text())

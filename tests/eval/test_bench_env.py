@@ -1,4 +1,4 @@
-"""eval/bench_env.py: the throughput benchmark runs, repeats its timed passes and reports them."""
+"""bench/bench_env.py: the throughput benchmark runs, repeats its timed passes and reports them."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_bench_env_reports_every_pass(tmp_path):
     out = tmp_path / "bench.json"
-    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--steps", "15", "--repeats", "3",
+    subprocess.run([sys.executable, str(ROOT / "bench" / "bench_env.py"), "--steps", "15", "--repeats", "3",
                     "--json", str(out)], check=True, capture_output=True, text=True, timeout=300)
     result = json.loads(out.read_text())
     passes = result["steps_per_s_passes"]
@@ -36,7 +36,7 @@ def test_bench_env_reports_every_pass(tmp_path):
 
 def test_bench_env_runs_a_controller_preset(tmp_path):
     out = tmp_path / "bench.json"
-    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--steps", "10", "--repeats", "1",
+    subprocess.run([sys.executable, str(ROOT / "bench" / "bench_env.py"), "--steps", "10", "--repeats", "1",
                     "--no-breakdown", "--stack", "sofar-recover", "--json", str(out)],
                    check=True, capture_output=True, text=True, timeout=300)
     result = json.loads(out.read_text())
@@ -45,7 +45,7 @@ def test_bench_env_runs_a_controller_preset(tmp_path):
 
 def test_bench_env_times_an_async_vector_env(tmp_path):
     out = tmp_path / "bench.json"
-    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--steps", "10", "--repeats", "1",
+    subprocess.run([sys.executable, str(ROOT / "bench" / "bench_env.py"), "--steps", "10", "--repeats", "1",
                     "--vector", "2", "--json", str(out)], check=True, capture_output=True, text=True, timeout=300)
     vec = json.loads(out.read_text())["vector"]
     assert vec["workers"] == 2 and vec["vector_steps"] == 10
@@ -54,7 +54,7 @@ def test_bench_env_times_an_async_vector_env(tmp_path):
 
 
 def test_bench_env_rejects_zero_repeats():
-    proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--repeats", "0"],
+    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "bench_env.py"), "--repeats", "0"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0 and "--repeats" in proc.stderr
 
@@ -64,7 +64,7 @@ def test_compare_runs_interleaved_passes_of_both_revisions(tmp_path):
     if subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True).returncode != 0:
         pytest.skip("not a git checkout")
     out = tmp_path / "ab.json"
-    subprocess.run([sys.executable, str(ROOT / "eval" / "bench_env.py"), "--compare", "HEAD", "--rounds", "1",
+    subprocess.run([sys.executable, str(ROOT / "bench" / "bench_env.py"), "--compare", "HEAD", "--rounds", "1",
                     "--steps", "5", "--no-breakdown", "--json", str(out)],
                    check=True, capture_output=True, text=True, timeout=300)
     res = json.loads(out.read_text())
@@ -79,7 +79,7 @@ def test_compare_runs_interleaved_passes_of_both_revisions(tmp_path):
 
 
 def test_bench_train_rejects_zero_rounds():
-    proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_train.py"), "--compare", "HEAD", "--rounds", "0"],
+    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "bench_train.py"), "--compare", "HEAD", "--rounds", "0"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0 and "--rounds" in proc.stderr
 
@@ -96,7 +96,7 @@ def test_bench_train_rejects_zero_rounds():
     ["--compare", "HEAD", "--backend", "spark"],        # not a set-up
 ])
 def test_bench_train_rejects_bad_backend_lists(argv):
-    proc = subprocess.run([sys.executable, str(ROOT / "eval" / "bench_train.py"), *argv],
+    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "bench_train.py"), *argv],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and ("--backends" in proc.stderr or "--compare" in proc.stderr)
 
@@ -104,11 +104,11 @@ def test_bench_train_rejects_bad_backend_lists(argv):
 def test_bench_train_reads_the_collection_time_from_the_tensorboard_log(tmp_path):
     from torch.utils.tensorboard import SummaryWriter
 
-    sys.path.insert(0, str(ROOT / "eval"))
+    sys.path.insert(0, str(ROOT / "bench"))
     try:
         from bench_train import collect_time
     finally:
-        sys.path.remove(str(ROOT / "eval"))
+        sys.path.remove(str(ROOT / "bench"))
     writer = SummaryWriter(str(tmp_path / "tb" / "run"))
     for step, seconds in enumerate((1.5, 2.25, 0.75)):
         writer.add_scalar("time/collect_s", seconds, step)

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python eval/bench_pass.py --env-id SOfAR-LagunaSeca-v0 --kwargs '{"rho": 0.5, "n_opponents": 4}'
+    python bench/bench_pass.py --env-id SOfAR-LagunaSeca-v0 --kwargs '{"rho": 0.5, "n_opponents": 4}'
                               [--steps 300] [--gamma 0.5] [--seed 0] [--warm-up 20] [--vector N] [--json PATH]
 
 The environment is made with ``gymnasium.make(ENV_ID, **KWARGS)`` after ``import sofar_env`` (which registers

@@ -1,7 +1,7 @@
 """Interleaved A/B of env speed: the working tree against a git revision, or two controller settings.
 
-Run through ``python eval/bench_env.py --compare REV [--rounds 5] [other bench_env options]`` or
-``python eval/bench_env.py --compare-stack JSON [--rounds 5] [...]``.
+Run through ``python bench/bench_env.py --compare REV [--rounds 5] [other bench_env options]`` or
+``python bench/bench_env.py --compare-stack JSON [--rounds 5] [...]``.
 
 With ``--compare REV`` the revision is exported (``git archive``) into a temporary directory; with
 ``--compare-stack JSON`` both sides are the working tree, "old" with the controller of ``--stack`` and

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python eval/bench_env.py [--steps 1000] [--track LagunaSeca] [--rho 0.5] [--opponents 4]
+    python bench/bench_env.py [--steps 1000] [--track LagunaSeca] [--rho 0.5] [--opponents 4]
                              [--gamma 0.5] [--seed 0] [--repeats 3] [--vector N] [--json PATH]
                              [--scenario paper|interactive] [--compare REV | --compare-stack JSON [--rounds 5]]
 
@@ -285,7 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help=f"the controller preset, one of {', '.join(STACK_PRESETS)} (default sofar)")
     parser.add_argument("--compare", default=None, metavar="REV",
                         help="interleaved A/B against the git revision REV instead of a plain run: CPU and wall "
-                             "time per step, each pass in a fresh subprocess (see eval/bench_compare.py)")
+                             "time per step, each pass in a fresh subprocess (see bench/bench_compare.py)")
     parser.add_argument("--compare-stack", default=None, metavar="JSON",
                         help="interleaved A/B in the working tree instead of a plain run: the default controller "
                              "against these controller overrides, e.g. '{\"mpc\": {\"qp_solver\": \"daqp\"}}'")

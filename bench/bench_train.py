@@ -2,11 +2,11 @@
 
 Usage::
 
-    python eval/bench_train.py --compare REV [--backend B [--scenario S]] [--rounds 3] [--json PATH]
-    python eval/bench_train.py --backends one-process local processes [ray] [--scenario S] [--multi-agent CARS]
+    python bench/bench_train.py --compare REV [--backend B [--scenario S]] [--rounds 3] [--json PATH]
+    python bench/bench_train.py --backends one-process local processes [ray] [--scenario S] [--multi-agent CARS]
                                [--rounds 3] [--json PATH]
 
-The revision is exported as in ``eval/bench_env.py --compare`` (:mod:`bench_compare`). Each
+The revision is exported as in ``bench/bench_env.py --compare`` (:mod:`bench_compare`). Each
 round runs, in a fresh process per side and in alternating order, the side's own::
 
     python train/pasta.py --n-envs 2 --total-steps 4096 --n-steps 512 --seed 1 \\
