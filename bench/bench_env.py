@@ -52,6 +52,7 @@ from collections import defaultdict
 
 import numpy as np
 
+from bench_pass import load_average, reference_workload_ms  # the sibling each timed pass runs
 from sofar_agents.cli_types import gamma_value, nonneg_float, nonneg_int, positive_int
 import sofar_env  # noqa: F401  (registers the ids)
 from sofar_env.env import SOfARRaceEnv
@@ -227,39 +228,6 @@ def _scenario_kwargs(args: argparse.Namespace) -> dict:
     return kwargs
 
 
-def reference_workload_ms(repeats: int = 5) -> float:
-    """Best-of-``repeats`` wall time [ms] of a fixed CPU-bound workload shaped like the env's hot path
-    (scalar Python float arithmetic and numpy calls on small arrays).
-
-    It does not depend on the package, so it measures the host, not the code: on a shared or
-    virtual machine the same binary runs slower while other tenants load the physical cores, and
-    the env's steps/s fall by about the factor this time rises. Reported next to the steps/s so that
-    runs on differently loaded hosts can be compared.
-    """
-    rng = np.random.default_rng(0)
-    a = rng.standard_normal(76)
-    b = rng.standard_normal((76, 6))
-    best = math.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        x = 0.0
-        for i in range(20000):  # scalar float work, as in the track's and opponents' scalar paths
-            x = (x * 0.5 + i * 1e-3) % 7.0
-        for _ in range(2000):  # small-array numpy calls, as in the planners' glue
-            c = np.maximum(a, 0.0) * 2.0 - a
-            x += float(c.sum()) + float((b @ b[0]).min())
-        best = min(best, time.perf_counter() - t0)
-    return 1e3 * best
-
-
-def _load_average() -> float | None:
-    """The host's 1-minute load average (None where the OS has none): a busy host slows every pass."""
-    try:
-        return float(os.getloadavg()[0])
-    except (AttributeError, OSError):
-        return None
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The command line of this script."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -328,12 +296,12 @@ def main(argv: list[str] | None = None) -> dict:
             env.step(np.array([args.gamma], np.float32))
         return env
 
-    load_before = _load_average()
+    load_before = load_average()
     ref_before = reference_workload_ms()
     env = make()
     passes = [run(env, args.steps, args.gamma, args.seed) for _ in range(args.repeats)]
     ref_after = reference_workload_ms()
-    load_after = _load_average()
+    load_after = load_average()
     rates = [args.steps / t.sum() for t, _ in passes]
     times, stats = passes[int(np.argsort(rates)[len(rates) // 2])]  # the median pass
     breakdown, compiled, wall = {}, {}, math.nan
