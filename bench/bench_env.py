@@ -52,7 +52,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from bench_pass import load_average, reference_workload_ms  # the sibling each timed pass runs
+from bench_pass import load_average, reference_workload_ms, timed_async  # the sibling each timed pass runs
 from sofar_agents.cli_types import gamma_value, nonneg_float, nonneg_int, positive_int
 import sofar_env  # noqa: F401  (registers the ids)
 from sofar_env.env import SOfARRaceEnv
@@ -187,36 +187,9 @@ def run_vector(args: argparse.Namespace) -> dict:
     """
     import functools
 
-    import gymnasium as gym
-
-    n = args.vector
     factory = functools.partial(SOfARRaceEnv, track=args.track, rho=args.rho, n_opponents=args.opponents,
                                 timing_info=True, **_scenario_kwargs(args))
-    try:
-        from sofar_env.vector import pinned_factories, worker_cpus
-    except ImportError:
-        fns, pinned = [factory] * n, False
-    else:
-        pinned = not args.no_pin and worker_cpus(n) is not None
-        fns = pinned_factories([factory] * n, pin=pinned)
-    envs = gym.vector.AsyncVectorEnv(fns)
-    try:
-        actions = np.full((n, 1), args.gamma, np.float32)
-        envs.reset(seed=[args.seed + i for i in range(n)])
-        for _ in range(20):  # warm-up: the workers build (and load) their controllers
-            envs.step(actions)
-        counted, episodes, resetting = 0, 0, np.zeros(n, bool)
-        t0 = time.perf_counter()
-        for _ in range(args.steps):
-            _, _, terminated, truncated, _ = envs.step(actions)
-            counted += int(n - resetting.sum())
-            resetting = terminated | truncated
-            episodes += int(resetting.sum())
-        wall = time.perf_counter() - t0
-    finally:
-        envs.close()
-    return {"workers": n, "pinned": pinned, "vector_steps": args.steps, "env_steps": counted, "wall_s": wall,
-            "steps_per_s": counted / wall, "episodes_ended": episodes}
+    return timed_async(factory, args.vector, args.steps, args.gamma, args.seed, pin=not args.no_pin)
 
 
 def _scenario_kwargs(args: argparse.Namespace) -> dict:

@@ -96,26 +96,33 @@ def timed_steps(env, steps: int, gamma: float, seed: int) -> dict:
 
 def timed_vector(env_id: str, kwargs: dict, n: int, steps: int, gamma: float, seed: int) -> dict:
     """Total env steps/s of a gymnasium ``AsyncVectorEnv`` of ``n`` workers, each ``gymnasium.make(env_id, **kwargs)``
-    seeded ``seed + i``, over ``steps`` vector steps after 20 untimed ones (steps that only reset not counted).
-    The workers are pinned to a CPU each where the package has :mod:`sofar_env.vector` (older revisions did not
-    pin)."""
+    (:func:`timed_async`)."""
     import functools
 
     import gymnasium as gym
 
-    factory = functools.partial(gym.make, env_id, **kwargs)
+    return timed_async(functools.partial(gym.make, env_id, **kwargs), n, steps, gamma, seed)
+
+
+def timed_async(factory, n: int, steps: int, gamma: float, seed: int, pin: bool = True) -> dict:
+    """Total env steps/s of a gymnasium ``AsyncVectorEnv`` of ``n`` workers built by ``factory``, seeded
+    ``seed + i``, over ``steps`` vector steps after 20 untimed ones (steps that only reset not counted). With
+    ``pin`` the workers are pinned to a CPU each where the package has :mod:`sofar_env.vector` (older
+    revisions did not pin)."""
+    import gymnasium as gym
+
     try:
         from sofar_env.vector import pinned_factories, worker_cpus
     except ImportError:
         fns, pinned = [factory] * n, False
     else:
-        pinned = worker_cpus(n) is not None
+        pinned = pin and worker_cpus(n) is not None
         fns = pinned_factories([factory] * n, pin=pinned)
     envs = gym.vector.AsyncVectorEnv(fns)
     try:
         actions = np.full((n, 1), gamma, np.float32)
         envs.reset(seed=[seed + i for i in range(n)])
-        for _ in range(20):
+        for _ in range(20):  # warm-up: the workers build (and load) their controllers
             envs.step(actions)
         counted, episodes, resetting = 0, 0, np.zeros(n, bool)
         t0 = time.perf_counter()
