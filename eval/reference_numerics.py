@@ -71,6 +71,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="Table I episodes of stack='sofar' on the same seed")
     t.add_argument("--gammas", nargs="+", type=gamma_value, default=list(FIXED_GAMMAS), help="fixed gammas")
     t.add_argument("--tracks", nargs="+", choices=TRACKS, default=list(TRACKS), help="circuits")
+    t.add_argument("--policy", default=None,
+                   help="a PASTA checkpoint trained under the controller: its Adaptive row is run and compared too "
+                        "(results/reference_numerics/pasta/pasta_final.json)")
     t.add_argument("--folder", default="table1",
                    help="subfolder of --out for the episodes; the comparison goes to <folder>_compare.md")
     t.add_argument("--summarize", action="store_true", help="run nothing; re-make <folder>_compare.md")
@@ -119,7 +122,8 @@ def run_table(args) -> str:
     out = Path(args.out) / args.folder
     gammas = tuple(args.gammas)
     if not args.summarize:
-        ev.run_table1(ev.build_strategies(gammas, adaptive=False), out, tracks=args.tracks, base_seed=args.seed,
+        strategies = ev.build_strategies(gammas, policy=args.policy, adaptive=args.policy is not None)
+        ev.run_table1(strategies, out, tracks=args.tracks, base_seed=args.seed,
                       workers=args.workers, progress=not args.no_progress, stack=STACK)
     sets = {"refnum": ev.read_episode_csv(out / "table1_episodes.csv")}
     for name, path in (("paper", args.paper_csv), ("sofar", args.sofar_csv)):
@@ -177,6 +181,14 @@ def run_table(args) -> str:
                 by_group.append(dataclasses.replace(c, a=f"{c.a}, {group}"))
     refnum = [r for r in rows if (r.get("stack") or "sofar") == STACK]
     points = th.sweep_points(refnum)
+    adaptive = [r for r in refnum if r["strategy"] == "adaptive"]
+    if adaptive:
+        n = len(adaptive)
+        mean_gamma = sum(float(r["mean_gamma"]) for r in adaptive) / n
+        ad = [ev.paired_comparison(pooled, f"{STACK}:adaptive", f"{STACK}:{Strategy.fixed(g).name}") for g in gammas]
+        lines += ["\n## The adaptive policy trained under the bug-compatible controller\n",
+                  f"{n} episodes, success {100 * sum(bool(r['success']) for r in adaptive) / n:.0f} %, mean γ "
+                  f"{mean_gamma:.3f}, against each fixed γ on the same episodes:\n", ev.format_paired(ad)]
     lines += ["\n## Solver failures under the bug-compatible controller\n",
               "| γ | episodes | success [%] | episodes with a failed solve | failed episodes with a failed solve |",
               "|---:|---:|---:|---:|---:|",

@@ -60,8 +60,10 @@ def test_the_reference_numerics_manifests_are_its_script_s_settings() -> None:
             stack, tuple(gammas), args.seed, args.episodes, args.duration, False)
         assert m.out == f"results/reference_numerics/sweep/{stack}"
     table = mf.load_manifest(ROOT / "experiments" / "reference_numerics_table1.toml")
-    assert (table.stack, table.seed, table.adaptive, table.out) == (refnum.STACK, 0, False,
+    assert (table.stack, table.seed, table.adaptive, table.out) == (refnum.STACK, 0, True,
                                                                    "results/reference_numerics/table1")
+    assert table.policy == "results/reference_numerics/pasta/pasta_final.json"  # trained under the controller
+    assert (ROOT / table.policy).exists()
 
 
 @pytest.mark.parametrize("name", BACKFILLED)
