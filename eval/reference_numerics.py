@@ -34,7 +34,8 @@ from sofar_agents.evaluation.protocol import FIXED_GAMMAS, TRACKS, Strategy
 logger = logging.getLogger("reference_numerics")
 
 STACK, CONTROL = "reference-numerics", "reference-numerics-no-phantoms"
-SWEEP_GAMMAS = (0.05, 0.054, 0.058, 0.062, 0.07, 0.15, 0.50, 0.87, 0.89, 0.90, 0.91, 0.93, 0.95)
+SWEEP_GAMMAS = (0.05, 0.054, 0.058, 0.062, 0.07, 0.15, 0.30, 0.50, 0.70, 0.85, 0.87, 0.89, 0.90, 0.91, 0.93, 0.95,
+                0.97)
 CONTROL_GAMMAS = (0.05, 0.058, 0.50, 0.90, 0.95)
 ROAD_RUNS = ((0.3, 300, (0.03, 0.05, 0.055, 0.06, 0.07, 0.1), True), (0.8, 600, (0.05, 0.5, 0.88, 0.89, 0.9, 0.95), True),
              (0.3, 300, (0.05, 0.95), False), (0.8, 600, (0.05, 0.95), False))
