@@ -3,13 +3,15 @@
     python eval/manifest.py list                       # the manifests and the configuration hash of each
     python eval/manifest.py run NAME [--workers N]     # run (or resume) it into its folder, write manifest.json
     python eval/manifest.py check                      # every manifest resolves; committed rows carry its hash
-    python eval/manifest.py verify NAME [--rows 2]     # re-make its shortest rows per circuit in a temporary folder
+    python eval/manifest.py verify NAME [--rows 2]     # re-make its shortest rows (races) per circuit in a temporary folder
     python eval/manifest.py verify NAME --backfill     # ... and, when they match, give its rows the manifest's hash
 
 ``check`` exits with status 1 when a committed CSV holds rows of another configuration hash than its
 manifest's (the defaults moved since: re-run the manifest into another folder, or restore the old
 defaults); rows without a hash (written before the column) are reported, not an error. ``verify`` exits
-with status 1 when a re-made row differs from the committed one in any column but ``wall_time``.
+with status 1 when a re-made row differs from the committed one in any column of the committed file but
+``wall_time``. ``--backfill`` refuses a CSV of the first format (without the ``stack`` column), whose
+``stalled`` is unknown.
 The logic lives in sofar_agents.evaluation.manifest.
 """
 
@@ -61,12 +63,12 @@ def _load(folder: Path, name: str) -> mf.Manifest:
 
 
 def shortest_rows(m: mf.Manifest, n: int, root: Path = ROOT) -> list[dict[str, str]]:
-    """The ``n`` committed rows of ``m`` with the fewest steps on each circuit (the cheapest to re-make); rows of
-    the CSV that are not episodes of ``m`` (other runs into the same folder) are not candidates."""
+    """The ``n`` committed rows of ``m`` with the fewest steps on each circuit (races: the least driven; the
+    cheapest to re-make); rows of the CSV that are not episodes of ``m`` (other runs into the same folder) are not
+    candidates."""
     ids = mf.episode_ids(m, root)
-    rows = sorted((r for r in mf.raw_rows(root / m.out / m.csv_name)
-                   if (r["track"], r["strategy"], r["rho"], r["seed"], r["use_miqp"]) in ids),
-                  key=lambda r: (int(r["steps"]), r["strategy"]))
+    rows = sorted((r for r in mf.raw_rows(root / m.out / m.csv_name, m.kind) if mf.row_id(m, r) in ids),
+                  key=lambda r: (mf.row_length(m, r), r["strategy"], r["seed"]))
     per_track: dict[str, list[dict[str, str]]] = {}
     for r in rows:
         mine = per_track.setdefault(r["track"], [])
@@ -118,14 +120,18 @@ def main(argv=None) -> int:
         path = ROOT / m.out / m.csv_name
         from sofar_agents.evaluation.protocol import exact_text
 
-        settings = {(r["stack"], r["scenario"], r["duration"]) for r in mf.raw_rows(path)}
+        settings = {(r["stack"], r["scenario"], r["duration"]) for r in mf.raw_rows(path, m.kind)}
         if settings != {(m.stack, m.scenario, exact_text(m.duration))}:
             logger.error("%s: not back-filled: %s holds rows of other settings %s", m.name, path, sorted(settings))
             return 1
-        n = mf.restamp_hash(path, old, m.config_hash) if old else mf.backfill_hash(path, m.config_hash)
-        from sofar_agents.evaluation.configs import episode_config, write_config_json
+        try:
+            n = mf.restamp_hash(path, old, m.config_hash) if old else mf.backfill_hash(path, m.config_hash)
+        except ValueError as err:
+            logger.error("%s: not back-filled: %s", m.name, err)
+            return 1
+        from sofar_agents.evaluation.configs import write_config_json
 
-        write_config_json(ROOT / m.out, [episode_config(m.stack, m.scenario, m.duration)])
+        write_config_json(ROOT / m.out, [m.config()])
         logger.info("%s: %d rows now carry config_hash %s (before: %s)", m.name, n, m.config_hash, old or "none")
     return 0
 

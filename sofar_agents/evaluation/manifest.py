@@ -19,6 +19,7 @@ with) and reads like the command line it replaces. Keys (:class:`Manifest`):
 ``gammas``      the fixed gammas (default: the paper's six; table2: [0.5])
 ``adaptive``    also the shipped PASTA policy of ``stack``/``scenario`` (default true); ``policy``: another
                 checkpoint, relative to the repository root
+``self_play``   multi-agent: a second checkpoint (relative to the root), the strategy ``self-play``
 ``opponents``   table1: opponents per episode (default: the environment's); multi-agent: scripted opponents
 ``cars``        multi-agent: controlled cars (default 4)
 ``prefix``      file prefix in ``out`` (default ``table1``, ``table2``, ``multi_agent``)
@@ -29,7 +30,8 @@ with) and reads like the command line it replaces. Keys (:class:`Manifest`):
 ``manifest.json`` there: the manifest, its configuration hash, the code commit, the machine, its CPU flags
 and the wall time. :func:`check_manifest` compares the hash a manifest resolves to with the hashes the
 rows of its committed CSV carry. :func:`rerun_rows` re-makes chosen committed rows in another folder and
-compares them field by field (every column but ``wall_time`` and ``config_hash``), which is what justifies
+compares them field by field (every column of the committed file but ``wall_time`` and ``config_hash``; for
+the multi-agent table the races, re-run one by one), which is what justifies
 giving rows written before the hash column the manifest's hash (:func:`backfill_hash`), or rows of a hash
 that moved without changing the episodes the new one (:func:`restamp_hash`).
 """
@@ -51,12 +53,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sofar_agents.evaluation.configs import episode_config_hash, race_config_hash, row_hash
+from sofar_agents.evaluation.configs import episode_config, episode_config_hash, race_config, race_config_hash, row_hash
 from sofar_agents.evaluation.protocol import DEFAULT_DURATION, FIXED_GAMMAS, RHOS, TRACKS, Strategy, build_strategies
 from sofar_agents.evaluation.results import EPISODE_COLUMNS, read_csv_rows
 
 __all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths", "run_manifest", "check_manifest",
-           "ManifestCheck", "episode_ids", "raw_rows", "rerun_rows", "backfill_hash",
+           "ManifestCheck", "episode_ids", "row_id", "row_length", "raw_rows", "rerun_rows", "backfill_hash",
            "restamp_hash"]
 
 logger = logging.getLogger(__name__)
@@ -98,6 +100,7 @@ class Manifest:
     gammas: tuple[float, ...] | None = None
     adaptive: bool = True
     policy: str | None = None
+    self_play: str | None = None
     opponents: int | None = None
     cars: int = 4
     prefix: str | None = None
@@ -121,6 +124,12 @@ class Manifest:
             return race_config_hash(self.stack, self.scenario, self.duration, int(self.opponents or 0))
         return episode_config_hash(self.stack, self.scenario, self.duration)
 
+    def config(self) -> Any:
+        """The resolved configuration of that hash (what ``config.json`` records)."""
+        if self.kind == "multi-agent":
+            return race_config(self.stack, self.scenario, float(self.duration), int(self.opponents or 0))
+        return episode_config(self.stack, self.scenario, float(self.duration))
+
     def strategies(self, root: str | os.PathLike) -> list[Strategy]:
         """Its strategies: the adaptive policy (``policy``, else the shipped one) when ``adaptive``, then the
         fixed gammas. A missing shipped policy raises ``FileNotFoundError`` (a manifest does not silently
@@ -135,14 +144,42 @@ class Manifest:
                                          scenario=self.scenario)
             if policy is None:
                 raise FileNotFoundError(f"manifest {self.name}: no adaptive policy for stack {self.stack!r}")
-        return build_strategies(gammas, policy=policy, adaptive=self.adaptive)
+        out = build_strategies(gammas, policy=policy, adaptive=self.adaptive)
+        if self.self_play:
+            if self.kind != "multi-agent":
+                raise ValueError(f"manifest {self.name}: self_play is a key of the multi-agent table")
+            out.append(Strategy.adaptive(Path(root) / self.self_play, name="self-play"))
+        return out
 
 
-def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple[str, str, str, str, str]]:
-    """``(track, strategy, rho, seed, use_miqp)`` as written in a CSV, of every episode of the table ``m``
-    (a CSV may hold rows of other runs too)."""
+def row_id(m: Manifest, row: dict[str, str]) -> tuple:
+    """What names an episode in a CSV of ``m``'s kind: ``(track, strategy, rho, seed, use_miqp)``, for the
+    multi-agent table ``(track, strategy, seed)``."""
+    if m.kind == "multi-agent":
+        return row["track"], row["strategy"], row["seed"]
+    return row["track"], row["strategy"], row["rho"], row["seed"], row["use_miqp"]
+
+
+def row_length(m: Manifest, row: dict[str, str]) -> float:
+    """How long a committed row's episode ran (steps; for a race the car-seconds driven over the possible):
+    :func:`rerun_rows` re-makes the shortest ones."""
+    return float(row["driven"] if m.kind == "multi-agent" else row["steps"])
+
+
+def _race_tasks(m: Manifest, root: str | os.PathLike) -> list:
+    from sofar_agents.evaluation.multi_agent import multi_agent_tasks
+
+    return multi_agent_tasks(m.strategies(root), m.tracks, m.episodes or 4, m.seed, m.cars, m.duration, m.stack,
+                             m.scenario, int(m.opponents or 0))
+
+
+def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple]:
+    """:func:`row_id` as written in a CSV, of every episode (race) of the table ``m`` (a CSV may hold rows of
+    other runs too)."""
     from sofar_agents.evaluation.protocol import exact_text, miqp_ablation_tasks, table1_tasks
 
+    if m.kind == "multi-agent":
+        return {(t.track, t.strategy.name, str(t.seed)) for t in _race_tasks(m, root)}
     strategies = m.strategies(root)
     if m.kind == "table2":
         tasks = miqp_ablation_tasks(strategies, m.episodes or 10, m.rhos, m.track, m.seed, m.duration, stack=m.stack,
@@ -151,7 +188,7 @@ def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple[str, str, str
         tasks = table1_tasks(strategies, m.tracks, m.rhos, m.episodes or 5, m.seed, m.duration, stack=m.stack,
                              scenario=m.scenario, n_opponents=m.opponents)
     else:
-        raise ValueError("episode_ids takes the episode tables (table1, table2)")
+        raise ValueError(f"unknown kind {m.kind!r}")
     return {(t.track, t.strategy.name, exact_text(t.rho), str(t.seed), str(int(t.use_miqp))) for t in tasks}
 
 
@@ -299,45 +336,75 @@ def check_manifest(m: Manifest, root: str | os.PathLike) -> ManifestCheck:
     return check
 
 
-def raw_rows(path: str | os.PathLike) -> list[dict[str, str]]:
-    """The complete rows of an episode CSV as written (strings), with ``config_hash`` "" where it has none."""
-    return read_csv_rows(path, EPISODE_COLUMNS, added={"config_hash": ""},
+_OLDER_EPISODE_COLUMNS = {"stack": "sofar", "n_opponents": "", "scenario": "paper", "stalled": "", "config_hash": ""}
+"""Episode columns that CSVs of older formats lack, with the value their rows stand for (as the table reader has
+them; "" of ``stalled``: unknown)."""
+_OLDER_RACE_COLUMNS = {"opponents": "0", "config_hash": ""}
+
+
+def raw_rows(path: str | os.PathLike, kind: str = "table1") -> list[dict[str, str]]:
+    """The complete rows of an episode CSV (``kind`` ``"multi-agent"``: a race CSV) as written (strings); the
+    columns of an older format that the file lacks hold the value its rows stand for (``config_hash`` "")."""
+    if kind == "multi-agent":
+        from sofar_agents.evaluation.multi_agent import RACE_COLUMNS
+
+        return read_csv_rows(path, RACE_COLUMNS, added=_OLDER_RACE_COLUMNS, may_be_empty=("policy_id", "config_hash"),
+                             kind="per-race CSV")
+    return read_csv_rows(path, EPISODE_COLUMNS, added=_OLDER_EPISODE_COLUMNS,
                          may_be_empty=("policy_id", "n_opponents", "stalled", "config_hash"))
 
 
-def _row_id(row: dict[str, str]) -> tuple:
-    return (row["track"], row["strategy"], row["rho"], row["seed"], row["use_miqp"])
+def _header(path: Path) -> list[str]:
+    with open(path, newline="") as f:
+        return next(csv.reader(f), [])
+
+
+def _rerun_races(m: Manifest, root: str | os.PathLike, wanted: set[tuple], out: Path) -> None:
+    """Run the races of ``m`` named in ``wanted`` one by one into ``out``'s race CSV (as the table writes it)."""
+    from sofar_agents.evaluation.multi_agent import _append, run_race
+
+    policies: dict[str, Any] = {}
+    out.mkdir(parents=True, exist_ok=True)
+    for task in _race_tasks(m, root):
+        if (task.track, task.strategy.name, str(task.seed)) in wanted:
+            if task.strategy.name not in policies:
+                policies[task.strategy.name] = task.strategy.build()
+            _append(out / m.csv_name, run_race(task, policies[task.strategy.name]))
 
 
 def rerun_rows(m: Manifest, root: str | os.PathLike, rows: Sequence[dict[str, str]], out: str | os.PathLike,
-               workers: int | None = 1) -> list[str]:
-    """Run the episodes of the committed ``rows`` (strings, as :func:`~sofar_agents.evaluation.results.
-    read_csv_rows` gives them) through ``m`` into ``out`` and compare every column but ``wall_time`` and
-    ``config_hash`` as written. Returns the differences (empty: the rows are re-made bit for bit); a row
-    whose episode ``m`` does not hold is a difference too. Table kinds only."""
+               workers: int | None = 1, columns: Sequence[str] | None = None) -> list[str]:
+    """Run the episodes (races) of the committed ``rows`` (strings, as :func:`raw_rows` gives them) through ``m``
+    into ``out`` and compare ``columns`` (default: every column of ``m``'s committed CSV) but ``wall_time`` and
+    ``config_hash`` as written. Returns the differences (empty: the rows are re-made bit for bit); a row whose
+    episode ``m`` does not hold is a difference too."""
+    wanted = {row_id(m, r) for r in rows}
+    if columns is None:
+        committed = Path(root) / m.out / m.csv_name
+        columns = _header(committed) if committed.is_file() else list(rows[0]) if rows else []
     if m.kind == "multi-agent":
-        raise ValueError("rerun_rows takes the episode tables (table1, table2)")
-    wanted = {_row_id(r) for r in rows}
+        _rerun_races(m, root, wanted, Path(out))
+    else:
+        def keep(task) -> bool:
+            from sofar_agents.evaluation.protocol import exact_text
 
-    def keep(task) -> bool:
-        from sofar_agents.evaluation.protocol import exact_text
+            return (task.track, task.strategy.name, exact_text(task.rho), str(task.seed),
+                    str(int(task.use_miqp))) in wanted
 
-        return (task.track, task.strategy.name, exact_text(task.rho), str(task.seed),
-                str(int(task.use_miqp))) in wanted
-
-    run_manifest(m, root, workers=workers, out=out, progress=False, tasks_filter=keep)
-    made = {_row_id(r): r for r in raw_rows(Path(out) / m.csv_name)}
+        run_manifest(m, root, workers=workers, out=out, progress=False, tasks_filter=keep)
+    made = {row_id(m, r): r for r in raw_rows(Path(out) / m.csv_name, m.kind)}
     diffs = []
     for r in rows:
-        new = made.get(_row_id(r))
+        new = made.get(row_id(m, r))
         if new is None:
-            diffs.append(f"{_row_id(r)}: not re-made (not an episode of manifest {m.name})")
+            diffs.append(f"{row_id(m, r)}: not re-made (not an episode of manifest {m.name})")
             continue
-        for c in EPISODE_COLUMNS:
+        for c in columns:
             if c not in _NOT_COMPARED and r.get(c, "") != new.get(c, ""):
-                diffs.append(f"{_row_id(r)}: {c} {r.get(c)!r} committed, {new.get(c)!r} re-made")
+                diffs.append(f"{row_id(m, r)}: {c} {r.get(c)!r} committed, {new.get(c)!r} re-made")
         if new.get("config_hash") != m.config_hash:
-            diffs.append(f"{_row_id(r)}: re-made with config_hash {new.get('config_hash')}, manifest {m.config_hash}")
+            diffs.append(f"{row_id(m, r)}: re-made with config_hash {new.get('config_hash')}, "
+                         f"manifest {m.config_hash}")
     return diffs
 
 
