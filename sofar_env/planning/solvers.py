@@ -38,6 +38,12 @@ values bit for bit). If the bound is below the optimum (the margin missed, or th
 itself), DAQP reports infeasible and the call is repeated without it. On the calls of a closed loop of the
 env this cuts the branch and bound's time by about 1.25x (rho 0.5) to 1.35x (rho 0.3).
 
+Compiled route. With the pinned DAQP (:mod:`~sofar_env.planning.daqp_c`), the data, the incumbent, DAQP's branch
+and bound and its repetition without the bound are one compiled call (:func:`_bnb_solve`, DAQP's C API called from
+the kernel); otherwise (:data:`NATIVE` False) the same steps run from Python around ``daqp.solve``. Both give the
+same values to the bit (tests/planning/test_daqp_c.py). The products with ``R^-1`` stay numpy calls on either
+route: their bits are those of numpy's BLAS.
+
 Per-call cost. The diagonal Hessian, the constraint types, the index arrays and the
 constant parts of the bounds of the branch-and-bound depend only on ``(C, P)`` and
 are kept in a cache owned by the caller (the planner).
@@ -50,6 +56,7 @@ import logging
 import numpy as np
 
 from .._jit import kernel, py_max, py_min
+from . import daqp_c
 from .problem import SideProblem
 
 try:  # DAQP is a hard dependency, but the planner must never raise because of it.
@@ -71,6 +78,11 @@ _BOUND_MAX_CLUSTERS = 8  # the incumbent tries every side pattern: up to 2^8 of 
 _SENSE_BINARY = 16
 _SENSE_ACTIVE_LOWER = 3   # DAQP: ACTIVE (1) | LOWER (2): start with this bound in the working set
 _NO_FIXED = np.zeros(0, dtype=np.int64)
+_WORKSPACE = "daqp workspace"  # key of the compiled route's DAQP records and buffers in the caller's cache
+
+NATIVE = daqp_c.AVAILABLE
+"""Whether :func:`solve_branch_and_bound` takes the compiled route (:func:`_bnb_solve`, DAQP's C API from a kernel)
+instead of building the data and calling ``daqp.solve`` from Python; the two give the same values to the bit."""
 
 
 def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tuple[np.ndarray, np.ndarray] | None:
@@ -101,6 +113,19 @@ def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tu
         cache[key] = cached
     H, sense = cached
     b_fixed = prob.b_fixed if prob.b_fixed is not None else _NO_FIXED
+    if NATIVE:
+        work = cache.get(_WORKSPACE)
+        if work is None:
+            work = cache[_WORKSPACE] = daqp_c.Workspace()
+        start = prob.d_prev if prob.d_prev is not None else prob.n_ref
+        lateral = (prob.f_d, start, prob.w_diag is not None, prob.w_diag or 0.0, float(prob.w_smooth))
+        flag, x = _bnb_solve(C, prob.Rinv, prob.RinvT @ prob.f_d, prob.f_b, float(w_slack), (prob.lo, prob.hi),
+                             (prob.pair_k, prob.pair_c, prob.pair_n, prob.pair_w), b_fixed, lateral, H, sense,
+                             work.records, work.reserve(nv, sense.shape[0]))
+        if flag not in _DAQP_OK:
+            logger.debug("DAQP branch-and-bound exit flag %d", flag)
+            return None
+        return prob.Rinv @ x[C + P:], x[:C].round()
     f, A, bupper, blower = _bnb_data(C, prob.Rinv, prob.RinvT @ prob.f_d, prob.f_b, float(w_slack), prob.lo, prob.hi,
                                      prob.pair_k, prob.pair_c, prob.pair_n, prob.pair_w, b_fixed)
     bound = _INF
@@ -117,6 +142,27 @@ def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tu
         return None
     x = np.asarray(x)
     return prob.Rinv @ x[C + P:], x[:C].round()
+
+
+@kernel
+def _bnb_solve(C, Rinv, f_u, f_b, w_slack, corridor, pairs, b_fixed, lateral, H, sense, records, buffers):
+    """The Python route of :func:`solve_branch_and_bound` from its data to DAQP's solution in one compiled call:
+    :func:`_bnb_data`, the incumbent (:func:`_incumbent_bound`, when ``lateral[2]``), DAQP's branch and bound
+    (:func:`.daqp_c.quadprog`, ``presolve=0``) and, when the bound pruned every node, the search once more
+    without it. ``corridor = (lo, hi)``, ``pairs = (pair_k, pair_c, pair_n, pair_w)``, ``lateral = (f_d, start,
+    use_bound, w_diag, w_smooth)``; ``records``, ``buffers`` of a :class:`.daqp_c.Workspace`. Returns DAQP's exit
+    flag and a copy of x = [b (C), xi (P), u (N)]."""
+    lo, hi = corridor
+    pair_k, pair_c, pair_n, pair_w = pairs
+    f_d, start, use_bound, w_diag, w_smooth = lateral
+    f, A, bupper, blower = _bnb_data(C, Rinv, f_u, f_b, w_slack, lo, hi, pair_k, pair_c, pair_n, pair_w, b_fixed)
+    bound = _INF
+    if use_bound:
+        bound = _incumbent_bound(C, f, f_d, w_diag, w_smooth, lo, hi, start, pair_k, pair_c, pair_n, pair_w, b_fixed)
+    flag, _ = daqp_c.quadprog(H, f, A, bupper, blower, sense, bound, 0, records, buffers)
+    if flag == _DAQP_INFEASIBLE and bound < _INF:
+        flag, _ = daqp_c.quadprog(H, f, A, bupper, blower, sense, _INF, 0, records, buffers)
+    return flag, buffers[0][:f.shape[0]].copy()
 
 
 @kernel
