@@ -51,6 +51,13 @@ class ClearanceWindow:
         """(nodes,) node times [s]."""
         self._gradient = GridGradient(self.t).coefficients()  # d/dt along the nodes (np.gradient's formula)
 
+    def arguments(self) -> tuple:
+        """The arguments of :func:`_clearance_table` after ``opp_s``: the gradient coefficients, then ``safe_lon,
+        safe_lat, closing_decel, ellipse, stride`` (what :meth:`clearance` passes)."""
+        cfg = self.config
+        return (*self._gradient, float(cfg.safe_lon), float(cfg.safe_lat), float(cfg.closing_decel),
+                cfg.window_shape == "ellipse", int(cfg.closing_stride))
+
     def clearance(self, s_nodes: np.ndarray, opp_s: np.ndarray) -> np.ndarray:
         """(M, N) lateral clearance [m] that node k must keep from opponent i; 0: no constraint.
 
@@ -69,10 +76,7 @@ class ClearanceWindow:
         opp_s = np.asarray(opp_s, dtype=float)
         if opp_s.shape[0] == 0:
             return np.zeros((0, N))
-        uniform, two_dx, dx0, dxn, ga, gb, gc = self._gradient
-        return _clearance_table(np.asarray(s_nodes, dtype=float), opp_s, uniform, two_dx, dx0, dxn, ga, gb, gc,
-                                float(cfg.safe_lon), float(cfg.safe_lat), float(cfg.closing_decel),
-                                cfg.window_shape == "ellipse", int(cfg.closing_stride))
+        return _clearance_table(np.asarray(s_nodes, dtype=float), opp_s, *self.arguments())
 
 
 @kernel

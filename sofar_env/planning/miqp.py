@@ -9,7 +9,8 @@ the previous plan and decisions; the parts live in their own modules:
 :mod:`~sofar_env.planning.config` (parameters), :mod:`~sofar_env.planning.clearance`
 (where and by how much each opponent must be cleared, and which opponents share a
 side), :mod:`~sofar_env.planning.hysteresis` (the previous side of each car),
-:mod:`~sofar_env.planning.problem` (the problem data and its exact cost) and
+:mod:`~sofar_env.planning.problem` (the problem data and its exact cost),
+:mod:`~sofar_env.planning.build` (all of the above from the inputs to the problem data, in one compiled call) and
 :mod:`~sofar_env.planning.solvers` (DAQP branch-and-bound, enumeration fallback).
 
 Problem solved at every :meth:`PassingSidePlanner.plan` call
@@ -65,9 +66,10 @@ import numpy as np
 
 from .._interp import interp as _interp_kernel
 from .._jit import kernel, maximum
-from .clearance import ClearanceWindow, side_clusters
+from .build import NO_OPPONENTS, UNBOUNDED, _corridor, build_problem
+from .clearance import ClearanceWindow
 from .config import MIQPConfig
-from .hysteresis import match_previous_sides, prior_sides
+from .hysteresis import prior_sides
 from .problem import SideProblem, cost_factors, evaluate, plan_cost
 from .solvers import solve_branch_and_bound, solve_enumeration
 
@@ -79,6 +81,10 @@ except ImportError:  # pragma: no cover - other numpy layouts
 __all__ = ["MIQPConfig", "PlanResult", "PassingSidePlanner"]
 
 logger = logging.getLogger(__name__)
+
+_EMPTY = np.zeros(0)
+_NO_OPP = np.zeros((0, 3))
+_NO_SIDES = np.zeros(0, dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -128,6 +134,10 @@ class PassingSidePlanner:
         self._factors = cost_factors(config)  # Cholesky factors of the lateral cost (u = R d)
         self._window = ClearanceWindow(config)
         self._t = self._window.t  # node times [s]
+        self._weights = (float(config.track_margin), float(config.continuity), float(config.w_dev),
+                         float(config.w_prev), float(config.w_switch), float(config.alongside_gap),
+                         float(config.cluster_gap), float(config.safe_lat), float(config.node_dt))
+        self._window_args = self._window.arguments()  # the clearance table's parameters (build_problem's window)
         self._bnb_cache: dict = {}  # (C, P) -> Hessian, sense and index arrays of the branch-and-bound
         self.n_failures = 0
         self._prev_s: np.ndarray | None = None
@@ -203,32 +213,31 @@ class PassingSidePlanner:
             if opp_s.shape != (M, N):
                 raise ValueError(f"opponent_s must have shape ({M}, {N}), got {opp_s.shape}")
 
-        lo, hi, bounded = _corridor(n_min, n_max, float(self.config.track_margin), s_nodes, n_ref, opp, opp_s,
-                                    float(ego_n), float(progress))
-        # Every input finite: its sum is (the sum of the old test, taken where a magnitude is too large to tell).
-        if not (bounded or math.isfinite(s_nodes.sum() + n_ref.sum() + lo.sum() + hi.sum() + opp.sum() + opp_s.sum()
-                                         + float(ego_n) + float(progress))):
-            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None,
-                                  "non-finite input")
-
+        ego_n, progress = float(ego_n), float(progress)
+        nodes = (s_nodes, n_ref, n_min, n_max)
         try:
-            clear = self._window.clearance(s_nodes, opp_s)
-            active = clear > 0.0
-            relevant = active.any(axis=1).nonzero()[0]
-            if relevant.size == 0:
-                d = n_ref.clip(lo, hi)
-                self._remember(s_nodes, d, opp, np.zeros(M, dtype=int))
-                return PlanResult(d=d, s=s_nodes.copy(), sides=np.zeros(M, dtype=int),
-                                  objective=plan_cost(cfg, d, n_ref, None, 0.0, 0.0),
-                                  status="no_opponents", success=True,
-                                  solve_time=time.perf_counter() - t0, n_binaries=0,
-                                  opponent_slack=np.zeros(M))
-            prob = self._build(s_nodes, n_ref, lo, hi, float(ego_n), float(progress), opp,
-                               active, relevant, clear, opp_s)
+            status, lo, hi, relevant, parts = build_problem(nodes, opp, opp_s, (ego_n, progress), self._previous(),
+                                                            self._weights, self._window_args, False)
+            if status == UNBOUNDED:
+                # Every input finite: its sum is (the sum of the old test, taken where a magnitude is too large).
+                if not math.isfinite(s_nodes.sum() + n_ref.sum() + lo.sum() + hi.sum() + opp.sum() + opp_s.sum()
+                                     + ego_n + progress):
+                    return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None, "non-finite input")
+                status, lo, hi, relevant, parts = build_problem(nodes, opp, opp_s, (ego_n, progress),
+                                                                self._previous(), self._weights, self._window_args,
+                                                                True)
         except Exception as exc:  # numerical trouble while building: never raise
-            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None,
-                                  f"build failed: {exc!r}")
-
+            lo, hi, _ = _corridor(n_min, n_max, float(cfg.track_margin), s_nodes, n_ref, opp, opp_s, ego_n, progress)
+            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None, f"build failed: {exc!r}")
+        if status == NO_OPPONENTS:
+            d = n_ref.clip(lo, hi)
+            self._remember(s_nodes, d, opp, np.zeros(M, dtype=int))
+            return PlanResult(d=d, s=s_nodes.copy(), sides=np.zeros(M, dtype=int),
+                              objective=plan_cost(cfg, d, n_ref, None, 0.0, 0.0),
+                              status="no_opponents", success=True,
+                              solve_time=time.perf_counter() - t0, n_binaries=0,
+                              opponent_slack=np.zeros(M))
+        prob = self._problem(n_ref, parts)
         prior = prior_sides(relevant, prob.b_prev, M)
         sol = None
         routes = ((self._solve_bnb, self._solve_enumerate) if cfg.solver == "daqp"
@@ -262,60 +271,27 @@ class PassingSidePlanner:
                           opponent_slack=opp_slack)
 
     # ------------------------------------------------------------ components
-    def _previous_plan_at(self, s_nodes: np.ndarray, progress: float) -> np.ndarray | None:
-        """The previous plan at the new nodes (shifted by ``progress``), None without one."""
-        if self._prev_d is None:
-            return None
-        return _interp_kernel(s_nodes + progress, self._prev_s, self._prev_d)  # np.interp
+    def _previous(self) -> tuple:
+        """The planner's memory as :func:`.build.build_problem` takes it: ``(has_plan, prev_s, prev_d, has_sides,
+        prev_opp, prev_sides)``, empty arrays where there is none."""
+        has_plan = self._prev_d is not None
+        has_sides = self._prev_sides is not None and self._prev_opp is not None
+        return (has_plan, self._prev_s if has_plan else _EMPTY, self._prev_d if has_plan else _EMPTY, has_sides,
+                self._prev_opp if has_sides else _NO_OPP, self._prev_sides if has_sides else _NO_SIDES)
 
-    def _build(self, s_nodes, n_ref, lo, hi, ego_n, progress, opp, active, relevant, clear, opp_s) -> SideProblem:
-        """The problem of this call: clusters, continuity, consistency and hysteresis terms, pairs."""
+    def _problem(self, n_ref: np.ndarray, parts: tuple) -> SideProblem:
+        """The :class:`SideProblem` of the data built by :func:`.build.build_problem` (``parts``): with the
+        factors of the lateral cost (with the consistency term when there is a previous plan) and the
+        incumbent's weights (``cfg.incumbent``)."""
         cfg = self.config
-        opp_rel = opp[relevant]
-        act_rel = active[relevant]
-        along = apart = None
-        if cfg.alongside_gap > 0.0:  # cars alongside: one on each side of the ego are not one cluster
-            along = np.abs(opp_rel[:, 0]) < cfg.alongside_gap
-            left = opp_rel[:, 1] > ego_n
-            apart = along[:, None] & along[None, :] & (left[:, None] != left[None, :])
-        n_clusters, labels = side_clusters(opp_s[relevant], act_rel, cfg.cluster_gap, apart)
-
-        lo = lo.copy()
-        hi = hi.copy()
-        lo_0, hi_0 = float(lo[0]), float(hi[0])
-        e = min(max(ego_n, lo_0), hi_0)
-        lo[0] = max(lo_0, e - cfg.continuity)
-        hi[0] = min(hi_0, e + cfg.continuity)
-
-        d_prev = self._previous_plan_at(s_nodes, progress)
-        Rinv, RinvT = self._factors[d_prev is not None]
-        if d_prev is None:
-            f_d = -2.0 * cfg.w_dev * n_ref
-        else:
-            f_d = -2.0 * (cfg.w_dev * n_ref + cfg.w_prev * d_prev)
-
-        b_prev = match_previous_sides(cfg, s_nodes, progress, opp_rel, self._prev_opp, self._prev_sides)
-        known = b_prev >= 0
-        # w (b - bp)^2 = w (1 - 2 bp) b + w bp for binary b and bp (constant dropped), summed per cluster.
-        f_b = np.bincount(labels[known], weights=cfg.w_switch * (1.0 - 2.0 * b_prev[known]), minlength=n_clusters)
-        b_fixed = None
-        if along is not None and along.any():
-            # a car alongside keeps the ego on its side of it: its cluster's binary is fixed to that side
-            b_now = (ego_n > opp_rel[along, 1]).astype(int)  # 1: the ego is on its left
-            n_left = np.bincount(labels[along], weights=b_now, minlength=n_clusters)
-            count = np.bincount(labels[along], minlength=n_clusters)
-            b_fixed = np.full(n_clusters, -1, dtype=int)
-            b_fixed[(count > 0) & (n_left == count)] = 1
-            b_fixed[(count > 0) & (n_left == 0)] = 0
-
-        # the lateral Hessian's weights let the solver bound the optimum from the previous plan (cfg.incumbent)
-        w_diag = cfg.w_dev + (cfg.w_prev if d_prev is not None else 0.0) if cfg.incumbent else None
-        rows, ks = act_rel.nonzero()
-        return SideProblem(lo=lo, hi=hi, f_d=f_d, Rinv=Rinv, RinvT=RinvT, pair_k=ks,
-                           pair_c=labels[rows], pair_n=opp_rel[rows, 1],
-                           pair_w=clear[relevant[rows], ks], pair_r=rows, n_clusters=n_clusters,
-                           f_b=f_b, n_ref=n_ref, d_prev=d_prev, b_prev=b_prev, rel_cluster=labels,
-                           b_fixed=b_fixed, w_diag=w_diag, w_smooth=cfg.w_smooth)
+        C, labels, lo, hi, d_prev, f_d, b_prev, f_b, b_fixed, pair_k, pair_c, pair_n, pair_w, pair_r = parts
+        has_plan = d_prev.shape[0] > 0
+        Rinv, RinvT = self._factors[has_plan]
+        w_diag = cfg.w_dev + (cfg.w_prev if has_plan else 0.0) if cfg.incumbent else None
+        return SideProblem(lo=lo, hi=hi, f_d=f_d, Rinv=Rinv, RinvT=RinvT, pair_k=pair_k, pair_c=pair_c,
+                           pair_n=pair_n, pair_w=pair_w, pair_r=pair_r, n_clusters=C, f_b=f_b, n_ref=n_ref,
+                           d_prev=d_prev if has_plan else None, b_prev=b_prev, rel_cluster=labels,
+                           b_fixed=b_fixed if b_fixed.shape[0] else None, w_diag=w_diag, w_smooth=cfg.w_smooth)
 
     # ------------------------------------------------------------- solvers
     def _solve_bnb(self, prob: SideProblem) -> tuple[np.ndarray, np.ndarray] | None:
@@ -359,33 +335,6 @@ class PassingSidePlanner:
         return PlanResult(d=d, s=s_out.copy(), sides=sides, objective=float("nan"),
                           status="fallback", success=False,
                           solve_time=time.perf_counter() - t0, n_binaries=0)
-
-
-@kernel
-def _corridor(n_min, n_max, margin, s_nodes, n_ref, opp, opp_s, ego_n, progress):
-    """Bounds on d, the edges ``n_min``, ``n_max`` [m] moved in by ``margin`` (``track_margin``), their centre
-    ``0.5 (n_min + n_max)`` where they cross; and whether every input of the plan (these, ``s_nodes``,
-    ``n_ref``, the opponents, ``ego_n``, ``progress``) is finite with a magnitude below 1e300, so that
-    their sum is finite (else the caller takes the sum). One compiled call (:mod:`sofar_env._jit`)."""
-    N = n_min.shape[0]
-    lo = np.empty(N)
-    hi = np.empty(N)
-    big = 1e300
-    bounded = abs(ego_n) <= big and abs(progress) <= big
-    for k in range(N):
-        a = n_min[k] + margin
-        b = n_max[k] - margin
-        if a > b:
-            a = b = 0.5 * (n_min[k] + n_max[k])
-        lo[k], hi[k] = a, b
-        bounded = (bounded and abs(a) <= big and abs(b) <= big and abs(s_nodes[k]) <= big
-                   and abs(n_ref[k]) <= big)
-    for i in range(opp.shape[0]):
-        for c in range(opp.shape[1]):
-            bounded = bounded and abs(opp[i, c]) <= big
-        for c in range(opp_s.shape[1]):
-            bounded = bounded and abs(opp_s[i, c]) <= big
-    return lo, hi, bounded
 
 
 @kernel
