@@ -34,30 +34,19 @@ combine freely.
     The interactive world, everything above, on the **dynamic single-track plant with Pacejka tyres**
     (:mod:`sofar_env.dynamics`: tyre forces on loads that change with downforce and braking, a friction
     ellipse, steering and powertrain lags, mu drawn per episode in U(0.8, 1.0)). The controller keeps its
-    kinematic model: model mismatch, as on a real car. What the world sets so that the two fit:
+    kinematic model: model mismatch, as on a real car. What the world sets so that the two fit (the reasons
+    and the probes behind each value: ``docs/decisions/dynamic-world-settings.md``):
 
     * **The car's yaw-rate loop** (``race.dynamic.yaw_rate_gain`` = 2): the steering servo aims at the
-      MPC's angle plus a correction toward the kinematic bicycle's yaw rate at that angle, as the low-level
-      lateral controllers below the planners of real autonomous race cars do. Without it the car under-
-      and oversteers against the MPC's model: in our probes of a lone car (3 circuits, 2 seeds, 60 s, the
-      limits below, the kinematic world's steering weights) it left the track in 6 of 6 episodes within
-      2-32 s; with it, in 1 of 6.
-    * **Limits inside the tyres' grip at the lowest mu** (0.8, no downforce: 10.9 m/s^2 lateral,
-      12.5 m/s^2 longitudinal): ``vehicle.lat_acc_max`` = 8.5 m/s^2 and ``vehicle.a_min`` = -7 m/s^2 make
-      a box inside the friction ellipse ((7/12.5)^2 + (8.5/10.9)^2 = 0.92), so braking into a corner does
-      not spin the car; the ego's ``speed_factor`` = 0.7 puts the speed profile (built for 15 m/s^2
-      lateral, 10 m/s^2 braking) at 7.4 and 4.9 m/s^2, inside those limits; cars start at 0.5-0.7 of the
-      profile (``race.start_speed_fraction``), never above the reference they are to follow.
-    * **Room for the tracking error** (``stack.mpc.track_margin`` = 2.2 m, half the width plus 1.25 m
-      instead of 0.25 m): a kinematic MPC on a sliding car tracks its plan to a few tenths of a metre, and
-      in 12 probe episodes with 4 opponents (4 circuits, 3 seeds, 60 s, γ 0.5) the car left the track
-      in 11 with 1.2 m, in 4 with 1.7 m and in none with 2.2 m.
-    * **Calmer steering** (``stack.mpc.q`` n-weight 20 instead of 150, ``stack.mpc.r`` steering-rate
-      weight 50 instead of 8): the kinematic world's weights let the MPC change the steering by up to
-      0.03 rad every step in traffic (sensor noise moves the barrier constraints), which a car that turns
-      instantly follows and a car with a 0.053 s steering lag and yaw inertia turns into a weave. With
-      the other settings, 100 s probes at γ 0.05, 0.3 and 1.0 (36 episodes) had 27 successes with these
-      weights and 24 with the kinematic world's.
+      MPC's angle plus a correction toward the kinematic bicycle's yaw rate at that angle.
+    * **Limits inside the tyres' grip at the lowest mu** (0.8, no downforce): ``vehicle.lat_acc_max`` =
+      8.5 m/s^2 and ``vehicle.a_min`` = -7 m/s^2, a box inside the friction ellipse; the ego's
+      ``speed_factor`` = 0.7 puts the speed profile inside those limits; cars start at 0.5-0.7 of the
+      profile (``race.start_speed_fraction``).
+    * **Room for the tracking error**: ``stack.mpc.track_margin`` = 2.2 m (half the width plus 1.25 m
+      instead of 0.25 m).
+    * **Calmer steering**: ``stack.mpc.q`` n-weight 20 instead of 150, ``stack.mpc.r`` steering-rate
+      weight 50 instead of 8.
 
     These stack settings are part of the world (the plant and the sensed traffic ask for them); they are
     applied on top of a named ``stack`` preset too, and the user's own stack keys win. The observation is
