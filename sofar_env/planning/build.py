@@ -22,11 +22,12 @@ from __future__ import annotations
 import numpy as np
 
 from .._interp import interp_located, locate
-from .._jit import kernel, py_max, py_min
+from .._jit import kernel, maximum, py_max, py_min
 from .clearance import _clearance_table, _side_clusters
 from .hysteresis import _match
+from .problem import _slack_and_switch
 
-__all__ = ["build_problem", "UNBOUNDED", "NO_OPPONENTS", "PROBLEM"]
+__all__ = ["build_problem", "finish_plan", "UNBOUNDED", "NO_OPPONENTS", "PROBLEM"]
 
 UNBOUNDED = 0
 """Some input is not finite or above 1e300 in magnitude: the caller tests the sum of the inputs (nothing else
@@ -214,3 +215,35 @@ def build_problem(nodes, opp, opp_s, ego, previous, weights, window, checked):
                 p += 1
     problem = (C, labels, p_lo, p_hi, d_prev, f_d, b_prev, f_b, b_fixed, pair_k, pair_c, pair_n, pair_w, pair_r)
     return PROBLEM, lo, hi, relevant, problem
+
+
+@kernel
+def finish_plan(d, b, prob_bounds, pairs, rel_cluster, b_prev, relevant, M):
+    """What :meth:`~sofar_env.planning.miqp.PassingSidePlanner.plan` takes from a solution ``(d, b)`` in one
+    compiled call: ``d`` clipped into ``prob_bounds = (lo, hi)`` (``np.clip``'s formula: nan kept, ties to the
+    bound), the minimal slack per pair and the number of side switches (:func:`~.problem._slack_and_switch`),
+    the sides per input opponent (+1 left where ``b > 0.5``, -1 right, 0 not relevant), the largest slack per
+    opponent and over all pairs (0 without pairs). ``pairs = (pair_k, pair_c, pair_n, pair_w, pair_r)``.
+    Returns ``(d, xi, switch, sides, opponent_slack, max_slack)``."""
+    lo, hi = prob_bounds
+    pair_k, pair_c, pair_n, pair_w, pair_r = pairs
+    N = d.shape[0]
+    out = np.empty(N)
+    for k in range(N):
+        x = d[k]
+        if x == x:
+            x = x if x > lo[k] else lo[k]
+        if x == x:
+            x = x if x < hi[k] else hi[k]
+        out[k] = x
+    xi, switch = _slack_and_switch(b, out, pair_c, pair_k, pair_n, pair_w, rel_cluster, b_prev)
+    sides = np.zeros(M, dtype=np.int64)
+    for r in range(relevant.shape[0]):
+        sides[relevant[r]] = 1 if b[rel_cluster[r]] > 0.5 else -1
+    opp_slack = np.zeros(M)
+    top = 0.0
+    for p in range(xi.shape[0]):
+        i = relevant[pair_r[p]]
+        opp_slack[i] = maximum(opp_slack[i], xi[p])
+        top = maximum(top, xi[p])
+    return out, xi, switch, sides, opp_slack, top

@@ -65,18 +65,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._interp import interp as _interp_kernel
-from .._jit import kernel, maximum
-from .build import NO_OPPONENTS, UNBOUNDED, _corridor, build_problem
+from .build import NO_OPPONENTS, UNBOUNDED, _corridor, build_problem, finish_plan
 from .clearance import ClearanceWindow
 from .config import MIQPConfig
 from .hysteresis import prior_sides
-from .problem import SideProblem, cost_factors, evaluate, plan_cost
+from .problem import SideProblem, cost_factors, plan_cost
 from .solvers import solve_branch_and_bound, solve_enumeration
-
-try:  # the ufunc behind ndarray.clip, without its Python wrapper (same results)
-    from numpy._core.umath import clip as _clip
-except ImportError:  # pragma: no cover - other numpy layouts
-    _clip = np.clip
 
 __all__ = ["MIQPConfig", "PlanResult", "PassingSidePlanner"]
 
@@ -238,7 +232,6 @@ class PassingSidePlanner:
                               solve_time=time.perf_counter() - t0, n_binaries=0,
                               opponent_slack=np.zeros(M))
         prob = self._problem(n_ref, parts)
-        prior = prior_sides(relevant, prob.b_prev, M)
         sol = None
         routes = ((self._solve_bnb, self._solve_enumerate) if cfg.solver == "daqp"
                   else (self._solve_enumerate,))
@@ -251,24 +244,22 @@ class PassingSidePlanner:
             if sol is not None:
                 break
         if sol is None:
-            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, prior,
+            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, prior_sides(relevant, prob.b_prev, M),
                                   "solver failed")
-        d, b = sol
-        d = _clip(d, prob.lo, prob.hi)  # remove solver tolerance outside the hard bounds (d.clip)
-        obj, xi = evaluate(cfg, prob, d, b)
+        # d clipped into the hard bounds (solver tolerance), slacks, sides: one compiled call (build.finish_plan)
+        d, xi, switch, sides, opp_slack, max_slack = finish_plan(
+            sol[0], sol[1], (prob.lo, prob.hi), (prob.pair_k, prob.pair_c, prob.pair_n, prob.pair_w, prob.pair_r),
+            prob.rel_cluster, prob.b_prev, relevant, M)
+        slack_sum = float(np.add.reduce(xi))
+        obj = plan_cost(cfg, d, n_ref, prob.d_prev, cfg.w_switch * switch, cfg.w_slack * slack_sum)
         if not math.isfinite(obj):
-            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, prior,
+            return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, prior_sides(relevant, prob.b_prev, M),
                                   "non-finite objective")
-        sides = np.zeros(M, dtype=int)
-        sides[relevant] = np.where(b[prob.rel_cluster] > 0.5, 1, -1)
-        opp_slack = _max_per_opponent(M, relevant[prob.pair_r], xi)
         self._remember(s_nodes, d, opp, sides)
         return PlanResult(d=d, s=s_nodes.copy(), sides=sides, objective=obj,
                           status="optimal", success=True,
                           solve_time=time.perf_counter() - t0, n_binaries=prob.n_clusters,
-                          max_slack=float(np.maximum.reduce(xi, initial=0.0)),
-                          slack_sum=float(np.add.reduce(xi)),
-                          opponent_slack=opp_slack)
+                          max_slack=max_slack, slack_sum=slack_sum, opponent_slack=opp_slack)
 
     # ------------------------------------------------------------ components
     def _previous(self) -> tuple:
@@ -335,13 +326,3 @@ class PassingSidePlanner:
         return PlanResult(d=d, s=s_out.copy(), sides=sides, objective=float("nan"),
                           status="fallback", success=False,
                           solve_time=time.perf_counter() - t0, n_binaries=0)
-
-
-@kernel
-def _max_per_opponent(M, rows, xi):
-    """(M,) the largest ``xi`` [m] of each row index in ``rows`` (0 for rows without one):
-    ``np.maximum.at(np.zeros(M), rows, xi)``."""
-    out = np.zeros(M)
-    for p in range(rows.shape[0]):
-        out[rows[p]] = maximum(out[rows[p]], xi[p])
-    return out

@@ -99,3 +99,41 @@ def test_the_compiled_build_is_the_numpy_form(alongside_gap):
             opp[:, 0] -= rng.uniform(0.0, 5.0)
     assert built[PROBLEM] > 20 and with_plan > 10
     assert locked > 0 or not alongside_gap
+
+
+def test_the_compiled_finish_is_the_numpy_form():
+    """The solutions of closed-loop-like problems, and the same moved outside their bounds, with nan and signed
+    zeros on the bounds: clipped plan, slacks, switch count, sides and slack maxima of the compiled finish equal
+    the numpy form's (np.clip, the slack kernel, np.where, np.maximum.at, np.maximum.reduce), bit for bit."""
+    from numpy._core.umath import clip
+
+    from sofar_env.planning.build import finish_plan
+    from sofar_env.planning.problem import _slack_and_switch
+
+    from .test_solvers import _closed_loop_problems
+
+    rng = np.random.default_rng(17)
+    seen = _closed_loop_problems(seed=19, alongside_gap=8.0)
+    assert len(seen) > 15
+    for trial, (prob, _, out) in enumerate(seen):
+        d, b = out[0].copy(), out[1]
+        if trial % 3 == 1:
+            d += rng.normal(size=d.size)
+            d[int(rng.integers(d.size))] = np.nan
+            d[0] = -0.0
+            prob.lo[0] = 0.0
+        M = int(prob.pair_r.max(initial=0)) + 2
+        relevant = np.arange(prob.rel_cluster.size) + 1
+        got = finish_plan(d, b, (prob.lo, prob.hi), (prob.pair_k, prob.pair_c, prob.pair_n, prob.pair_w, prob.pair_r),
+                          prob.rel_cluster, prob.b_prev, relevant, M)
+        d_w = clip(d, prob.lo, prob.hi)
+        xi, switch = _slack_and_switch(b, d_w, prob.pair_c, prob.pair_k, prob.pair_n, prob.pair_w, prob.rel_cluster,
+                                       prob.b_prev)
+        sides = np.zeros(M, dtype=int)
+        sides[relevant] = np.where(b[prob.rel_cluster] > 0.5, 1, -1)
+        opp_slack = np.zeros(M)
+        np.maximum.at(opp_slack, relevant[prob.pair_r], xi)
+        want = (d_w, xi, switch, sides, opp_slack, float(np.maximum.reduce(xi, initial=0.0)))
+        for i, (g, w) in enumerate(zip(got, want)):
+            np.testing.assert_array_equal(g, w, err_msg=str(i))
+            assert np.signbit(g).tolist() == np.signbit(w).tolist(), i
