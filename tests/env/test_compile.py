@@ -51,6 +51,21 @@ assert condensed._condense.signatures, "not compiled by the warm-up"
         warm_up([], multi_agent=False, qp_solvers=["osqp"])
 
 
+def test_warm_up_compiles_the_planners_kernels() -> None:
+    """The passing-side planner's compiled calls (the problem's build, DAQP's branch and bound through its C API,
+    the finish) are compiled (or loaded from the cache) by the paper world's warm-up (a fresh process)."""
+    code = """
+from sofar_env.compile import warm_up
+from sofar_env.planning import build, daqp_c, solvers
+kernels = [build.build_problem, build.finish_plan] + ([solvers._bnb_solve] if daqp_c.AVAILABLE else [])
+assert not any(k.signatures for k in kernels)
+warm_up(["paper"], multi_agent=False, qp_solvers=())
+assert all(k.signatures for k in kernels), [k.__name__ for k in kernels if not k.signatures]
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+
+
 def test_the_first_compilation_in_a_process_logs_one_line(caplog, monkeypatch) -> None:
     def fresh(x):
         return x + 1.0
