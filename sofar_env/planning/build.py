@@ -8,7 +8,8 @@ the relevant opponents, the cars alongside and their side locks, the side cluste
 (``np.interp``'s arithmetic, :func:`sofar_env._interp.interp_at`), the linear cost, the previous sides
 (:func:`~.hysteresis._match`), the hysteresis cost per cluster and the active pairs. Each value with the
 operations of the numpy form it replaced, in the same order (tests/planning/test_build.py compares the two bit
-for bit); matrix products (BLAS) are left to the caller.
+for bit); matrix products (BLAS) are left to the caller (why, and the measurements:
+docs/decisions/compiled-planner.md).
 
 Inputs bundled per concept: ``nodes = (s_nodes, n_ref, n_min, n_max)``; ``ego = (ego_n, progress)``; ``previous
 = (has_plan, prev_s, prev_d, has_sides, prev_opp, prev_sides)`` (the planner's memory; the flags say whether the

@@ -13,6 +13,7 @@ copied from the headers of ``daqp`` :data:`DAQP_VERSION`; their layout changes b
 :data:`AVAILABLE` is True only when the installed version is that one and DAQP's own
 ``daqp_default_settings`` fills the settings record with the defaults of ``daqp.solve`` (a check of the
 layout). Otherwise a warning is logged once and the callers keep their ``daqp.solve`` route (same results).
+Measurements and what stays numpy: docs/decisions/compiled-planner.md.
 """
 
 from __future__ import annotations
