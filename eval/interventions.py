@@ -14,7 +14,10 @@ placebos' are what a within-race gamma could gain; rescues at their rate are re-
 The report ends with each timely switch of the placebo's window against the displaced placebo, paired on
 the failures both were run on (exact McNemar test). Writes ``interventions.csv`` (one row per replay) and
 ``interventions.md`` to ``--out``; ``--report`` re-makes ``interventions.md`` from an ``interventions.csv``
-(in its folder, or ``--out``) without running an episode. The logic is in sofar_agents.evaluation.interventions.
+(in its folder, or ``--out``) without running an episode. The replays run on the executor with Table I's
+behaviour: rerunning the same command resumes (the episodes whose replays ``interventions.csv`` holds, under the
+same configuration hash, are skipped), and a run that leaves episodes out (failed, or lost with a worker process
+that died) says how many and exits with status 1. The logic is in sofar_agents.evaluation.interventions.
 """
 
 from __future__ import annotations
@@ -76,7 +79,8 @@ def report(args) -> int:
             raise ValueError(f"no such CSV: {path}")
         with open(path, newline="") as f:
             reader = csv.DictReader(f)
-            missing = [c for c in iv.INTERVENTION_COLUMNS if c not in (reader.fieldnames or [])]
+            missing = [c for c in iv.INTERVENTION_COLUMNS if c not in (reader.fieldnames or []) and c not in
+                       iv.ADDED_COLUMNS]
             if missing:
                 raise ValueError(f"{path} is not an interventions.csv (missing columns {missing})")
             results = iv.results_from_rows(list(reader))
@@ -119,15 +123,22 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     t0 = time.perf_counter()
-    results = iv.run_interventions(episodes, interventions, workers=args.workers)
-    wall = time.perf_counter() - t0
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / "interventions.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=iv.INTERVENTION_COLUMNS, lineterminator="\n")
-        w.writeheader()
-        w.writerows(iv.intervention_rows(results))
+    try:
+        results, stats = iv.replay_interventions(episodes, interventions, out / "interventions.csv",
+                                                 workers=args.workers)
+    except ValueError as exc:  # an interventions.csv of another kind in --out
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: finished replays are in {out}; rerun the same command to resume", file=sys.stderr)
+        return 130
+    wall = time.perf_counter() - t0
     text = iv.format_interventions(iv.summarize_interventions(results), args.gamma, iv.placebo_comparisons(results))
+    incomplete = ev.incomplete_message(stats, args.out, unit="failed episodes")
+    if incomplete:
+        text += (f"\n**Incomplete:** {stats.unfinished} of {stats.requested} failed episodes are missing; rerun the "
+                 "same command.\n")
     replays = len(results)
     steps = sum(r.steps for r in results)
     text += (f"\n{replays} replays, {steps:,} env steps, {wall:.0f} s on {args.workers} worker(s). "
@@ -137,6 +148,9 @@ def main(argv=None) -> int:
              + (f" --limit {args.limit}" if args.limit else "") + f" --workers {args.workers} --out {args.out}`\n")
     ev.write_markdown(out / "interventions.md", text)
     print(text)
+    if incomplete:
+        logger.error(incomplete)
+        return 1
     return 0
 
 

@@ -14,30 +14,31 @@ off-track and stalled cars per race, success per car, car-seconds driven. Exampl
 
 ``--alongside-gap 6`` turns on the controllers' MIQP side lock for cars alongside
 (``stack.miqp.alongside_gap``); ``--table-races 4 --duration 200`` races the fields of the multi-agent
-table (its seeds) for an A/B against its committed rows.
+table (its seeds) for an A/B against its committed rows. The races run on the executor
+(:mod:`sofar_agents.executor`, in worker processes with ``--workers``); a race that fails or is lost with a worker
+is logged and left out of the tables, and the script exits with status 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import logging
 import math
-import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 
 from sofar_agents.cli_types import gamma_value, int_at_least, nonneg_float, nonneg_int, positive_float, positive_int
 from sofar_agents.evaluation.multi_agent import (
-    RaceResult,
+    RaceJob,
+    RaceRunner,
     RaceTask,
     format_multi_agent_table,
     format_per_circuit,
     race_seed,
-    run_race,
 )
 from sofar_agents.evaluation.protocol import Strategy
-from sofar_agents.worker_lifetime import exit_with_parent
+from sofar_agents.executor import execute, missing_summary
 from sofar_env.constants import CIRCUITS
 
 logger = logging.getLogger("multi_agent_races")
@@ -87,11 +88,9 @@ def main(argv: list[str] | None = None) -> int:
              for seed in (args.seeds if args.table_races is None
                           else [race_seed(0, track, e) for e in range(args.table_races)])]
     t0 = time.perf_counter()
-    if args.workers == 1:
-        results = [_run(task, overrides, stack) for task in tasks]
-    else:
-        with ProcessPoolExecutor(args.workers, initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
-            results = list(pool.map(_run, tasks, [overrides] * len(tasks), [stack] * len(tasks)))
+    job = RaceJob(None, functools.partial(RaceRunner, overrides, stack))
+    stats = execute(tasks, job, workers=args.workers, progress=False)
+    results = [job.results[t.key] for t in tasks if t.key in job.results]
     for r in results:
         logger.info("%s seed %d: %d overtakes, %d colliding, %d off track, %d stalled, pace %s",
                     r.track, r.seed, r.overtakes, r.collided, r.off_track, r.stalled, r.speed_factors)
@@ -113,11 +112,11 @@ def main(argv: list[str] | None = None) -> int:
         for r in results:
             print(f"| {r.track} | {r.seed} | {r.speed_factors} | {r.overtakes} | {r.collided} | {r.off_track} | "
                   f"{r.stalled} |")
+    missing = missing_summary(stats, unit="races")
+    if missing:
+        logger.error("incomplete: %s; the tables above leave them out", missing)
+        return 1
     return 0
-
-
-def _run(task: RaceTask, race_overrides: dict, stack_overrides: dict | None) -> RaceResult:
-    return run_race(task, None, race_overrides, stack_overrides)
 
 
 if __name__ == "__main__":

@@ -9,7 +9,7 @@
     python eval/table.py --multi-agent --self-play runs/selfplay/pasta_final.json --gammas 0.3 0.5 --workers 1
 
 Results (per-episode CSV, Markdown table) go to --out; rerunning the same command
-skips the episodes already in the CSV. A run that leaves episodes out (failed, or lost
+skips the episodes already in the CSV. A run that leaves episodes (races) out (failed, or lost
 with a worker process that died) says how many and exits with status 1; numbers out of
 range are usage errors (status 2). The worker processes end with this one, even when it
 is killed. The logic lives in sofar_agents.evaluation (experiments.py runs a table;
@@ -164,10 +164,9 @@ def multi_agent_main(args: argparse.Namespace) -> int:
         return 130
     print(report.markdown)
     print(f"Wrote {report.csv_path} and {report.markdown_path}")
-    if report.missing:
-        logger.error("incomplete: %d of %d races are missing (a worker process died); re-run with the same --out %s "
-                     "to resume (the finished races are kept, only the missing ones run)", report.missing,
-                     report.expected, out)
+    incomplete = ev.incomplete_message(report.stats, out, unit="races")
+    if incomplete:
+        logger.error(incomplete)
         return 1
     return 0
 

@@ -2,8 +2,8 @@
 
 A pool worker blocked on its queue, or in the middle of a long episode, does not notice that
 its driver was killed (SIGKILL, the OOM killer, a closed terminal): it would finish its work for
-nobody and then wait for ever, holding its memory. Called first thing in a worker (a process
-target, a ``ProcessPoolExecutor`` initializer), :func:`exit_with_parent` ends the worker as soon
+nobody and then wait for ever, holding its memory. Called first thing in a worker (as every worker of
+:mod:`sofar_agents.worker_processes` does), :func:`exit_with_parent` ends the worker as soon
 as its parent ends; :func:`exit_with_process` does the same for a process that is not the
 parent (a Ray actor, whose parent is Ray's raylet, tied to the driver on the same machine).
 

@@ -7,10 +7,9 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
   the task lists of Tables I and II (what to run);
 * :mod:`~sofar_agents.evaluation.episode`: one episode in one environment (``make_env``,
   ``run_episode``);
-* :mod:`~sofar_agents.evaluation.sweep`: many episodes over a process pool, resumed from
-  the CSV (``run_sweep``);
-* :mod:`~sofar_agents.evaluation.ray_backend`: the same episodes on Ray actors, locally or on
-  a cluster (``run_sweep(..., backend="ray", address=...)``; needs ``pip install "sofar[ray]"``);
+* :mod:`~sofar_agents.evaluation.sweep`: many episodes on the executor (:mod:`sofar_agents.executor`: this
+  process, worker processes, or Ray actors locally or on a cluster with ``backend="ray"``), resumed from the CSV
+  (``run_sweep``);
 * :mod:`~sofar_agents.evaluation.results`: the episode record and the episode/trace CSV
   files (columns, reading, appending, resume keys);
 * :mod:`~sofar_agents.evaluation.tables`: totals per group and the Markdown of Tables I/II;
@@ -25,8 +24,8 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
 * :mod:`~sofar_agents.evaluation.headroom`: what an adaptive gamma could gain over the best fixed one,
   by oracles over the fixed-gamma rows of Table I (``headroom``; ``eval/headroom.py``);
 * :mod:`~sofar_agents.evaluation.interventions`: the within-race part of that question: each failure of a
-  fixed gamma replayed with gamma switched just before it, against placebo switches (``run_interventions``;
-  ``eval/interventions.py``);
+  fixed gamma replayed with gamma switched just before it, against placebo switches (``run_interventions``,
+  ``replay_interventions``: resumable from ``interventions.csv``; ``eval/interventions.py``);
 * :mod:`~sofar_agents.evaluation.paired`: two strategies compared on the same seeded episodes, with an
   exact McNemar test (``paired_comparison``; ``eval/paired.py``);
 * :mod:`~sofar_agents.evaluation.latency`: Table III (``measure_latency``);
@@ -47,7 +46,7 @@ from sofar_agents.evaluation.headroom import (HeadroomRow, fixed_gamma_rows, for
                                               outcome_flips)
 from sofar_agents.evaluation.interventions import (Intervention, InterventionResult,
                                                    default_interventions, failed_episodes, format_interventions,
-                                                   run_interventions, summarize_interventions)
+                                                   replay_interventions, run_interventions, summarize_interventions)
 from sofar_agents.evaluation.manifest import Manifest, check_manifest, load_manifest, run_manifest
 from sofar_agents.evaluation.latency import (PAPER_LATENCY_MS, format_latency, latency_stats, machine_info,
                                              measure_latency, write_json)
@@ -89,6 +88,7 @@ __all__ = [
     "default_interventions",
     "failed_episodes",
     "run_interventions",
+    "replay_interventions",
     "summarize_interventions",
     "format_interventions",
     "PairedComparison",

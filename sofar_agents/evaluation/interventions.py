@@ -25,23 +25,35 @@ the same window length:
 
 Rescues beyond the placebos' are what a state-dependent gamma could gain, *if* a policy could tell
 the moments apart; rescues at the placebos' rate are re-drawn outcomes that no policy can aim at.
+
+The replays run on the executor (:mod:`sofar_agents.executor`), one task per failed episode
+(:class:`ReplayTask`: its base replay and every intervention), with the resume and fault behaviour of Table I:
+:func:`replay_interventions` appends each episode's rows to ``interventions.csv`` as it finishes, skips the
+episodes whose rows the file already holds (by the episode's resume key, which holds the configuration hash of
+the ``config_hash`` column, and the interventions asked for), counts the episodes that failed or were lost with a
+worker, and once every episode is in the file rewrites it with the run's rows in task order (the file a run
+without interruptions writes).
 """
 
 from __future__ import annotations
 
+import csv
 import math
+import os
 from collections.abc import Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from sofar_agents.evaluation.episode import make_env, run_episode
 from sofar_agents.evaluation.paired import PairedComparison, format_paired, paired_comparison
-from sofar_agents.evaluation.protocol import EpisodeTask, Strategy, exact_text, gamma_text
+from sofar_agents.evaluation.protocol import EpisodeTask, Strategy, _key, exact_text, gamma_text
+from sofar_agents.evaluation.results import read_csv_rows
+from sofar_agents.executor import Job, RunStats, execute
 
-__all__ = ["Intervention", "InterventionResult", "INTERVENTION_COLUMNS", "default_interventions",
-           "failed_episodes", "intervene", "run_interventions", "summarize_interventions", "placebo_comparisons",
-           "format_interventions", "intervention_rows", "results_from_rows"]
+__all__ = ["Intervention", "InterventionResult", "INTERVENTION_COLUMNS", "ReplayTask", "default_interventions",
+           "failed_episodes", "intervene", "run_interventions", "replay_interventions", "summarize_interventions",
+           "placebo_comparisons", "format_interventions", "intervention_rows", "results_from_rows"]
 
 _CONTROL_DT = 0.1
 """Seconds per env step of the registered environments: one decision per control step of
@@ -132,6 +144,8 @@ class InterventionResult:
     steps: int
     outcome: str
     """``success``, ``collision``, ``off_track`` or ``stalled``."""
+    config_hash: str = ""
+    """The configuration hash of the replayed environment ("": rows written before the column)."""
 
     @property
     def rescued(self) -> bool:
@@ -148,8 +162,11 @@ class InterventionResult:
 
 INTERVENTION_COLUMNS = ("track", "rho", "seed", "stack", "scenario", "use_miqp", "duration", "n_opponents",
                         "base_gamma", "kind", "gamma", "window_s", "hold_s", "lead_s", "base_steps", "base_outcome",
-                        "steps", "outcome", "rescued", "delayed")
+                        "steps", "outcome", "rescued", "delayed", "config_hash")
 """Columns of :func:`intervention_rows` (``kind`` is ``base`` for the base replay)."""
+ADDED_COLUMNS = {"config_hash": ""}
+"""Columns that files of an older layout lack, with the value their rows stand for (no hash: reused by no task)."""
+_MAY_BE_EMPTY = ("n_opponents", "window_s", "hold_s", "lead_s", "config_hash")
 
 
 def intervention_rows(results: Iterable[InterventionResult]) -> list[dict[str, Any]]:
@@ -164,7 +181,8 @@ def intervention_rows(results: Iterable[InterventionResult]) -> list[dict[str, A
             "kind": "base" if iv is None else iv.kind, "gamma": r.base_gamma if iv is None else iv.gamma,
             "window_s": "" if iv is None else iv.window_s, "hold_s": "" if iv is None else iv.hold_s,
             "lead_s": "" if iv is None else iv.lead_s, "base_steps": r.base_steps, "base_outcome": r.base_outcome,
-            "steps": r.steps, "outcome": r.outcome, "rescued": int(r.rescued), "delayed": int(r.delayed)})
+            "steps": r.steps, "outcome": r.outcome, "rescued": int(r.rescued), "delayed": int(r.delayed),
+            "config_hash": r.config_hash})
     return rows
 
 
@@ -183,7 +201,7 @@ def results_from_rows(rows: Iterable[Mapping[str, Any]]) -> list[InterventionRes
             iv = None if r["kind"] == "base" else Intervention(
                 float(r["gamma"]), float(r["window_s"]), float(r["hold_s"]), float(r["lead_s"]), str(r["kind"]))
             out.append(InterventionResult(task, base, iv, int(r["base_steps"]), str(r["base_outcome"]),
-                                          int(r["steps"]), str(r["outcome"])))
+                                          int(r["steps"]), str(r["outcome"]), str(r.get("config_hash") or "")))
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"row {k + 1} is not an interventions.csv row: {exc}") from exc
     return out
@@ -222,9 +240,9 @@ def failed_episodes(rows: Iterable[Mapping[str, Any]], gamma: float, limit: int 
     return out
 
 
-def _replay(env, task: EpisodeTask, schedule: _Schedule) -> tuple[int, str]:
+def _replay(env, task: EpisodeTask, schedule: _Schedule) -> tuple[int, str, str]:
     result, _ = run_episode(env, schedule, task)
-    return result.steps, _outcome(result)
+    return result.steps, _outcome(result), result.config_hash
 
 
 def intervene(task: EpisodeTask, interventions: Sequence[Intervention]) -> list[InterventionResult]:
@@ -236,43 +254,181 @@ def intervene(task: EpisodeTask, interventions: Sequence[Intervention]) -> list[
     env = make_env(task.track, use_miqp=task.use_miqp, duration=task.duration, stack=task.stack,
                    scenario=task.scenario)
     try:
-        k_fail, base_out = _replay(env, task, _Schedule(base_gamma))
-        out = [InterventionResult(task, base_gamma, None, k_fail, base_out, k_fail, base_out)]
+        k_fail, base_out, env_hash = _replay(env, task, _Schedule(base_gamma))
+        out = [InterventionResult(task, base_gamma, None, k_fail, base_out, k_fail, base_out, env_hash)]
         if base_out == "success":
             return out
         for iv in interventions:
             first, end = iv.steps(k_fail)
             if end <= first:  # a displaced window that would lie before the start
                 continue
-            steps, outcome = _replay(env, task, _Schedule(base_gamma, iv.gamma, first, end))
-            out.append(InterventionResult(task, base_gamma, iv, k_fail, base_out, steps, outcome))
+            steps, outcome, _ = _replay(env, task, _Schedule(base_gamma, iv.gamma, first, end))
+            out.append(InterventionResult(task, base_gamma, iv, k_fail, base_out, steps, outcome, env_hash))
         return out
     finally:
         env.close()
 
 
-def _intervene_star(args) -> list[InterventionResult]:
-    return intervene(*args)
+@dataclass(frozen=True)
+class ReplayTask:
+    """One failed episode to replay: its base replay, then once per intervention (:func:`intervene`)."""
+
+    episode: EpisodeTask
+    interventions: tuple[Intervention, ...]
+
+    @property
+    def key(self) -> tuple:
+        """The episode's resume key (configuration hash included); the interventions are the run's, checked
+        against the rows by :class:`InterventionJob`."""
+        return self.episode.key
+
+
+class InterventionRunner:
+    """The executor's worker body for replays: :func:`intervene` (it builds and closes the episode's env)."""
+
+    def run(self, task: ReplayTask) -> list[InterventionResult]:
+        return intervene(task.episode, task.interventions)
+
+    def close(self) -> None:
+        pass
+
+
+def _row_episode_key(row: Mapping[str, Any]) -> tuple:
+    """The resume key of the episode an ``interventions.csv`` row replayed (that of its :class:`ReplayTask`)."""
+    return _key(row["track"], Strategy.fixed(float(row["base_gamma"])).name, "", row["rho"], int(row["seed"]),
+                bool(int(row["use_miqp"])), row["duration"], row["stack"], row["n_opponents"], row["scenario"],
+                row.get("config_hash") or "")
+
+
+def _row_intervention(row: Mapping[str, Any]) -> Intervention | None:
+    if row["kind"] == "base":
+        return None
+    return Intervention(float(row["gamma"]), float(row["window_s"]), float(row["hold_s"]), float(row["lead_s"]),
+                        str(row["kind"]))
+
+
+def _episode_rows(rows: Iterable[Mapping[str, Any]], interventions: Sequence[Intervention]) -> dict[tuple, list]:
+    """Per episode key, the rows of a complete replay of the episode with ``interventions``, in the order a
+    replay writes them (base, then the interventions in their order; of rows given twice, the last): the base row,
+    and a row for every intervention whose window is not empty (none after a base replay that did not fail)."""
+    groups: dict[tuple, dict] = {}
+    for r in rows:
+        groups.setdefault(_row_episode_key(r), {})[_row_intervention(r)] = r
+    out = {}
+    for key, by_iv in groups.items():
+        base = by_iv.get(None)
+        if base is None:
+            continue
+        wanted = [] if base["base_outcome"] == "success" else [
+            iv for iv in interventions if iv.steps(int(base["base_steps"]))[1] > iv.steps(int(base["base_steps"]))[0]]
+        if all(iv in by_iv for iv in wanted):
+            out[key] = [base] + [by_iv[iv] for iv in wanted]
+    return out
+
+
+def _read_rows(path: Path) -> list[dict[str, str]]:
+    return read_csv_rows(path, INTERVENTION_COLUMNS, added=ADDED_COLUMNS, may_be_empty=_MAY_BE_EMPTY,
+                         kind="interventions CSV")
+
+
+def _write_rows(path: Path, rows: Iterable[Mapping[str, Any]]) -> None:
+    """Replace ``path`` (atomically) with ``rows`` under :data:`INTERVENTION_COLUMNS`."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=INTERVENTION_COLUMNS, lineterminator="\n")
+        w.writeheader()
+        w.writerows({c: r.get(c, ADDED_COLUMNS.get(c, "")) for c in INTERVENTION_COLUMNS} for r in rows)
+    os.replace(tmp, path)
+
+
+class InterventionJob(Job):
+    """Replays as an executor job: each finished episode's rows are appended (flushed) to ``csv_path`` (if given)
+    and its results kept in ``results`` under its key. Done: the episodes whose complete replay with
+    ``interventions`` the file holds (:func:`_episode_rows`); a file of an older layout, or with a torn last line,
+    is rewritten in the current layout (its complete rows) before the first append. ``runner``: a picklable
+    factory of the worker body (None: :class:`InterventionRunner`)."""
+
+    unit = "episodes"
+
+    def __init__(self, csv_path: str | os.PathLike | None, interventions: Sequence[Intervention],
+                 runner: Any = None) -> None:
+        self.runner = runner or InterventionRunner
+        self.csv_path = None if csv_path is None else Path(csv_path)
+        self.interventions = tuple(interventions)
+        self.results: dict[tuple, list[InterventionResult]] = {}
+        self._f = self._w = None
+
+    def done_keys(self) -> set:
+        if self.csv_path is None:
+            return set()
+        return set(_episode_rows(_read_rows(self.csv_path), self.interventions))
+
+    def open(self, pending) -> None:
+        if self.csv_path is None:
+            return
+        self.csv_path.parent.mkdir(parents=True, exist_ok=True)
+        if not self.csv_path.exists() or self.csv_path.stat().st_size == 0:
+            _write_rows(self.csv_path, [])
+        elif not self.csv_path.read_text().endswith("\n") or (
+                self.csv_path.read_text().split("\n", 1)[0].split(",") != list(INTERVENTION_COLUMNS)):
+            _write_rows(self.csv_path, _read_rows(self.csv_path))
+        self._f = open(self.csv_path, "a", newline="")
+        self._w = csv.DictWriter(self._f, fieldnames=INTERVENTION_COLUMNS, lineterminator="\n")
+
+    def write(self, task: ReplayTask, payload: list[InterventionResult], stats: RunStats) -> None:
+        if self._w is not None:
+            self._w.writerows(intervention_rows(payload))
+            self._f.flush()
+        self.results[task.key] = payload
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = self._w = None
+
+    def describe(self, task: ReplayTask) -> str:
+        e = task.episode
+        return f"replays of episode {e.track}/{e.strategy.name} rho={e.rho:g} seed={e.seed:d}"
 
 
 def run_interventions(tasks: Sequence[EpisodeTask], interventions: Sequence[Intervention],
                       workers: int = 1) -> list[InterventionResult]:
-    """:func:`intervene` for every task, over ``workers`` processes; results in the tasks' order."""
+    """:func:`intervene` for every task, on the executor with ``workers`` (>= 1) worker processes (1: in this
+    process); results in the tasks' order, nothing written. ``RuntimeError`` (with the first traceback) if an
+    episode failed or was lost with its worker."""
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
-    jobs = [(t, tuple(interventions)) for t in tasks]
-    if workers == 1 or len(jobs) <= 1:
-        nested = [_intervene_star(j) for j in jobs]
-    else:
-        import multiprocessing as mp
-        import os
+    job = InterventionJob(None, interventions)
+    replays = [ReplayTask(t, tuple(interventions)) for t in tasks]
+    stats = execute(replays, job, workers=workers, progress=False)
+    if stats.unfinished:
+        raise RuntimeError(f"{stats.unfinished} of {len(tasks)} replays did not finish"
+                           + (f":\n{stats.errors[0]}" if stats.errors else ""))
+    return [r for t in replays for r in job.results[t.key]]
 
-        from sofar_agents.worker_lifetime import exit_with_parent
 
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=exit_with_parent,
-                                 initargs=(os.getpid(),)) as pool:
-            nested = list(pool.map(_intervene_star, jobs))
-    return [r for rs in nested for r in rs]
+def replay_interventions(tasks: Sequence[EpisodeTask], interventions: Sequence[Intervention],
+                         csv_path: str | os.PathLike, *, workers: int = 1,
+                         progress: bool = False) -> tuple[list[InterventionResult], RunStats]:
+    """Run (or resume) the replays of ``tasks`` into ``csv_path`` on the executor (module docstring).
+
+    Returns the results of the tasks' complete replays in the file, in the tasks' order (read back from the rows:
+    :func:`results_from_rows`), and the executor's stats: ``stats.unfinished`` episodes failed or were lost with a
+    worker (logged; a rerun retries them). When every task's replays are in the file, it is rewritten with exactly
+    those rows in task order (rows of other runs or configurations are dropped, as a new run replaces the file).
+    ``workers`` < 1 raises ``ValueError`` before anything is read or run.
+    """
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    replays = [ReplayTask(t, tuple(interventions)) for t in tasks]
+    stats = execute(replays, InterventionJob(csv_path, interventions), workers=workers, progress=progress)
+    path = Path(csv_path)
+    done = _episode_rows(_read_rows(path), interventions) if path.exists() else {}
+    keys = list(dict.fromkeys(t.key for t in replays))
+    rows = [r for k in keys if k in done for r in done[k]]
+    if keys and all(k in done for k in keys):
+        _write_rows(path, rows)
+    return results_from_rows(rows), stats
 
 
 def summarize_interventions(results: Sequence[InterventionResult]) -> dict[str, Any]:

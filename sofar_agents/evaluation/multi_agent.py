@@ -16,7 +16,8 @@ every car's ``info["overtakes"]``, which credits the passer only), the cars term
 collision with another car, by leaving the track and by stalling, the cars that reached the
 duration (success), and the car-seconds driven over ``cars x duration``. :func:`run_multi_agent_table`
 runs (or resumes: the rows already in the CSV are skipped) a list of races and writes a Markdown
-report; :func:`format_multi_agent_table` summarises rows per strategy.
+report on the executor (:mod:`sofar_agents.executor`: the resume, retry and fault behaviour of Table I);
+:func:`format_multi_agent_table` summarises rows per strategy.
 """
 
 from __future__ import annotations
@@ -27,9 +28,7 @@ import logging
 import os
 import time
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +36,7 @@ import numpy as np
 
 from sofar_agents.evaluation.protocol import DEFAULT_DURATION, TRACKS, Strategy, _fmt_float, episode_seed, exact_text
 from sofar_agents.evaluation.results import read_csv_rows
-from sofar_agents.worker_lifetime import exit_with_parent
+from sofar_agents.executor import Job, RunStats, execute
 
 __all__ = ["RACE_COLUMNS", "race_seed", "RaceTask", "RaceResult", "multi_agent_tasks", "run_race", "run_multi_agent_table",
            "read_race_csv", "format_multi_agent_table", "format_per_circuit"]
@@ -199,11 +198,53 @@ def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] 
     )
 
 
-def _run_in_worker(task: RaceTask) -> RaceResult:
-    from sofar_agents.evaluation.protocol import _limit_torch_threads
+class RaceRunner:
+    """The executor's worker body for races: :func:`run_race` with one policy per strategy, built on first use
+    and kept, and the same ``race_overrides`` / ``stack_overrides`` for every race."""
 
-    _limit_torch_threads()
-    return run_race(task)
+    def __init__(self, race_overrides: dict[str, Any] | None = None,
+                 stack_overrides: dict[str, Any] | None = None) -> None:
+        self.race_overrides, self.stack_overrides = race_overrides, stack_overrides
+        self.policies: dict[str, Any] = {}
+
+    def run(self, task: RaceTask) -> RaceResult:
+        if task.strategy.name not in self.policies:
+            self.policies[task.strategy.name] = task.strategy.build()
+        return run_race(task, self.policies[task.strategy.name], self.race_overrides, self.stack_overrides)
+
+    def close(self) -> None:
+        self.policies.clear()
+
+
+class RaceJob(Job):
+    """Races as an executor job: each finished race is appended to the per-race CSV ``csv_path`` (if given) and
+    kept in ``results`` under its task's key; the races already in the CSV (by :attr:`RaceTask.key`, which holds the
+    configuration hash) are skipped. ``runner``: a picklable factory of the worker body (:class:`RaceRunner`)."""
+
+    unit = "races"
+
+    def __init__(self, csv_path: str | os.PathLike | None, runner: Any = RaceRunner,
+                 warm_up: str | None = None) -> None:
+        self.csv_path = None if csv_path is None else Path(csv_path)
+        self.runner, self.scenario = runner, warm_up
+        self.results: dict[tuple, RaceResult] = {}
+
+    def done_keys(self) -> set:
+        return set() if self.csv_path is None else {r.key for r in read_race_csv(self.csv_path)}
+
+    def open(self, pending) -> None:
+        if self.scenario is not None:
+            from sofar_env.compile import warm_up
+
+            warm_up([self.scenario])  # compile here, not inside the progress bar's estimate
+
+    def write(self, task: RaceTask, payload: RaceResult, stats: RunStats) -> None:
+        if self.csv_path is not None:
+            _append(self.csv_path, payload)
+        self.results[task.key] = payload
+
+    def describe(self, task: RaceTask) -> str:
+        return f"race {task.track}/{task.strategy.name} seed={task.seed}"
 
 
 # ---------------------------------------------------------------------------- CSV
@@ -306,10 +347,13 @@ class MultiAgentReport:
     skipped: int
     elapsed: float
     missing: int = 0
-    """Races of the table without a row in the CSV (a worker process died): rerunning the same command
-    with the same output folder runs them."""
+    """Races of the table without a row in the CSV (they failed, or were lost with a worker process that died):
+    rerunning the same command with the same output folder runs them."""
     expected: int = 0
     """Races of the table."""
+    stats: RunStats = field(default_factory=RunStats)
+    """What the executor did in this run (``failed``, ``missing``; see
+    :func:`~sofar_agents.executor.incomplete_message`)."""
 
 
 def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.PathLike = "results/multi_agent", *,
@@ -319,12 +363,15 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
                           opponents: int = 0) -> MultiAgentReport:
     """Run (or resume) the races into ``out_dir/<prefix>_races.csv`` and write ``<prefix>.md``.
 
-    ``workers``: None for one per CPU, below 1 raises ValueError. With ``workers`` > 1 the races run in worker processes that end with this process (even when it is
-    killed); if one dies, the races without a result are logged and counted in ``missing`` of the report
-    (its Markdown says the table is incomplete) instead of raising.
+    The races run on the executor (:mod:`sofar_agents.executor`) with the resume and fault behaviour of Table I:
+    ``workers``: None for one per CPU, below 1 raises ValueError; with ``workers`` > 1 the races run in worker
+    processes that end with this process (even when it is killed). A race that raises, or is lost with a worker
+    process that died, is logged, left out of the CSV and counted (``stats.failed``, ``stats.missing``; in all,
+    ``missing`` of the report, and its Markdown says the table is incomplete) instead of raising; a rerun runs it.
     """
-    if workers is not None and int(workers) < 1:  # 0 is not "unset": None is
-        raise ValueError(f"workers must be >= 1 (or None: one per CPU), got {workers!r}")
+    from sofar_agents.executor.core import check_workers
+
+    check_workers(workers, "local")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     csv_path = out / f"{prefix}_races.csv"
@@ -332,34 +379,9 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
     from sofar_agents.evaluation.configs import check_one_config, race_config, write_config_json
 
     write_config_json(out, [race_config(stack, scenario, float(duration), int(opponents))])
-    done = {r.key for r in read_race_csv(csv_path)}
-    todo = [t for t in tasks if t.key not in done]
-    t0 = time.perf_counter()
-    from tqdm import tqdm
-
-    from sofar_env.compile import warm_up
-
-    if todo:
-        warm_up([scenario])  # compile here, not inside the progress bar's estimate
-    bar = tqdm(total=len(todo), unit="race", disable=not progress, dynamic_ncols=True, desc="races")
+    stats = execute(tasks, RaceJob(csv_path, RaceRunner, warm_up=scenario), workers=workers, progress=progress)
+    elapsed = stats.elapsed
     n_workers = max(1, int(workers or os.cpu_count() or 1))
-    if n_workers == 1:
-        policies: dict[str, Any] = {}
-        for task in todo:
-            if task.strategy.name not in policies:
-                policies[task.strategy.name] = task.strategy.build()
-            _append(csv_path, run_race(task, policies[task.strategy.name]))
-            bar.update()
-    else:
-        with ProcessPoolExecutor(n_workers, initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
-            try:
-                for result in pool.map(_run_in_worker, todo):
-                    _append(csv_path, result)
-                    bar.update()
-            except BrokenProcessPool as exc:
-                logger.error("a worker process died (%s): the races without a result are left out", exc)
-    bar.close()
-    elapsed = time.perf_counter() - t0
     wanted = {t.key for t in tasks}
     all_rows = read_race_csv(csv_path)
     rows = [r for r in all_rows if r.key in wanted]
@@ -368,8 +390,8 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
     other = sum(1 for r in all_rows if r.key[:-1] in by_rest and by_rest[r.key[:-1]] != r.key[-1])
     names = [s.name for s in strategies]
     labels = {s.name: s.label for s in strategies}
-    field = f"{cars} cars" + (f" and {opponents} scripted opponents" if opponents else "")
-    settings = (f"{field}, {duration:g} s races, circuits {', '.join(tracks)}, {races} races per circuit "
+    field_text = f"{cars} cars" + (f" and {opponents} scripted opponents" if opponents else "")
+    settings = (f"{field_text}, {duration:g} s races, circuits {', '.join(tracks)}, {races} races per circuit "
                 f"(base seed {base_seed}), "
                 f"controller {stack}, world {scenario}. Generated {time.strftime('%Y-%m-%d %H:%M')}.")
     parts = ["# Multi-agent races", "", settings, "",
@@ -388,10 +410,10 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
     missing = len(tasks) - len(rows)
     if missing:
         parts += ["", f"**Incomplete:** {missing} of {len(tasks)} races are missing; rerun the same command."]
-    parts += ["", f"{len(todo)} races run ({len(tasks) - len(todo)} taken from the CSV) with {n_workers} "
+    ran = stats.requested - stats.skipped
+    parts += ["", f"{ran} races run ({stats.skipped} taken from the CSV) with {n_workers} "
               f"worker{'' if n_workers == 1 else 's'} in {elapsed:.0f} s."]
     md = "\n".join(parts) + "\n"
     md_path = out / f"{prefix}.md"
     md_path.write_text(md)
-    return MultiAgentReport(md, csv_path, md_path, rows, len(todo), len(tasks) - len(todo), elapsed, missing,
-                            len(tasks))
+    return MultiAgentReport(md, csv_path, md_path, rows, ran, stats.skipped, elapsed, missing, len(tasks), stats)

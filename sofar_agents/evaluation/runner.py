@@ -1,8 +1,7 @@
 """The worker body of the sweeps: :class:`EpisodeRunner` runs episode tasks with cached environments and policies.
 
-A module of its own so that the sweep (:mod:`~sofar_agents.evaluation.sweep`) and its backends
-(:mod:`~sofar_agents.evaluation.process_pool`, :mod:`~sofar_agents.evaluation.ray_backend`) all depend on it and
-none of the backends depends on the sweep.
+A module of its own: the sweep (:mod:`~sofar_agents.evaluation.sweep`) hands the class to the executor
+(:mod:`sofar_agents.executor`), whose backends build it in their workers and know nothing of episodes.
 """
 
 from __future__ import annotations
@@ -21,8 +20,8 @@ class EpisodeRunner:
     """Runs episode tasks in one process, building environments and policies on first use and keeping them
     (one environment per ``task.env_key``, one policy per strategy) until :meth:`close`.
 
-    The worker body of every sweep backend: this process (one worker), the process pool
-    (:mod:`~sofar_agents.evaluation.process_pool`) and the Ray actors (:mod:`~sofar_agents.evaluation.ray_backend`).
+    The worker body of every sweep backend: this process (one worker), the worker processes
+    (:mod:`~sofar_agents.executor.processes`) and the Ray actors (:mod:`~sofar_agents.executor.ray_actors`).
     """
 
     def __init__(self) -> None:

@@ -8,24 +8,24 @@ here a worker goes on with its next step as soon as its own is done. A seeded ru
 updates and checkpoints as ``AsyncVectorEnv`` (and as the Ray backend) with the same ``n_envs``; why is in
 :mod:`sofar_agents.pasta.actor_pool`. Needs no Ray.
 
-Workers are started with the ``spawn`` method (no state inherited from the learner, whose torch threads
-a forked child must not share; as with every spawned pool, the main script must be importable, so not
-``python -`` reading standard input) and, with ``pin_workers``, each is pinned to a CPU of its own
+Workers are :class:`~sofar_agents.worker_processes.WorkerProcess` es, the transport of every process pool of the
+package (the executor's too): started with the ``spawn`` method (no state inherited from the learner, whose torch
+threads a forked child must not share; as with every spawned pool, the main script must be importable, so not
+``python -`` reading standard input), tied to the learner (they end with it, even when it is killed with SIGKILL;
+they ignore Ctrl-C, which is the learner's) and, with ``pin_workers``, each pinned to a CPU of its own
 (:func:`sofar_env.vector.worker_cpus`: Linux, and at least as many CPUs as workers). A worker that dies
-or raises fails the rollout with ``RuntimeError`` naming it; the agent is left as it was.
+or raises fails the rollout with ``RuntimeError`` naming it; the agent is left as it was. Why the training pools
+share the transport but not the executor's task queue: docs/decisions/one-executor.md.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
-import signal
-import traceback
+import functools
 from collections.abc import Callable, Sequence
-from multiprocessing.connection import Connection, wait
 from typing import Any
 
 from sofar_agents.pasta.actor_pool import ActorEnvPool, EnvSlice
+from sofar_agents.worker_processes import WorkerProcess, stop_workers, wait_ready
 from sofar_env.vector import worker_cpus
 
 __all__ = ["ProcessEnvPool"]
@@ -33,42 +33,11 @@ __all__ = ["ProcessEnvPool"]
 _JOIN_TIMEOUT_S = 5.0
 
 
-def _describe_failure(exc: BaseException) -> str:
-    """The exception on its first line, then the worker's traceback."""
-    return "".join(traceback.format_exception_only(exc)).strip() + "\n\nin the worker:\n" + traceback.format_exc()
+class _ProcessSlice(EnvSlice):
+    """The worker body: an :class:`EnvSlice` whose envs are closed when the worker stops."""
 
-
-def _serve(conn: Connection, make_vector: Callable, start: int, n_total: int, cpu: int | None) -> None:
-    """Worker process: build the :class:`EnvSlice`, then answer ``(method, args)`` calls until ``None`` arrives.
-
-    Every answer is ``(True, value)`` or ``(False, the exception and its traceback)``; the construction is answered
-    too.
-    """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the learner's to handle: it then closes the pool
-    if cpu is not None:
-        os.sched_setaffinity(0, {cpu})
-    try:
-        actor = EnvSlice(make_vector, start, n_total)
-    except Exception as exc:  # noqa: BLE001 (any failure is reported to the learner, which raises it)
-        conn.send((False, _describe_failure(exc)))
-        conn.close()
-        return
-    conn.send((True, None))
-    while True:
-        try:
-            msg = conn.recv()
-        except (EOFError, OSError):  # the learner is gone
-            break
-        if msg is None:
-            break
-        method, args = msg
-        try:
-            answer = (True, getattr(actor, method)(*args))
-        except Exception as exc:  # noqa: BLE001 (any failure is reported to the learner, which raises it)
-            answer = (False, _describe_failure(exc))
-        conn.send(answer)
-    actor.env.close()
-    conn.close()
+    def close(self) -> None:
+        self.env.close()
 
 
 class ProcessEnvPool(ActorEnvPool):
@@ -99,19 +68,12 @@ class ProcessEnvPool(ActorEnvPool):
         cpus = worker_cpus(len(self.slices)) if pin_workers else None
         self.pinned = cpus is not None
         """Whether each worker runs on a CPU of its own."""
-        ctx = mp.get_context("spawn")
-        self._conns: list[Connection] = []
-        self._procs: list[Any] = []
+        self._workers: list[WorkerProcess] = []
         try:
-            for w, (lo, hi) in enumerate(self.slices):
-                parent, child = ctx.Pipe()
-                proc = ctx.Process(target=_serve, args=(child, self._vector_fns[w], lo, self.num_envs,
-                                                        None if cpus is None else cpus[w]),
-                                   name=f"sofar-rollout-{w}", daemon=True)
-                proc.start()
-                child.close()
-                self._conns.append(parent)
-                self._procs.append(proc)
+            for w, (lo, _) in enumerate(self.slices):
+                body = functools.partial(_ProcessSlice, self._vector_fns[w], lo, self.num_envs)
+                self._workers.append(WorkerProcess(body, name=f"sofar-rollout-{w}", announce=True,
+                                                   cpu=None if cpus is None else cpus[w]))
             for w in range(len(self.slices)):
                 self._get(w, w)  # the construction's answer
             self._describe()
@@ -119,46 +81,28 @@ class ProcessEnvPool(ActorEnvPool):
             self.close()
             raise
 
+    @property
+    def _procs(self) -> list:
+        """The worker processes (``multiprocessing.Process``), in worker order."""
+        return [w.process for w in self._workers]
+
     def _submit(self, w: int, method: str, *args: Any) -> int:
-        try:
-            self._conns[w].send((method, args))
-        except OSError as err:  # a broken pipe: the worker is gone
-            raise self._exited(w) from err
+        self._workers[w].call(method, *args)  # WorkerGone (a RuntimeError) names the exit code
         return w
 
     def _wait_any(self, handles: list) -> int:
-        conns = {self._conns[w]: w for w in handles}
-        return conns[wait(list(conns))[0]]
+        index = {id(self._workers[w]): w for w in handles}
+        return index[id(wait_ready([self._workers[w] for w in handles])[0])]
 
     def _result(self, w: int, handle: int) -> Any:
-        try:
-            ok, value = self._conns[w].recv()
-        except (EOFError, OSError) as err:
-            raise self._exited(w) from err
-        if not ok:
-            raise RuntimeError(value)
-        return value
-
-    def _exited(self, w: int) -> RuntimeError:
-        return RuntimeError(f"the process exited (exit code {self._procs[w].exitcode})")
+        return self._workers[w].answer()
 
     def close(self) -> None:
-        """Stop the workers (those that do not stop within a few seconds are terminated)."""
+        """Stop the workers (those that do not stop within a few seconds are killed)."""
         if self.closed:
             return
         self.closed = True
-        for conn in self._conns:
-            try:
-                conn.send(None)
-            except (OSError, ValueError):  # the worker is gone
-                pass
-        for proc in self._procs:
-            proc.join(_JOIN_TIMEOUT_S)
-            if proc.is_alive():
-                proc.terminate()
-                proc.join(_JOIN_TIMEOUT_S)
-        for conn in self._conns:
-            conn.close()
+        stop_workers(self._workers, _JOIN_TIMEOUT_S)
 
     def __del__(self) -> None:
         if not getattr(self, "closed", True):

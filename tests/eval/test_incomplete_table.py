@@ -1,6 +1,6 @@
 """A table left incomplete is an error: when a worker process dies mid-sweep, eval/table.py writes what finished,
 says how many episodes (races) are missing and that the same --out resumes, and exits with status 1; the rerun
-completes the table."""
+completes the table (Table I and the multi-agent table alike: both run on the one executor)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from sofar_agents import evaluation as ev
+from sofar_agents.evaluation.multi_agent import read_race_csv
 
 from .process_tree import descendants, kill_all, wait_for
 
@@ -22,19 +23,20 @@ TABLE = ROOT / "eval" / "table.py"
 COMMON = ["--tracks", "LagunaSeca", "Monza", "--gammas", "0.5", "--no-adaptive", "--episodes", "1", "--duration", "5",
           "--workers", "2", "--no-progress"]
 
-CASES = {  # name: (table.py options, how a worker shows in its command line, message, rerun and check the CSV)
-    "process-pool": (["--rhos", "0.5"], lambda cmd: "spawn_main" in cmd,
-                     r"incomplete: 1 of 2 episodes are missing \(1 lost with a worker process that died\); re-run "
-                     r"with the same --out \S+ to resume", True),
-    "multi-agent-pool": (["--multi-agent"], lambda cmd: str(TABLE) in cmd,
-                         r"incomplete: [12] of 2 races are missing \(a worker process died\); re-run with the same "
-                         r"--out \S+ to resume", False),
+CASES = {  # name: (table.py options, the unit, the results CSV and how to read the circuits of its rows)
+    "process-pool": (["--rhos", "0.5"], "episodes",
+                     ("table1_episodes.csv", lambda p: [r["track"] for r in ev.read_episode_csv(p)])),
+    "multi-agent-pool": (["--multi-agent"], "races",
+                         ("multi_agent_races.csv", lambda p: [r.track for r in read_race_csv(p)])),
 }
+"""Both run on the executor: the same worker processes, the same message, the same resume."""
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_a_dead_worker_makes_the_table_fail_and_the_rerun_resumes(case, tmp_path):
-    options, is_worker, message, rerun = CASES[case]
+    options, unit, (csv_name, tracks_of) = CASES[case]
+    message = (rf"incomplete: 1 of 2 {unit} are missing \(1 lost with a worker process that died\); re-run "
+               r"with the same --out \S+ to resume")
     argv = [sys.executable, str(TABLE), *COMMON, *options, "--out", str(tmp_path)]
     driver = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     seen: dict = {}
@@ -42,12 +44,12 @@ def test_a_dead_worker_makes_the_table_fail_and_the_rerun_resumes(case, tmp_path
         def a_worker() -> int | None:
             kids = descendants(driver.pid)
             seen.update(kids)
-            return next((pid for (pid, _), cmd in kids.items() if is_worker(cmd)), None)
+            return next((pid for (pid, _), cmd in kids.items() if "spawn_main" in cmd), None)
 
         assert wait_for(lambda: a_worker() is not None or driver.poll() is not None, 120)
         victim = a_worker()
         assert victim is not None, driver.communicate(timeout=60)[1][-3000:]
-        os.kill(victim, signal.SIGKILL)  # dies with the episode it was given (one each: two episodes, two workers)
+        os.kill(victim, signal.SIGKILL)  # dies with the task it was given (one each: two tasks, two workers)
         out, err = driver.communicate(timeout=300)
     finally:
         if driver.poll() is None:
@@ -57,12 +59,10 @@ def test_a_dead_worker_makes_the_table_fail_and_the_rerun_resumes(case, tmp_path
     assert re.search(message, err), err[-3000:]
     assert "Traceback" not in err
     assert "Incomplete" in out  # the Markdown says it too
-    if rerun:
-        again = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=300)
-        assert again.returncode == 0, again.stderr[-3000:]
-        assert "incomplete" not in again.stderr
-        rows = ev.read_episode_csv(tmp_path / "table1_episodes.csv")
-        assert sorted(r["track"] for r in rows) == ["LagunaSeca", "Monza"]
+    again = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert "incomplete" not in again.stderr
+    assert sorted(tracks_of(tmp_path / csv_name)) == ["LagunaSeca", "Monza"]
 
 
 def test_incomplete_message_counts_the_missing_episodes():

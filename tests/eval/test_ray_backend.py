@@ -1,4 +1,4 @@
-"""sofar_agents.evaluation.ray_backend: a sweep on Ray writes the same rows as the process pool, survives a
+"""The executor's Ray backend (sofar_agents.executor.ray_actors): a sweep on Ray writes the same rows as the process pool, survives a
 dead worker, and without Ray says how to install it."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from sofar_agents import evaluation as ev
-from sofar_agents.evaluation import ray_backend
+from sofar_agents.evaluation import sweep
 from sofar_agents.evaluation.sweep import _EpisodeRunner
 
 ray = pytest.importorskip("ray")
@@ -53,7 +53,7 @@ def test_ray_sweep_retries_a_task_whose_worker_died(tmp_path, local_ray, monkeyp
                 os._exit(1)  # the worker process dies mid-sweep, once
             return super().run(task)
 
-    monkeypatch.setattr(ray_backend, "_EpisodeRunner", KillingRunner)
+    monkeypatch.setattr(sweep, "_EpisodeRunner", KillingRunner)
     tasks = _tasks()
     stats = ev.run_sweep(tasks, tmp_path / "ray.csv", workers=2, progress=False, backend="ray")
     assert os.path.exists(marker)

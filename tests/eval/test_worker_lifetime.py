@@ -31,10 +31,6 @@ def _spawned(cmd: str) -> bool:
     return "spawn_main" in cmd
 
 
-def _forked(cmd: str) -> bool:
-    return str(TABLE) in cmd
-
-
 def _ray_actor(cmd: str) -> bool:
     return cmd.startswith("ray::_RunnerActor")
 
@@ -45,7 +41,7 @@ def _not_ray_agent(cmd: str) -> bool:  # Ray's agents follow its raylet on Ray's
 
 CASES = {  # name: (table.py options, which descendants are the workers, which must end, seconds to start)
     "process-pool": (["--rhos", "0.5", "--workers", "2"], _spawned, lambda cmd: True, 120),
-    "multi-agent-pool": (["--multi-agent", "--workers", "2"], _forked, lambda cmd: True, 120),
+    "multi-agent-pool": (["--multi-agent", "--workers", "2"], _spawned, lambda cmd: True, 120),
     "ray-actors": (["--rhos", "0.5", "--backend", "ray", "--workers", "2"], _ray_actor, _not_ray_agent, 240),
 }
 
