@@ -78,3 +78,14 @@ def test_the_compiled_branch_and_bound_route_is_the_python_route():
         for a, b, c in zip(python, native, out):
             np.testing.assert_array_equal(a, b)
             np.testing.assert_array_equal(b, c)
+
+
+def test_another_daqp_version_keeps_the_python_route_with_a_warning(monkeypatch, caplog):
+    """A daqp other than the pinned one: the C route is refused (its structs may be laid out otherwise), one
+    warning says so."""
+    import logging
+
+    monkeypatch.setattr(daqp_c.metadata, "version", lambda name: "0.0.1")
+    with caplog.at_level(logging.WARNING, logger="sofar_env.planning.daqp_c"):
+        assert daqp_c._load() is False
+    assert any("0.0.1" in r.getMessage() and daqp_c.DAQP_VERSION in r.getMessage() for r in caplog.records)
