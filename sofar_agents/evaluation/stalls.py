@@ -1,0 +1,505 @@
+"""Why the ego stalls: replay or run episodes, record the slow phase step by step, classify each stall.
+
+A *stall* is the end of an episode by the stall rule (:mod:`sofar_env.core`): the ego slower than
+``stall_speed`` (1 m/s) for ``stall_seconds`` (20 s) without interruption. :func:`record_episode` runs one
+:class:`~sofar_agents.evaluation.protocol.EpisodeTask` (a replay of a committed row, or a new episode) as
+:func:`~sofar_agents.evaluation.episode.run_episode` does, and records one :class:`StepRecord` per control step
+while the ego is slower than :data:`RECORD_SPEED` (the records of a faster step are dropped, so the records
+left at the end are the final slow phase). Each record holds what the controller saw and did in that step:
+
+* the MIQP's decision (``follow``, ``left`` / ``right``: the side planned for the nearest car ahead that the
+  plan clears, ``free``: no car to clear), the plan's status, its largest clearance violation and the speed
+  of the followed car;
+* the MPC's status (``solved`` or a fallback), its track and barrier slacks, ``h`` at the current state,
+  the planned speed (largest over the horizon) and the speed reference it was given (largest over the
+  horizon, after the follow cap);
+* the nearest car ahead that the controller sees (gap, lateral offset, speed) and the free width beside it
+  (the wider of its two sides, edge to its body);
+* the ego's heading error ``e`` to the track, the room of its footprint's corners to the edges, the
+  *turn-back room* (the planners' edges less the MPC's ``track_margin``, on the side the car is turned towards,
+  minus the largest offset of its front end while it turns back at full lock: the recoverable envelope of
+  :class:`~sofar_env.control.mpc.ends.EndOffsets`) and the *row room* (the same edge minus what the MPC's own
+  track rows bound, :func:`rooms`; < 0: those rows are violated at this state).
+
+Classification (:func:`classify`), on the *window*: the last :data:`WINDOW_STEPS` records (the final 10 s of
+the stall). A property holds when it holds in at least half of the window's steps. The first rule that
+holds gives the class:
+
+1. ``mpc_fallback`` (no feasible forward plan): the MPC's status is a fallback (its QP failed).
+2. ``follow_hold`` (a follow decision that never releases): the plan in force follows a car and the speed
+   reference the MPC gets, capped by that follow decision, stays below 1 m/s over the whole horizon.
+3. ``stopped_ahead_no_room`` (a car stopped ahead with no room): a car is ahead within
+   :data:`NEAR_GAP` (gap between reference points), slower than 1 m/s, and the free width on both of its
+   sides is less than the ego's width plus 2 x 0.25 m.
+4. ``edge_no_turn_back`` (angled at an edge with no room to turn back): ``|e| >=`` :data:`ANGLE` and the row
+   room is below :data:`ROOM`: the MPC's own track rows leave (almost) nothing, so that every forward move its
+   model can make costs track slack.
+5. ``zero_plan`` (the MPC solves a standstill): it solved, its speed reference is at least 1 m/s, yet its plan
+   is below 1 m/s at the next step (it may plan to start later in the horizon, and re-plans the same wait at
+   every step). The evidence ``away`` is the share of steps in which the car is turned away from the MPC's
+   lateral reference (``e (n_ref - n) < 0``): driving off then first takes it further from that reference.
+6. ``other``: none of the above.
+
+Evidence (:func:`classify`): medians over the window of the record fields, the most frequent decision, the
+shares ``fallback``, ``follow``, ``stopped_ahead``, ``angled`` and ``away``, and the *onset* (the first record
+of the last uninterrupted run below 1 m/s, where the stall began: time, decision, heading error, gap to and speed
+of the car ahead).
+
+:func:`record_episode` can also run a probe of a candidate fix (``restart_weight``); it patches the controller's
+instance in this process only and is not a preset.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields
+
+import numpy as np
+
+from sofar_agents.evaluation.episode import make_env, run_episode
+from sofar_agents.evaluation.interventions import _outcome
+from sofar_agents.evaluation.protocol import EpisodeTask, Strategy, table1_tasks
+from sofar_agents.evaluation.results import EpisodeResult
+
+__all__ = ["StepRecord", "StallReport", "CLASSES", "RECORD_SPEED", "WINDOW_STEPS", "NEAR_GAP", "ANGLE", "ROOM",
+           "RESTART_EXIT", "record_episode", "classify", "rooms", "stalled_tasks", "fresh_tasks", "report_rows",
+           "record_rows", "records_from_rows", "REPORT_COLUMNS", "RECORD_COLUMNS"]
+
+RECORD_SPEED = 3.0
+"""Steps slower than this [m/s] are recorded; a faster step drops the records (the final slow phase is left)."""
+WINDOW_STEPS = 100
+"""Records the classification looks at: the last 10 s of the stall."""
+NEAR_GAP = 15.0
+"""A car ahead counts as blocking within this gap between reference points [m] (two car lengths and more)."""
+ANGLE = 0.31
+"""Heading error [rad] from which a car turned towards an edge cannot drive away from it without its front end
+first moving further out (``e*`` of :class:`~sofar_env.control.mpc.ends.EndOffsets`, AV-21)."""
+ROOM = 0.1
+"""Room of the MPC's own track rows [m] (``row_room``) below which the car counts as having no room to turn back."""
+SLOW = 1.0  # the stall rule's speed [m/s]
+RESTART_EXIT = 3.0
+"""The restart probe (:func:`record_episode`, ``restart_weight``) ends once the ego is this fast [m/s]."""
+_BUFFER = 0.25
+"""Lateral buffer beside a stopped car, each side [m] (that of the MPC's track margin)."""
+_HALF_WIDTH = 0.95
+"""Half the AV-21's width [m] (``VehicleParams.width`` / 2; the MPC's track margin is it plus 0.25 m)."""
+
+CLASSES: dict[str, str] = {
+    "mpc_fallback": "no feasible forward plan (MPC fallback loop)",
+    "follow_hold": "follow decision that never releases",
+    "stopped_ahead_no_room": "car stopped ahead with no room",
+    "edge_no_turn_back": "angled at an edge with no room to turn back",
+    "zero_plan": "MPC solves, plans standstill",
+    "other": "other",
+}
+"""The classes of :func:`classify`, in the order of its rules, with their descriptions."""
+
+
+@dataclass
+class StepRecord:
+    """What the controller saw and did in one control step (module docstring)."""
+
+    step: int
+    t: float
+    s: float
+    n: float
+    e: float
+    v: float
+    delta: float
+    decision: str
+    """``follow``, ``left``, ``right`` or ``free``."""
+    plan_status: str
+    plan_slack: float
+    """Largest clearance violation of the MIQP plan in force [m]."""
+    followed_v: float
+    """Speed of the slowest followed car when the follow plan was made [m/s] (nan: none followed)."""
+    mpc_status: str
+    track_slack: float
+    barrier_slack: float
+    h_min: float
+    v_plan: float
+    """Largest planned speed over the MPC horizon [m/s]."""
+    v_next: float
+    """Planned speed at the end of the first interval (the next control step) [m/s]."""
+    v_ref: float
+    """Largest speed reference over the horizon (after the follow cap) [m/s]."""
+    n_ref: float
+    """Lateral reference at the end of the horizon [m]."""
+    accel: float
+    gap_ahead: float
+    """Gap to the nearest car ahead the controller sees [m] (inf: none)."""
+    n_ahead: float
+    v_ahead: float
+    room_beside: float
+    """Free width on the wider side of that car, edge to body [m] (nan: none)."""
+    corner_room: float
+    """Smallest distance of a footprint corner to its edge [m] (< 0: outside)."""
+    turn_room: float
+    """Turn-back room on the side the car is turned towards [m] (module docstring)."""
+    row_room: float = math.nan
+    """Room the MPC's own track rows leave at this state on the side the car is turned towards [m] (:func:`rooms`;
+    < 0: the rows are violated, any forward move that does not bring them back costs slack)."""
+
+
+@dataclass
+class StallReport:
+    """One episode's outcome, and for a stall its class and the evidence of the window."""
+
+    task: EpisodeTask
+    result: EpisodeResult
+    label: str = ""  # where the episode comes from (a committed CSV, or a fresh seed set)
+    cls: str = ""  # class of :func:`classify` ("" when the episode did not stall)
+    evidence: dict = field(default_factory=dict)
+    records: list = field(default_factory=list)
+    restarts: int = 0
+    """Restarts of the probe of :func:`record_episode` (``restart_weight``) in the episode."""
+
+
+class _Recorder:
+    """Hooks one environment's controller: keeps the stage data of every MPC solve (its speed reference)."""
+
+    def __init__(self, env):
+        self.env = env.unwrapped
+        self.stage = None
+        self.x0 = None
+        self._plan_id, self._side = None, "free"
+
+    def install(self, restart_weight: float | None = None) -> None:
+        mpc = self.env.stack.mpc
+        solve = type(mpc).solve.__get__(mpc)
+        spare = None
+        if restart_weight is not None:
+            import dataclasses
+
+            cfg = mpc.config
+            q = (cfg.q[0], float(restart_weight)) + tuple(cfg.q[2:])
+            spare = type(mpc)(dataclasses.replace(cfg, q=q), mpc.vehicle)
+        self.restarting = False
+        self.restarts = 0
+
+        def hooked(x0, stage, opponents, gamma):
+            self.stage, self.x0 = stage, np.asarray(x0, float)
+            if spare is None:
+                return solve(x0, stage, opponents, gamma)
+            v, free = float(x0[3]), float(np.max(stage.v_ref)) >= SLOW
+            if free and (v < SLOW or (self.restarting and v < RESTART_EXIT)):
+                if not self.restarting:
+                    spare.reset()
+                    self.restarts += 1
+                self.restarting = True
+                result = spare.solve(x0, stage, opponents, gamma)
+                return _steer_to_lock(result, np.asarray(x0, float), mpc.vehicle, mpc.config.control_dt)
+            if self.restarting:  # back to the controller's own MPC, from a cold start
+                self.restarting = False
+                mpc.reset()
+            return solve(x0, stage, opponents, gamma)
+
+        mpc.solve = hooked
+
+    def record(self, step: int) -> StepRecord:
+        env = self.env
+        stack, race, track = env.stack, env.race, env.track
+        out = env.last_output
+        veh = stack.vehicle
+        x0 = self.x0
+        s = float(out.ego_s)
+        n, e, v, delta = (float(x) for x in x0[1:5])
+        plan = out.plan
+        opp = np.asarray(out.opponents_rel, float).reshape(-1, 3)
+        ahead = np.flatnonzero(opp[:, 0] > 0.0)
+        k = ahead[np.argmin(opp[ahead, 0])] if len(ahead) else None
+        decision = "free"
+        if out.following:
+            decision = "follow"
+        elif plan is not None and len(opp):
+            if out.miqp_ran or self._plan_id != id(plan):  # the sides index the rows the plan was made with
+                self._plan_id, self._side = id(plan), "free"
+                sides = np.asarray(plan.sides)
+                cleared = [i for i in ahead if i < len(sides) and sides[i] != 0]
+                if cleared:
+                    i = min(cleared, key=lambda j: opp[j, 0])
+                    self._side = "left" if sides[i] > 0 else "right"
+            decision = self._side
+        target = stack.pass_or_follow.target
+        followed_v = float(target.rows[:, 2].min()) if target is not None and len(target.rows) else math.nan
+        mpc = out.mpc
+        half = 0.5 * veh.width
+        room_beside = math.nan
+        gap = n_o = v_o = math.inf
+        if k is not None:
+            gap, n_o, v_o = (float(x) for x in opp[k])
+            s_o = s + gap
+            wl, wr = float(track.width_left(s_o)), float(track.width_right(s_o))
+            room_beside = max(wl - (n_o + half), (n_o - half) + wr)
+        return StepRecord(
+            step=step, t=float(race.time), s=s, n=n, e=e, v=v, delta=delta, decision=decision,
+            plan_status=plan.status if plan is not None else "", plan_slack=float(plan.max_slack) if plan else 0.0,
+            followed_v=followed_v, mpc_status=mpc.status, track_slack=float(mpc.slack.get("track", 0.0)),
+            barrier_slack=float(mpc.slack.get("barrier", 0.0)), h_min=float(mpc.barrier_min),
+            v_plan=float(np.max(mpc.x_pred[:, 3])), v_next=float(mpc.x_pred[1, 3]),
+            v_ref=float(np.max(self.stage.v_ref)),
+            n_ref=float(self.stage.n_ref[-1]), accel=float(mpc.u[0]),
+            gap_ahead=gap, n_ahead=n_o, v_ahead=v_o, room_beside=room_beside,
+            corner_room=_corner_room(track, veh, s, n, e), **rooms(stack.edges, veh, stack.config.mpc, s, n, e))
+
+
+def rooms(edges, vehicle, mpc_config, s: float, n: float, e: float) -> dict[str, float]:
+    """``turn_room`` and ``row_room`` [m] of the ego at ``(s, n, e)``, on the side it is turned towards.
+
+    Both against the planners' edges at ``s`` (``edges``: :class:`~sofar_env.stack.edges.TrackEdges`, the narrowest
+    within the car's length) less the MPC's ``track_margin``. ``turn_room``: less the largest offset of the front
+    end while the car turns back at full lock (the recoverable envelope). ``row_room``: less what the MPC's own
+    rows bound (``mpc_config.track_rows``): the reference point within edges tightened by ``l |sin e|``
+    (``"reference"``, the swing frozen at the current heading), the front end ``n + l sin e`` (``"ends"``), or the
+    envelope (``"recoverable"``: equal to ``turn_room``)."""
+    from sofar_env.control.mpc.ends import EndOffsets
+
+    lo, hi = (float(x[0]) for x in edges(np.array([s])))
+    margin = mpc_config.track_margin
+    lo, hi = lo + margin, hi - margin
+    g = EndOffsets(vehicle, recoverable=True)(np.array([e]))[0][:, 0]  # front up, front low, rear up, rear low
+    reach = max(vehicle.cg_to_front, vehicle.cg_to_rear)
+    left = e >= 0.0
+    turn = hi - (n + g[0]) if left else (n + g[1]) - lo
+    if mpc_config.track_rows == "recoverable":
+        row = turn
+    elif mpc_config.track_rows == "ends":
+        row = hi - (n + reach * math.sin(e)) if left else (n + reach * math.sin(e)) - lo
+    else:
+        swing = reach * math.sin(min(abs(e), 0.5 * math.pi))
+        row = hi - swing - n if left else n - (lo + swing)
+    return {"turn_room": float(turn), "row_room": float(row)}
+
+
+def _steer_to_lock(result, x0: np.ndarray, vehicle, dt: float):
+    """The restart probe's steering: a plan that stays below 1 m/s while the car is turned by ``ANGLE`` or more
+    steers towards full lock on the side that turns it back (at the steering rate limit), since at standstill the
+    MPC's model gives steering no effect (``e' = v tan(delta) / L ...`` is zero at ``v = 0``), and a car short of
+    full lock that stands at its recoverable bound cannot drive off without first steering."""
+    import dataclasses
+
+    e, delta = float(x0[2]), float(x0[4])
+    if float(result.x_pred[1, 3]) >= SLOW or abs(e) < ANGLE:
+        return result
+    lock = -math.copysign(vehicle.steer_max, e)
+    if abs(lock - delta) < 1e-3:
+        return result
+    rate = float(np.clip((lock - delta) / max(dt, 1e-9), -vehicle.steer_rate_max, vehicle.steer_rate_max))
+    return dataclasses.replace(result, u=np.array([float(result.u[0]), rate]))
+
+
+def _corner_room(track, veh, s: float, n: float, e: float) -> float:
+    """Smallest distance [m] of the footprint's four corners to the edge on their side (< 0: outside)."""
+    half = 0.5 * veh.width
+    c, sn = math.cos(e), math.sin(e)
+    room = math.inf
+    for lon in (veh.cg_to_front, -veh.cg_to_rear):
+        for lat in (half, -half):
+            cs = s + lon * c - lat * sn
+            cn = n + lon * sn + lat * c
+            room = min(room, float(track.width_left(cs)) - cn, cn + float(track.width_right(cs)))
+    return room
+
+
+class _Policy:
+    """Fixed gamma; records the previous step at each call (the env's last output is that step's)."""
+
+    def __init__(self, gamma: float, recorder: _Recorder, keep: list, restart_weight: float | None = None):
+        self.gamma, self.recorder, self.keep, self.restart_weight = float(gamma), recorder, keep, restart_weight
+        self.k = 0
+
+    def __call__(self, obs):
+        if self.k == 0:
+            self.recorder.install(self.restart_weight)
+        else:
+            self.flush()
+        self.k += 1
+        return [self.gamma]
+
+    def flush(self) -> None:
+        env = self.recorder.env
+        if env.last_output is None or self.recorder.stage is None:
+            return
+        if float(self.recorder.x0[3]) < RECORD_SPEED:
+            self.keep.append(self.recorder.record(self.k))
+        else:
+            self.keep.clear()
+
+
+def record_episode(task: EpisodeTask, label: str = "", env=None, restart_weight: float | None = None) -> StallReport:
+    """Run ``task`` (a fixed gamma) and record its final slow phase; a stall is classified (:func:`classify`).
+
+    ``env``: an environment of ``task``'s track and settings to reuse (else one is built and closed).
+    ``restart_weight``: a probe of a candidate fix, not a preset. While the ego is slower than 1 m/s with a speed
+    reference of at least 1 m/s (no follow decision holds it), and until it is :data:`RESTART_EXIT` fast, the MPC
+    step is solved by a second MPC whose lateral-tracking weight ``q_n`` is ``restart_weight`` instead of the
+    configured one (from a cold start; the controller's own MPC restarts cold afterwards), and a plan that stays
+    below 1 m/s with the car turned by :data:`ANGLE` or more steers to full lock first (:func:`_steer_to_lock`).
+    The controller's
+    configuration, and so the row's ``config_hash``, stays that of ``task.stack``."""
+    if task.strategy.kind != "fixed":
+        raise ValueError(f"stall replays take a fixed gamma, got strategy {task.strategy.name!r}")
+    own = env is None
+    if own:
+        env = make_env(task.track, use_miqp=task.use_miqp, duration=task.duration, stack=task.stack,
+                       scenario=task.scenario)
+    try:
+        records: list[StepRecord] = []
+        recorder = _Recorder(env)
+        policy = _Policy(task.strategy.gamma, recorder, records, restart_weight)
+        result, _ = run_episode(env, policy, task)
+        policy.flush()  # the last step
+    finally:
+        if own:
+            env.close()
+    report = StallReport(task, result, label, restarts=getattr(recorder, "restarts", 0))
+    if result.stalled:
+        report.cls, report.evidence = classify(records)
+        report.records = _stall_phase(records)
+    return report
+
+
+def _stall_phase(records: list, lead: int = 20) -> list:
+    """The records kept of a stall: its last run below 1 m/s (the stall) and ``lead`` steps before it."""
+    k = len(records)
+    while k > 0 and records[k - 1].v < SLOW:
+        k -= 1
+    return records[max(k - lead, 0):]
+
+
+def _share(flags: Iterable[bool]) -> float:
+    flags = [bool(f) for f in flags]
+    return sum(flags) / max(len(flags), 1)
+
+
+def classify(records: Sequence[StepRecord], window: int = WINDOW_STEPS) -> tuple[str, dict]:
+    """The class of a stall from its records (module docstring) and the evidence: medians and shares over the
+    window."""
+    records = list(records)
+    w = records[-window:]
+    if not w:
+        return "other", {"steps": 0}
+    med = {name: float(np.nanmedian([getattr(r, name) for r in w]))
+           for name in ("e", "v_plan", "v_next", "v_ref", "n_ref", "accel", "gap_ahead", "v_ahead", "room_beside",
+                        "corner_room", "turn_room", "row_room",
+                        "track_slack", "barrier_slack", "h_min", "plan_slack", "followed_v", "n")
+           if not all(math.isnan(getattr(r, name)) for r in w)}
+    decisions = Counter(r.decision for r in w)
+    ev = {"steps": len(w), "t_end": w[-1].t, **{k: round(v, 3) for k, v in med.items()},
+          "decision": decisions.most_common(1)[0][0],
+          "fallback": round(_share(r.mpc_status != "solved" for r in w), 2),
+          "follow": round(_share(r.decision == "follow" for r in w), 2)}
+    k = len(records) - len(_stall_phase(records, 0))
+    onset = records[min(k, len(records) - 1)]  # how the car came to stand: the first step of the last run below 1 m/s
+    ev.update(onset_t=round(onset.t, 1), onset_decision=onset.decision, onset_e=round(onset.e, 3),
+              onset_gap=round(onset.gap_ahead, 1), onset_v_ahead=round(onset.v_ahead, 2))
+    width = 2.0 * abs(_HALF_WIDTH) + 2.0 * _BUFFER
+    stopped = [r.gap_ahead <= NEAR_GAP and r.v_ahead < SLOW for r in w]
+    ev["stopped_ahead"] = round(_share(stopped), 2)
+    ev["angled"] = round(_share(abs(r.e) >= ANGLE for r in w), 2)
+    ev["away"] = round(_share(r.e * (r.n_ref - r.n) < 0.0 for r in w), 2)
+    if ev["fallback"] >= 0.5:
+        return "mpc_fallback", ev
+    if _share(r.decision == "follow" and r.v_ref < SLOW for r in w) >= 0.5:
+        return "follow_hold", ev
+    if _share(s and r.room_beside < width for s, r in zip(stopped, w)) >= 0.5:
+        return "stopped_ahead_no_room", ev
+    if _share(abs(r.e) >= ANGLE and r.row_room < ROOM for r in w) >= 0.5:
+        return "edge_no_turn_back", ev
+    if _share(r.mpc_status == "solved" and r.v_ref >= SLOW and r.v_next < SLOW for r in w) >= 0.5:
+        return "zero_plan", ev
+    return "other", ev
+
+
+def stalled_tasks(rows: Iterable[Mapping], stacks: Sequence[str] | None = None) -> list[EpisodeTask]:
+    """The stalled fixed-gamma episodes of per-episode CSV rows (typed, :func:`read_episode_csv`) as tasks."""
+    out = []
+    for r in rows:
+        if not r.get("stalled") or not str(r["strategy"]).startswith("gamma="):
+            continue
+        if stacks is not None and str(r.get("stack") or "sofar") not in stacks:
+            continue
+        n_opp = r.get("n_opponents", "")
+        out.append(EpisodeTask(
+            track=str(r["track"]), strategy=Strategy.fixed(float(str(r["strategy"])[6:])), rho=float(r["rho"]),
+            episode=int(r.get("episode", 0)), seed=int(r["seed"]), use_miqp=bool(r["use_miqp"]),
+            duration=float(r["duration"]), n_opponents=None if n_opp in ("", None) else int(float(n_opp)),
+            stack=str(r.get("stack") or "sofar"), scenario=str(r.get("scenario") or "paper")))
+    return out
+
+
+def fresh_tasks(stacks: Sequence[str], gammas: Sequence[float], tracks: Sequence[str], rhos: Sequence[float],
+                episodes: int, base_seed: int, n_opponents: int = 8, scenario: str = "interactive",
+                duration: float = 200.0) -> list[EpisodeTask]:
+    """Table I's episodes of every (stack, gamma) on a base seed (paired: the same seeds for every stack)."""
+    strategies = [Strategy.fixed(g) for g in gammas]
+    per_stack = [table1_tasks(strategies, tracks, rhos, episodes, base_seed, duration, stack=stack, scenario=scenario,
+                              n_opponents=n_opponents) for stack in stacks]
+    # interleaved by episode (each episode's presets and gammas together), so that a partial run stays paired
+    return [t for group in zip(*per_stack) for t in group]
+
+
+REPORT_COLUMNS = ("label", "track", "rho", "seed", "stack", "gamma", "outcome", "sim_time", "cls", "decision",
+                  "fallback", "follow", "stopped_ahead", "angled", "away", "e", "v_plan", "v_ref", "gap_ahead",
+                  "v_ahead", "room_beside", "corner_room", "turn_room", "row_room", "v_next", "accel", "n", "n_ref",
+                  "track_slack", "barrier_slack", "h_min", "plan_slack", "followed_v", "onset_t", "onset_decision",
+                  "onset_e", "onset_gap", "onset_v_ahead", "restarts", "wall_time")
+"""Columns of :func:`report_rows` (one row per episode)."""
+
+
+def report_rows(reports: Iterable[StallReport]) -> list[dict]:
+    """One row of :data:`REPORT_COLUMNS` per episode (evidence fields empty when it did not stall)."""
+    rows = []
+    for rep in reports:
+        t, r = rep.task, rep.result
+        row = {"label": rep.label, "track": t.track, "rho": t.rho, "seed": t.seed, "stack": t.stack,
+               "gamma": t.strategy.gamma, "outcome": _outcome(r), "sim_time": round(r.sim_time, 1), "cls": rep.cls,
+               "restarts": rep.restarts, "wall_time": round(r.wall_time, 2)}
+        for c in REPORT_COLUMNS:
+            row.setdefault(c, rep.evidence.get(c, ""))
+        rows.append(row)
+    return rows
+
+
+def record_rows(report: StallReport) -> list[dict]:
+    """The step records of a stalled episode as CSV rows (with the episode's identity)."""
+    t = report.task
+    head = {"track": t.track, "rho": t.rho, "seed": t.seed, "stack": t.stack, "gamma": t.strategy.gamma}
+    return [{**head, **{k: (round(v, 4) if isinstance(v, float) else v) for k, v in asdict(r).items()}}
+            for r in report.records]
+
+
+def records_from_rows(rows: Iterable[Mapping]) -> dict[tuple, list[StepRecord]]:
+    """The step records of a ``records.csv`` by episode ``(track, rho, seed, stack, gamma)`` (strings as written),
+    with ``turn_room`` and ``row_room`` computed again by :func:`rooms` (files of an earlier version of the
+    recorder measured them otherwise)."""
+    from sofar_env.stack.config import stack_preset
+    from sofar_env.stack.edges import TrackEdges
+    from sofar_env.tracks import Track
+    from sofar_env.vehicle import AV21
+
+    names = [f.name for f in fields(StepRecord)]
+    kinds = {f.name: f.type for f in fields(StepRecord)}
+    edges: dict[str, TrackEdges] = {}
+    out: dict[tuple, list[StepRecord]] = {}
+    for r in rows:
+        key = (r["track"], r["rho"], r["seed"], r["stack"], r["gamma"])
+        values = {}
+        for name in names:
+            raw = r.get(name, "")
+            kind = kinds[name]
+            values[name] = (int(float(raw)) if kind == "int" else str(raw) if kind == "str"
+                            else float(raw) if raw not in ("", None) else math.nan)
+        if r["track"] not in edges:
+            edges[r["track"]] = TrackEdges(Track.load(r["track"]), AV21)
+        preset = stack_preset(r["stack"].split("+")[0])  # "<stack>+restart<w>": a probe of eval/stalls.py
+        values.update(rooms(edges[r["track"]], AV21, preset.mpc, values["s"], values["n"],
+                            values["e"]))
+        out.setdefault(key, []).append(StepRecord(**values))
+    return out
+
+
+RECORD_COLUMNS = ("track", "rho", "seed", "stack", "gamma") + tuple(f.name for f in fields(StepRecord))
+"""Columns of :func:`record_rows`."""

@@ -1,0 +1,124 @@
+"""The stall diagnosis: the classification rules on synthetic step records, one real replay of a stall."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import gzip
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+from sofar_agents.evaluation import stalls as st
+
+from .episode_csv import write_episode_csv
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "eval"))
+import stalls as stalls_cli  # noqa: E402
+
+# A racing step with nothing wrong: every rule's property is false.
+_FREE = st.StepRecord(step=0, t=0.0, s=0.0, n=0.0, e=0.0, v=0.0, delta=0.0, decision="left", plan_status="optimal",
+                      plan_slack=0.0, followed_v=math.nan, mpc_status="solved", track_slack=0.0, barrier_slack=0.0,
+                      h_min=40.0, v_plan=20.0, v_next=1.5, v_ref=20.0, n_ref=0.0, accel=5.0, gap_ahead=50.0,
+                      n_ahead=0.0, v_ahead=20.0, room_beside=6.0, corner_room=3.0, turn_room=2.0, row_room=2.0)
+
+
+def _window(n: int = 100, **changes) -> list[st.StepRecord]:
+    return [dataclasses.replace(_FREE, step=k, t=0.1 * k, **changes) for k in range(n)]
+
+
+@pytest.mark.parametrize(("changes", "expected"), [
+    ({"mpc_status": "fallback_shift"}, "mpc_fallback"),
+    ({"decision": "follow", "v_ref": 0.0, "followed_v": 0.0}, "follow_hold"),
+    ({"gap_ahead": 8.0, "v_ahead": 0.0, "room_beside": 1.0}, "stopped_ahead_no_room"),
+    ({"e": -0.6, "row_room": -0.05, "v_next": 0.0}, "edge_no_turn_back"),
+    ({"e": -0.54, "row_room": 0.38, "v_next": 0.0, "accel": 0.0}, "zero_plan"),
+    ({"v_next": 0.0, "v_ref": 0.5}, "other"),
+])
+def test_each_rule_by_hand(changes, expected):
+    cls, ev = st.classify(_window(**changes))
+    assert cls == expected
+    assert ev["steps"] == st.WINDOW_STEPS
+
+
+def test_rules_apply_in_order_and_by_majority():
+    # a fallback loop behind a stopped car with no room is a fallback loop (rule 1 before rule 3)
+    both = _window(mpc_status="fallback_brake", gap_ahead=8.0, v_ahead=0.0, room_beside=1.0)
+    assert st.classify(both)[0] == "mpc_fallback"
+    # a follow plan with the speed reference free is not a follow hold
+    assert st.classify(_window(decision="follow", v_ref=20.0, v_next=0.0))[0] == "zero_plan"
+    # a car stopped ahead with room beside it is not rule 3
+    assert st.classify(_window(gap_ahead=8.0, v_ahead=0.0, room_beside=5.0))[0] == "other"
+    # a property holds when it holds in at least half of the window's steps
+    half = _window(50, mpc_status="fallback_shift") + _window(50)
+    assert st.classify(half)[0] == "mpc_fallback"
+    fewer = _window(49, mpc_status="fallback_shift") + _window(51)
+    assert st.classify(fewer)[0] == "other"
+    # only the window counts: earlier records (the approach) do not
+    late = _window(300, mpc_status="fallback_shift") + _window(100)
+    assert st.classify(late)[0] == "other"
+    assert st.classify([])[0] == "other"
+
+
+def test_every_class_is_documented():
+    doc = st.__doc__
+    for cls in st.CLASSES:
+        assert f"``{cls}``" in doc
+
+
+def test_stalled_tasks_from_rows():
+    rows = [{"track": "Monza", "strategy": "gamma=0.30", "rho": 0.1, "seed": 7, "stalled": True, "use_miqp": True,
+             "duration": 200.0, "n_opponents": "8", "stack": "sofar-recover", "scenario": "interactive", "episode": 1},
+            {"track": "Monza", "strategy": "gamma=0.30", "rho": 0.1, "seed": 8, "stalled": False, "use_miqp": True,
+             "duration": 200.0, "n_opponents": "8", "stack": "sofar-recover", "scenario": "interactive"},
+            {"track": "Monza", "strategy": "adaptive", "rho": 0.1, "seed": 9, "stalled": True, "use_miqp": True,
+             "duration": 200.0, "n_opponents": "8", "stack": "sofar", "scenario": "interactive"}]
+    tasks = st.stalled_tasks(rows)
+    assert len(tasks) == 1
+    t = tasks[0]
+    assert (t.seed, t.strategy.gamma, t.n_opponents, t.stack, t.scenario) == (7, 0.3, 8, "sofar-recover", "interactive")
+    assert st.stalled_tasks(rows, stacks=["sofar"]) == []
+
+
+def test_fresh_tasks_pair_the_presets():
+    tasks = st.fresh_tasks(["sofar", "sofar-recover"], [0.05], ["Monza"], [0.1, 0.2], 2, base_seed=7301)
+    assert len(tasks) == 8
+    assert [t.stack for t in tasks[:2]] == ["sofar", "sofar-recover"]
+    assert tasks[0].seed == tasks[1].seed and tasks[0].n_opponents == 8 and tasks[0].scenario == "interactive"
+
+
+def test_replay_of_a_stall(tmp_path):
+    """Laguna Seca, rho 0.1, gamma 0.15 with "sofar-recover": a committed stall at 54.8 s (base seed 0), replayed
+    with a 60 s horizon by the script, then re-classified from its records. A seeded run reproduces on one
+    instruction set only; where the episode ends otherwise, only the files of a replay without a stall are checked."""
+    row = {"track": "LagunaSeca", "rho": 0.1, "seed": 4258579602, "strategy": "gamma=0.15", "success": 0,
+           "use_miqp": 1, "stalled": 1, "duration": 60.0, "n_opponents": 8, "stack": "sofar-recover",
+           "scenario": "interactive"}
+    write_episode_csv(tmp_path / "run" / "table1_episodes.csv", [row])
+    out = tmp_path / "stalls"
+    assert stalls_cli.main(["--replay", str(tmp_path / "run" / "table1_episodes.csv"), "--out", str(out),
+                            "--log-level", "WARNING"]) == 0
+    with open(out / "stalls.csv", newline="") as f:
+        first = list(csv.DictReader(f))
+    assert len(first) == 1 and first[0]["stack"] == "sofar-recover"
+    assert (out / "stalls.md").is_file()
+    if first[0]["outcome"] != "stalled":
+        assert first[0]["cls"] == "" and not (out / stalls_cli.RECORDS).exists()
+        return
+    assert first[0]["cls"] in st.CLASSES
+    with gzip.open(out / stalls_cli.RECORDS, "rt", newline="") as f:
+        records = st.records_from_rows(csv.DictReader(f))
+    (steps,) = records.values()
+    assert 200 <= len(steps) <= 220  # the 20 s below 1 m/s and up to 2 s before
+    assert all(r.v < st.RECORD_SPEED for r in steps) and sum(r.v >= 1.0 for r in steps) <= 20
+    # --report classifies again from the records: the same class; a rerun skips the episode
+    assert stalls_cli.main(["--report", str(out)]) == 0
+    with open(out / "stalls.csv", newline="") as f:
+        again = list(csv.DictReader(f))
+    assert again[0]["cls"] == first[0]["cls"]
+    assert stalls_cli.main(["--replay", str(tmp_path / "run" / "table1_episodes.csv"), "--out", str(out),
+                            "--log-level", "WARNING"]) == 0
+    with open(out / "stalls.csv", newline="") as f:
+        assert len(list(csv.DictReader(f))) == 1
