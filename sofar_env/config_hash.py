@@ -23,6 +23,10 @@ Contract
   - ``race.opponents.rho``: the opponents' pace ratio (the ``rho`` column; episodes set it per reset);
   - ``stack.use_miqp``: the MIQP layer on or off (the ``use_miqp`` column; Table II runs both).
 
+  - a field declared :func:`~sofar_env.domains.neutral` while it holds its default: a field added after
+    results were made, whose default keeps their behaviour (a fix switched off), so that adding it keeps
+    every existing hash; at any other value it is hashed.
+
   The reset seed is not part of a configuration (the ``seed`` column). Everything else is in: the
   duration, the default opponent count (which an empty ``n_opponents`` column stands for), the world's
   settings, every controller value.
@@ -30,7 +34,8 @@ Contract
   It depends only on the values, not on the process, the platform, dict order or ``PYTHONHASHSEED``;
   two configurations that differ in any included field have different hashes (up to SHA-256 collisions
   of 48 bits: negligible for the few configurations a project holds). Adding a field to a configuration
-  class changes every hash: rows made before it carry the old hash and are not mixed with newer ones.
+  class changes every hash (rows made before it carry the old hash and are not mixed with newer ones),
+  unless the field is declared neutral at a default that keeps the old behaviour.
 """
 
 from __future__ import annotations
@@ -46,6 +51,8 @@ from typing import Any
 
 import numpy as np
 
+from .domains import is_neutral_default
+
 __all__ = ["EXCLUDED", "HASH_LENGTH", "canonical_config", "canonical_json", "config_hash", "hash_of_canonical"]
 
 EXCLUDED: tuple[str, ...] = ("track", "race.opponents.rho", "stack.use_miqp")
@@ -60,7 +67,7 @@ def _value(v: Any, path: str, excluded: frozenset[str]) -> Any:
         out = {}
         for f in dataclasses.fields(v):
             where = f"{path}.{f.name}" if path else f.name
-            if where not in excluded:
+            if where not in excluded and not is_neutral_default(f, getattr(v, f.name)):
                 out[f.name] = _value(getattr(v, f.name), where, excluded)
         return out
     if isinstance(v, Mapping):

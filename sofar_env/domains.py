@@ -48,10 +48,12 @@ from typing import Any
 
 from .errors import ConfigError
 
-__all__ = ["Domain", "real", "integer", "flag", "choice", "reals", "nested", "text", "custom", "check_fields",
+__all__ = ["NEUTRAL_KEY", "Domain", "neutral", "is_neutral_default", "real", "integer", "flag", "choice", "reals", "nested", "text", "custom", "check_fields",
            "domain_of", "undeclared_fields", "is_real", "is_integer", "is_bool"]
 
 _KEY = "domain"
+NEUTRAL_KEY = "neutral_default"
+"""Metadata key of a field declared with :func:`neutral`."""
 
 
 def is_bool(x: Any) -> bool:
@@ -185,6 +187,27 @@ def _field(default: Any, domain: Domain, factory: Callable[[], Any] | None = Non
     if factory is not None:
         return dataclasses.field(default_factory=factory, metadata={_KEY: domain})
     return dataclasses.field(default=default, metadata={_KEY: domain})
+
+
+def neutral(f: Any) -> Any:
+    """Mark a field as *neutral at its default*: added after results were made, with a default that keeps
+    the behaviour those results had (a fix switched off, a new term weighted 0). While it holds its default
+    it is left out of the configuration hash (:mod:`sofar_env.config_hash`), so adding it does not re-label
+    every committed table; set to any other value, it is hashed like every field. Wraps a field helper::
+
+        restart_lateral_weight: float = neutral(real(0.0, ge=0.0))
+    """
+    if not isinstance(f, dataclasses.Field) or f.default is MISSING:
+        raise TypeError("neutral() wraps a field helper with a plain default, e.g. neutral(real(0.0))")
+    return dataclasses.field(default=f.default, metadata={**f.metadata, NEUTRAL_KEY: True})
+
+
+def is_neutral_default(f: dataclasses.Field, value: Any) -> bool:
+    """Whether ``value`` of field ``f`` is the default of a field declared with :func:`neutral`."""
+    if not f.metadata.get(NEUTRAL_KEY):
+        return False
+    same = value == f.default
+    return same is True or (type(same).__module__ == "numpy" and getattr(same, "ndim", 1) == 0 and bool(same))
 
 
 def real(default: Any = MISSING, *, gt: float | None = None, ge: float | None = None, lt: float | None = None,

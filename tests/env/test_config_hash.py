@@ -128,3 +128,37 @@ def test_the_same_hash_in_a_fresh_process() -> None:
     env = {**os.environ, "PYTHONHASHSEED": "12345"}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
     assert out.stdout.strip() == config_hash(_cfg())
+
+
+def test_a_neutral_field_at_its_default_keeps_the_hash():
+    """A field added later with neutral() is left out while at its default (old tables keep their hash) and
+    hashed at any other value."""
+    import dataclasses
+
+    from sofar_env.domains import neutral, real
+
+    @dataclasses.dataclass(frozen=True)
+    class Before:
+        a: float = real(1.0)
+
+    @dataclasses.dataclass(frozen=True)
+    class After:
+        a: float = real(1.0)
+        fix: float = neutral(real(0.0, ge=0.0))
+
+    assert config_hash(After()) == config_hash(Before())
+    assert config_hash(After(fix=0.5)) != config_hash(Before())
+    assert config_hash(After(fix=0.5)) != config_hash(After(fix=0.25))
+
+
+def test_neutral_needs_a_plain_default():
+    import dataclasses
+
+    import pytest
+
+    from sofar_env.domains import neutral
+
+    with pytest.raises(TypeError, match="plain default"):
+        neutral(dataclasses.field(default_factory=list))
+    with pytest.raises(TypeError, match="plain default"):
+        neutral(0.0)
