@@ -158,6 +158,13 @@ moves forward (a *stall*). A candidate fix of the stalls, measured against ``"so
 (``mpc.track_rows = "recoverable"``): the front end's rows bound the largest offset it reaches while the car
 turns back to the track's direction at full lock (:mod:`sofar_env.control.mpc.ends`), so a car never stands
 turned towards an edge it cannot drive away from. The other candidate fix of the stalls."""),
+    "sofar-2": Entry(dataclasses.replace(_track_rows("recoverable"), restart_lateral_weight=15.0,
+                                         follow_creep_speed=2.0), """``"sofar-recover"`` plus the restart
+mode and the turned-car creep; candidate default, not yet default. Below 1 m/s under a free speed reference
+(until 3 m/s) the MPC tracks the lateral reference with a tenth of its weight (``restart_lateral_weight`` 15,
+steering to full lock first when turned beyond ``e*``), and a follow decision does not brake a car turned more
+than 0.3 rad to the track below 2 m/s until it is turned less than 0.2 rad (``follow_creep_speed`` 2). The
+stall fixes of ``docs/decisions/stall-fixes.md``."""),
     "reference-numerics": Entry(_reference_numerics(True), """A **bug-compatible** controller, never a default:
 ``"paper"`` on the reference's uniform time grid with the low-level MPC replaced by
 :class:`~sofar_env.control.refnum.ReferenceNumericsMPC`, which reproduces the numerical defects of the paper's

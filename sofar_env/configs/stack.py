@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..constants import MAX_SPEED_FACTOR
-from ..domains import check_fields, flag, integer, nested, real
+from ..domains import check_fields, flag, integer, nested, neutral, real
 from ..errors import ConfigError
 from .miqp import MIQPConfig
 from .mpc import BarrierParams, MPCConfig
@@ -115,6 +115,34 @@ class StackConfig:
     the heading error (:mod:`sofar_env.stack.edges`). With ``mpc.track_rows = "ends"`` the MPC bounds
     the car's ends in its QP instead (also with ``"recoverable"``), and its edges are not tightened by
     the heading error."""
+    restart_lateral_weight: float | None = neutral(real(None, ge=0.0, optional="off", unit="1/m^2"))
+    """*Restart mode* (None: off, the default). While the ego is slower than ``restart_speed`` under a speed
+    reference of at least ``restart_speed``, and from then on until it is ``restart_exit_speed`` fast, the MPC
+    step is solved by a second MPC whose lateral-tracking weight ``mpc.q[1]`` is this value (entered from a
+    cold start; the stack's own MPC restarts cold when the mode ends), and a plan that stays below
+    ``restart_speed`` while the car is turned by the turn-back angle ``e*``
+    (:class:`~sofar_env.control.mpc.ends.EndOffsets`) or more steers towards full lock on the side that turns
+    it back (at standstill the model gives steering no effect). Over a horizon shorter than the turn back, the
+    full lateral weight makes a standstill turned away from the lateral reference the MPC's optimum [1/m^2],
+    >= 0. Decision: ``docs/decisions/stall-fixes.md``."""
+    restart_speed: float = neutral(real(1.0, gt=0.0, unit="m/s"))
+    """Speed below which the restart mode starts [m/s], > 0 (only with ``restart_lateral_weight``)."""
+    restart_exit_speed: float = neutral(real(3.0, gt=0.0, unit="m/s"))
+    """Speed at which the restart mode ends [m/s], >= ``restart_speed``."""
+    follow_creep_speed: float = neutral(real(0.0, ge=0.0, unit="m/s"))
+    """*Turned-car creep* (0: off, the default). While a car is followed and the ego is turned to the track by
+    more than ``follow_creep_angle``, and until it is turned by less than ``follow_creep_release``, the follow
+    speed cap is raised to at least this speed at the stages where every followed car is predicted more than
+    the barrier's ``a0`` ahead, so that a follow decision does not brake a car to a stop in the middle of a
+    lateral move (the DCBF still keeps the distance) [m/s], >= 0. Decision: ``docs/decisions/stall-fixes.md``."""
+    follow_creep_angle: float = neutral(real(0.3, gt=0.0, unit="rad"))
+    """|Heading error| above which the creep starts [rad], > 0."""
+    follow_creep_release: float = neutral(real(0.2, ge=0.0, unit="rad"))
+    """|Heading error| below which the creep ends [rad], in [0, ``follow_creep_angle``]."""
+    parked_follow_gap: float | None = neutral(real(None, ge=0.0, optional="follow_gap", unit="m"))
+    """Arc-length distance kept behind a followed car slower than ``parked_speed`` [m] (None: ``follow_gap``,
+    the default), so that the ego stops where it can still steer around a near-stationary car. Decision:
+    ``docs/decisions/stall-fixes.md``."""
     mpc: MPCConfig = nested(MPCConfig)
     """The low-level MPC-DCBF."""
     miqp: MIQPConfig = nested(MIQPConfig, factory=lambda: MIQPConfig(closing_decel=BarrierParams().a_brake))
@@ -134,6 +162,12 @@ class StackConfig:
         if not self.follow_release_slack <= self.follow_slack:
             raise ConfigError(f"stack.follow_release_slack must lie in [0, follow_slack = {self.follow_slack}] "
                               f"[m], got {self.follow_release_slack!r}")
+        if not self.restart_speed <= self.restart_exit_speed:
+            raise ConfigError(f"stack.restart_exit_speed must be >= restart_speed = {self.restart_speed} [m/s], "
+                              f"got {self.restart_exit_speed!r}")
+        if not self.follow_creep_release <= self.follow_creep_angle:
+            raise ConfigError(f"stack.follow_creep_release must lie in [0, follow_creep_angle = "
+                              f"{self.follow_creep_angle}] [rad], got {self.follow_creep_release!r}")
         if not 0.0 < self.parked_window <= self.miqp.safe_lon:
             raise ConfigError(f"stack.parked_window must lie in (0, miqp.safe_lon = {self.miqp.safe_lon}] [m], "
                               f"got {self.parked_window!r}")

@@ -3,13 +3,18 @@
 One step: the opponents relative to the ego (:mod:`~sofar_env.stack.prediction`), every
 ``miqp_interval``-th step the passing-side plan or a follow plan
 (:mod:`~sofar_env.stack.follow`), the MPC's per-stage references and track bounds
-(:mod:`~sofar_env.stack.edges`), and the MPC-DCBF solve with the caller's ``gamma``.
+(:mod:`~sofar_env.stack.edges`), and the MPC-DCBF solve with the caller's ``gamma``. Two switches of
+:class:`~sofar_env.configs.stack.StackConfig`, off by default, change how a slow car is driven: the
+*restart mode* (``restart_lateral_weight``: a second MPC with a lower lateral-tracking weight solves the
+steps of a restart from standstill) and the *turned-car creep* (``follow_creep_speed``: a follow cap that
+does not stop a car turned to the track).
 The stack never raises on numerical trouble: the planners return fallbacks, which are
 counted (:attr:`OvertakingStack.counters`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -17,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..control.mpc import MPCDCBF, MPCResult, MPCStageData
+from ..control.mpc.ends import EndOffsets
 from ..planning.miqp import PassingSidePlanner, PlanResult
 from ..vehicle import AV21, VehicleParams
 from .config import StackConfig
@@ -76,6 +82,11 @@ class OvertakingStack:
         self.edges = TrackEdges(track, vehicle, footprint_aware=cfg.footprint_edges)
         self._stage = StageLookup(track, self.edges, cfg.speed_factor)
         self.pass_or_follow = PassOrFollow(cfg, self.planner, track, self.predict, self.edges)
+        self._restart_mpc: MPCDCBF | None = None  # the restart mode's MPC (restart_lateral_weight)
+        if cfg.restart_lateral_weight is not None and cfg.reference_numerics is None:
+            q = (cfg.mpc.q[0], float(cfg.restart_lateral_weight)) + tuple(cfg.mpc.q[2:])
+            self._restart_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, q=q), vehicle)
+            self._turn_back_angle = EndOffsets(vehicle, recoverable=True).e_star
         self._node_t = np.arange(cfg.miqp.nodes) * cfg.miqp.node_dt
         self._mpc_t = cfg.mpc.time_grid()
         self.reset()
@@ -83,6 +94,10 @@ class OvertakingStack:
     def reset(self) -> None:
         """Forget warm starts, the last plan, the followed opponents and the counters."""
         self.mpc.reset()
+        if self._restart_mpc is not None:
+            self._restart_mpc.reset()
+        self._restarting = False  # in the restart mode (restart_lateral_weight)
+        self._creeping = False  # the follow cap keeps the creep speed (follow_creep_speed)
         self.planner.reset()
         self.pass_or_follow.reset()
         self._plan: PlanResult | None = None
@@ -92,10 +107,11 @@ class OvertakingStack:
         self._last_pred: np.ndarray | None = None  # previous MPC prediction (for the heading error)
         self.counters = {"steps": 0, "mpc_failures": 0, "miqp_failures": 0, "miqp_solves": 0,
                          "follow_steps": 0, "parked_checks": 0, "parked_passes": 0, "mpc_restarts": 0,
-                         "mpc_restarts_taken": 0}
+                         "mpc_restarts_taken": 0, "slow_restarts": 0, "creep_steps": 0}
         """Episode counters: control steps, MPC / MIQP failures, MIQP solves, steps in follow mode,
         MIQP calls that tried / took a pass of near-stationary opponents (:mod:`~sofar_env.stack.follow`),
-        MPC restarts from a cold guess tried / kept (``mpc.restart_slack``)."""
+        MPC restarts from a cold guess tried / kept (``mpc.restart_slack``), restart modes entered
+        (``restart_lateral_weight``), steps with the creep floor on the follow cap (``follow_creep_speed``)."""
 
     @property
     def following(self) -> bool:
@@ -133,7 +149,8 @@ class OvertakingStack:
         else:
             n_ref = np.zeros_like(s_rel)
         if cfg.use_miqp:
-            cap = self.pass_or_follow.speed_cap(ego_s, s_rel, self._mpc_t, self._step)
+            creep = cfg.follow_creep_speed if self._creeping else 0.0
+            cap = self.pass_or_follow.speed_cap(ego_s, s_rel, self._mpc_t, self._step, creep=creep)
             if cap is not None:
                 v_ref = np.minimum(v_ref, cap)
         # an MPC that bounds the car's ends itself gets the edges without the frozen-heading tightening
@@ -173,6 +190,9 @@ class OvertakingStack:
         if cfg.use_miqp and (self._plan is None or self._step % cfg.miqp_interval == 0):
             miqp_time = self._plan_lateral(s, n, v, opp_rel)
             miqp_ran = True
+        if cfg.follow_creep_speed > 0.0:
+            self._creeping = self._creep(e)
+            self.counters["creep_steps"] += int(self._creeping)
         stage = self.stage_data(s)
         opp_mpc = opp_rel
         if cfg.pace_prediction and len(opp_rel):
@@ -189,7 +209,7 @@ class OvertakingStack:
         if cfg.reference_numerics is not None:  # its slots are filled from every opponent on the track
             half = 0.5 * float(self.track.length)
             opp_mpc = relative_opponents(self.track, s, opponents, half, half)[:, :3]
-        result = self.mpc.solve(np.array([0.0, n, e, v, delta]), stage, opp_mpc, gamma)
+        result = self._solve_mpc(np.array([0.0, n, e, v, delta]), stage, opp_mpc, gamma)
         if not result.success:
             self.counters["mpc_failures"] += 1
         self.counters["mpc_restarts"] = self.mpc.n_restarts
@@ -204,3 +224,49 @@ class OvertakingStack:
             miqp_ran=miqp_ran, opponents_rel=opp_rel, mpc_time=result.solve_time, miqp_time=miqp_time,
             ego_s=s, plan_s=self._plan_s, following=following,
         )
+
+    def _creep(self, e: float) -> bool:
+        """Whether the follow cap keeps the creep speed at this step: a car is followed and the ego is turned by
+        more than ``follow_creep_angle``, or it was creeping and is still turned by ``follow_creep_release`` or
+        more."""
+        cfg = self.config
+        if not self.following:
+            return False
+        if abs(e) > cfg.follow_creep_angle:
+            return True
+        return self._creeping and abs(e) >= cfg.follow_creep_release
+
+    def _solve_mpc(self, x0: np.ndarray, stage: MPCStageData, opponents: np.ndarray, gamma: float) -> MPCResult:
+        """The MPC step: the stack's MPC, or in the restart mode (``restart_lateral_weight``) the second MPC,
+        steering towards full lock while its plan stays below ``restart_speed`` with the car turned by ``e*``
+        or more (:class:`~sofar_env.configs.stack.StackConfig`)."""
+        spare = self._restart_mpc
+        if spare is None:
+            return self.mpc.solve(x0, stage, opponents, gamma)
+        cfg = self.config
+        v = float(x0[3])
+        free = float(np.max(stage.v_ref)) >= cfg.restart_speed
+        if free and (v < cfg.restart_speed or (self._restarting and v < cfg.restart_exit_speed)):
+            if not self._restarting:
+                spare.reset()
+                self.counters["slow_restarts"] += 1
+            self._restarting = True
+            return self._steer_to_lock(spare.solve(x0, stage, opponents, gamma), x0)
+        if self._restarting:  # back to the stack's own MPC, from a cold start
+            self._restarting = False
+            self.mpc.reset()
+        return self.mpc.solve(x0, stage, opponents, gamma)
+
+    def _steer_to_lock(self, result: MPCResult, x0: np.ndarray) -> MPCResult:
+        """``result`` with its steering rate replaced by one towards full lock on the side that turns the car back,
+        at the rate limit, when its plan stays below ``restart_speed`` and ``|e| >= e*``; else ``result``."""
+        e, delta = float(x0[2]), float(x0[4])
+        if float(result.x_pred[1, 3]) >= self.config.restart_speed or abs(e) < self._turn_back_angle:
+            return result
+        veh = self.vehicle
+        lock = -math.copysign(veh.steer_max, e)
+        if abs(lock - delta) < 1e-3:
+            return result
+        dt = max(self.config.mpc.control_dt, 1e-9)
+        rate = float(np.clip((lock - delta) / dt, -veh.steer_rate_max, veh.steer_rate_max))
+        return dataclasses.replace(result, u=np.array([float(result.u[0]), rate]))

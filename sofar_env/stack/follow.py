@@ -233,11 +233,14 @@ class PassOrFollow:
                             np.asarray(gap, float), np.asarray(opp_s, float), float(self.config.mpc.barrier.a0),
                             bool(self.config.follow_alongside))
 
-    def speed_cap(self, ego_s: float, s_rel: np.ndarray, t: np.ndarray, step: int) -> np.ndarray | None:
+    def speed_cap(self, ego_s: float, s_rel: np.ndarray, t: np.ndarray, step: int,
+                  creep: float = 0.0) -> np.ndarray | None:
         """Cap [m/s] on the MPC speed reference at the times ``t`` [s] of control step ``step``
         (ego at ``ego_s`` now, at ``s_rel`` [m] relative to that along the horizon): the speed from
         which braking at ``follow_decel`` ends at each followed car's speed ``follow_gap`` behind
-        it. None when no car is followed."""
+        it (``parked_follow_gap`` behind a car slower than ``parked_speed``, where set). ``creep`` > 0:
+        the cap is at least ``creep`` at the stages where every followed car is more than the barrier's
+        ``a0`` ahead (``StackConfig.follow_creep_speed``). None when no car is followed."""
         if self.target is None:
             return None
         cfg = self.config
@@ -246,8 +249,14 @@ class PassOrFollow:
         pred = self.predict(plan_s, rows, elapsed + t)  # relative to the ego at plan time
         gap = pred.T - float(self.track.gap(ego_s, plan_s)) - s_rel[:, None]
         v_o = self._gradient(t, pred).T if len(t) > 1 else rows[None, :, 2]
-        v_cap2 = v_o ** 2 + 2.0 * cfg.follow_decel * (gap - cfg.follow_gap)
-        return np.sqrt(np.maximum(v_cap2.min(axis=1), 0.0))
+        keep = cfg.follow_gap
+        if cfg.parked_follow_gap is not None:
+            keep = np.where(np.abs(v_o) < cfg.parked_speed, cfg.parked_follow_gap, cfg.follow_gap)
+        v_cap2 = v_o ** 2 + 2.0 * cfg.follow_decel * (gap - keep)
+        cap = np.sqrt(np.maximum(v_cap2.min(axis=1), 0.0))
+        if creep > 0.0:
+            cap = np.where(gap.min(axis=1) > cfg.mpc.barrier.a0, np.maximum(cap, creep), cap)
+        return cap
 
     def _gradient(self, t: np.ndarray, f: np.ndarray) -> np.ndarray:
         """``np.gradient(f, t, axis=1)`` (bit-identical), its coefficients kept for the last grid ``t``

@@ -29,8 +29,24 @@ MULTI_CAR_CASES: dict[str, dict[str, Any]] = {
 
 
 def as_json(obj: Any) -> Any:
-    """``dataclasses.asdict(obj)`` as plain JSON values (tuples as lists, inf as Infinity)."""
-    return json.loads(json.dumps(dataclasses.asdict(obj), default=repr, allow_nan=True))
+    """``dataclasses.asdict(obj)`` as plain JSON values (tuples as lists, inf as Infinity), without the fields
+    that hold their neutral default (:func:`sofar_env.domains.neutral`: added after the snapshot, left out of
+    the configuration hash at that default too)."""
+    return json.loads(json.dumps(_plain(obj), default=repr, allow_nan=True))
+
+
+def _plain(obj: Any) -> Any:
+    """``dataclasses.asdict`` less the neutral defaults, recursively."""
+    from sofar_env.domains import is_neutral_default
+
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: _plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)
+                if not is_neutral_default(f, getattr(obj, f.name))}
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(_plain(v) for v in obj)
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    return obj
 
 
 def built_stack(env: Any) -> Any:
