@@ -1,0 +1,119 @@
+"""The stall fixes of ``docs/decisions/stall-fixes.md``: the neutral StackConfig fields of the restart mode, the
+turned-car creep and the parked follow gap, and the preset ``"sofar-2"`` that switches the first two on."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from sofar_env.config_hash import config_hash
+from sofar_env.configs import registry
+from sofar_env.domains import NEUTRAL_KEY
+from sofar_env.stack import STACK_PRESETS, OvertakingStack, StackConfig, stack_preset
+
+from .closed_loop import empty_race
+
+NEW_FIELDS = {  # field -> a value that switches it on or moves it
+    "restart_lateral_weight": 15.0, "restart_speed": 0.5, "restart_exit_speed": 4.0,
+    "follow_creep_speed": 2.0, "follow_creep_angle": 0.4, "follow_creep_release": 0.1, "parked_follow_gap": 20.0,
+}
+
+
+def test_sofar_2_is_one_registry_entry_over_sofar_recover():
+    assert STACK_PRESETS.count("sofar-2") == 1 and "sofar-2" in registry.STACK_PRESET_REGISTRY
+    value, doc = registry.STACK_PRESET_REGISTRY["sofar-2"]
+    assert value == dataclasses.replace(stack_preset("sofar-recover"), restart_lateral_weight=15.0,
+                                        follow_creep_speed=2.0)
+    assert "candidate default, not yet default" in doc
+    assert stack_preset("sofar") == StackConfig()  # the default is unchanged
+    assert len({config_hash(stack_preset(p)) for p in STACK_PRESETS}) == len(STACK_PRESETS)
+
+
+def test_sofar_2_runs_a_short_episode():
+    import gymnasium as gym
+
+    import sofar_env  # noqa: F401
+
+    env = gym.make("SOfAR-LagunaSeca-v0", config={"stack": "sofar-2", "scenario": "interactive"})
+    try:
+        env.reset(seed=3, options={"rho": 0.3})
+        for _ in range(20):
+            *_, terminated, truncated, _info = env.step(np.array([0.5]))
+            assert not (terminated or truncated)
+        assert env.unwrapped.config.stack == stack_preset("sofar-2")
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("name", sorted(NEW_FIELDS))
+def test_each_new_field_is_neutral_at_its_default(name):
+    field = {f.name: f for f in dataclasses.fields(StackConfig)}[name]
+    assert field.metadata.get(NEUTRAL_KEY)
+    base = StackConfig()
+    at_default = dataclasses.replace(base, **{name: field.default})
+    assert config_hash(at_default) == config_hash(base)
+    assert config_hash(dataclasses.replace(base, **{name: NEW_FIELDS[name]})) != config_hash(base)
+    for preset in ("sofar", "sofar-recover", "paper"):
+        assert getattr(stack_preset(preset), name) == field.default
+
+
+@pytest.mark.parametrize("name", sorted(NEW_FIELDS))
+def test_each_new_field_leaves_the_plan_of_a_car_at_speed_unchanged(tracks, name):
+    """Set, each field changes nothing while the car drives at speed, straight and free (the switches act only
+    on a slow car, or on a followed car while turned); at its default, the controller is today's."""
+    track = tracks["Monza"]
+    outputs = []
+    for cfg in (StackConfig(), dataclasses.replace(StackConfig(), **{name: NEW_FIELDS[name]})):
+        race, stack = empty_race(track, start_s=100.0), OvertakingStack(track, cfg)
+        us = []
+        for _ in range(15):
+            out = stack.step(race.frenet[0], race.opponent_frenet(0), 0.5)
+            race.step(out.u[None, :])
+            us.append(out.u.copy())
+        outputs.append(np.array(us))
+    np.testing.assert_array_equal(outputs[0], outputs[1])
+
+
+def test_invalid_stall_fix_settings_are_rejected():
+    with pytest.raises(ValueError, match="restart_exit_speed"):
+        StackConfig(restart_speed=2.0, restart_exit_speed=1.0)
+    with pytest.raises(ValueError, match="follow_creep_release"):
+        StackConfig(follow_creep_release=0.5)
+    with pytest.raises(ValueError, match="restart_lateral_weight"):
+        StackConfig(restart_lateral_weight=-1.0)
+
+
+def test_the_creep_floors_the_follow_cap_only_with_room_ahead(tracks):
+    track = tracks["Monza"]
+    stack = OvertakingStack(track, StackConfig())
+    pof = stack.pass_or_follow
+    pof.target = type("T", (), {"rows": np.array([[30.0, 0.0, 0.0]]), "ego_s": 100.0, "step": 0})()
+    s_rel, t = np.linspace(0.0, 40.0, 21), stack.config.mpc.time_grid()
+    cap = pof.speed_cap(100.0, s_rel, t, 0)
+    crept = pof.speed_cap(100.0, s_rel, t, 0, creep=2.0)
+    room = 30.0 - s_rel > stack.config.mpc.barrier.a0
+    np.testing.assert_array_equal(crept[~room], cap[~room])
+    assert np.all(crept[room] >= 2.0) and np.any(cap[room] < 2.0)
+
+
+def test_a_replayed_stall_drives_off_with_sofar_2():
+    """The stall of Laguna Seca (dense interactive world, rho 0.1, seed 4258579602, gamma 0.15): ``"sofar-recover"``
+    brakes to a stop at 33.6 s turned 0.57 rad to the track under a follow decision behind a car at 2 m/s,
+    1.2 m from its lateral edge, and stands there (stalled at 54.8 s); ``"sofar-2"`` drives on."""
+    from sofar_agents.evaluation.episode import make_env, run_episode
+    from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
+
+    outcomes = {}
+    for stack in ("sofar-recover", "sofar-2"):
+        task = EpisodeTask("LagunaSeca", Strategy.fixed(0.15), 0.1, 0, 4258579602, duration=60.0, n_opponents=8,
+                           stack=stack, scenario="interactive")
+        env = make_env(task.track, duration=task.duration, stack=stack, scenario=task.scenario)
+        try:
+            result, _ = run_episode(env, lambda obs: np.array([0.15]), task)
+        finally:
+            env.close()
+        outcomes[stack] = result
+    assert outcomes["sofar-recover"].stalled and 50.0 < outcomes["sofar-recover"].sim_time < 60.0
+    assert not outcomes["sofar-2"].stalled and not outcomes["sofar-2"].collision
