@@ -79,7 +79,7 @@ class MuController:
         mu     <- clip((1 - ema) * mu + ema * target, mu_min, mu_max)
     """
 
-    mu_max: float = 10.0
+    mu_max: float = 0.3
     mu_min: float = 0.05
     ema: float = 0.05
     kappa: float = 0.4

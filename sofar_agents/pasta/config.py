@@ -11,7 +11,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from sofar_agents.cli_types import float_in, nonneg_float, positive_float, positive_int
+from sofar_agents.cli_types import float_in, nonneg_float, nonneg_int, positive_float, positive_int
 
 __all__ = ["SQUASHINGS", "PASTAConfig"]
 
@@ -89,8 +89,11 @@ class PASTAConfig:
     estimate when the latter is below it (0 = plain running maximum)."""
     regret_clip: Annotated[float, positive_float] = 10.0
     """Upper clip of the normalised regret (return standard deviations)."""
-    mu_max: Annotated[float, positive_float] = 10.0
-    """Upper bound and initial value of the smoothing temperature mu."""
+    mu_max: Annotated[float, positive_float] = 0.3
+    """Upper bound and initial value of the smoothing temperature mu. The reference uses 10; at a
+    temperature much above the weighted regrets ``w_j * regret_j`` (about 0.03 to 2 here) the attention is
+    uniform and the preference input has no effect on the loss, so the default keeps mu between
+    ``mu_min`` and 0.3 (docs/decisions/pasta-temperature.md)."""
     mu_min: Annotated[float, positive_float] = 0.05
     """Lower bound of mu, reached at the end of the linear decay."""
     mu_ema: Annotated[float, _UNIT] = 0.05
@@ -133,6 +136,12 @@ class PASTAConfig:
     preference_sampling: str = "dirichlet"
     """``"dirichlet"``: draw a preference w per episode from a Dirichlet whose mean is
     the agent's preference; ``"fixed"``: always use the agent's preference."""
+    preference_interval: Annotated[int, nonneg_int] = 0
+    """Draw a new preference every this many steps of an episode (0: once per episode, as the reference).
+    The switch is a segment boundary for the advantages: the segment's returns bootstrap from the value
+    under the preference it was driven with. A rollout must hold many preferences for the actor to learn
+    what its preference input means; episodes of the racing worlds are longer than a rollout
+    (docs/decisions/pasta-temperature.md). Local rollouts only (``train/pasta.py --backend local``)."""
     dirichlet_concentration: Annotated[float, positive_float] = 1.0
     """Concentration c of the preference Dirichlet, ``Dir(c * K * w)``. With a uniform
     w and c = 1 this is the uniform distribution on the simplex."""
@@ -158,6 +167,9 @@ class PASTAConfig:
             )
         if not 0.5 <= self.utopia_quantile <= 1.0:
             raise ValueError(f"utopia_quantile must lie in [0.5, 1], got {self.utopia_quantile}")
+        if isinstance(self.preference_interval, bool) or not isinstance(self.preference_interval, int) \
+                or self.preference_interval < 0:
+            raise ValueError(f"preference_interval must be an integer >= 0, got {self.preference_interval!r}")
         if self.conflict_every < 1:
             raise ValueError("conflict_every must be >= 1")
         object.__setattr__(self, "hidden_sizes", tuple(int(h) for h in self.hidden_sizes))

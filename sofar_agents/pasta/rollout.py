@@ -199,6 +199,20 @@ class RolloutCollector:
         self.ep_returns = np.zeros((n, agent.n_objectives))
         self.ep_lengths = np.zeros(n, dtype=np.int64)
 
+    def _switch_preferences(self, agent: PASTA, t: int, next_obs: Any, done: np.ndarray, trunc_b: np.ndarray,
+                            final_val: np.ndarray) -> None:
+        """Every ``preference_interval`` steps of a running episode: end the segment at step ``t`` as a
+        truncation bootstrapped from ``V(next_obs, old preference)``, then draw the env's next preference."""
+        assert self.ep_lengths is not None and self.prefs is not None
+        due = np.flatnonzero(~done & (self.ep_lengths % agent.config.preference_interval == 0))
+        if not due.size:
+            return
+        obs = np.asarray(next_obs, dtype=np.float32).reshape(done.shape[0], agent.obs_dim)[due]
+        with torch.no_grad():
+            final_val[t, due] = agent.critic(network_inputs(obs, self.prefs[due])).numpy()
+        trunc_b[t, due] = True
+        self.prefs[due] = agent.sample_preferences(due.size)
+
     def collect(self, agent: PASTA, vec_env: Any, t_steps: int) -> RolloutBuffer:
         """Run ``t_steps`` steps in every env of ``vec_env`` with ``agent``'s stochastic policy.
 
@@ -210,6 +224,9 @@ class RolloutCollector:
         self.prepare(agent, vec_env)
         remote = getattr(vec_env, "collect_rollout", None)
         if remote is not None:  # the envs live elsewhere (e.g. Ray actors) and collect the rollout themselves
+            if agent.config.preference_interval:
+                raise ValueError("preference_interval > 0 is implemented by the local rollout collector only "
+                                 "(train/pasta.py --backend local)")
             buffer = remote(agent, t_steps)
             self.boundary = vec_env.rollout_state()
             return buffer
@@ -282,6 +299,8 @@ class RolloutCollector:
                 self.ep_returns[idx] = 0.0
                 self.ep_lengths[idx] = 0
                 self.prefs[idx] = agent.sample_preferences(idx.size)
+            if cfg.preference_interval:
+                self._switch_preferences(agent, t, next_obs, done, trunc_b, final_val)
             self.last_obs = np.asarray(next_obs, dtype=np.float32).reshape(n, obs_dim)
 
         with torch.no_grad():

@@ -118,7 +118,7 @@ def test_generated_options_check_numbers(cls, argv, error, capsys) -> None:
 
 def test_dataclass_checks_become_usage_errors(capsys) -> None:
     parser = argparse.ArgumentParser()
-    assert check_dataclass_options(parser, PASTAConfig, {"mu_min": 0.5}).mu_min == 0.5
+    assert check_dataclass_options(parser, PASTAConfig, {"mu_min": 0.2}).mu_min == 0.2
     with pytest.raises(SystemExit) as exc:
         check_dataclass_options(parser, PASTAConfig, {"mu_min": 5.0, "mu_max": 1.0})
     assert exc.value.code == 2 and "mu_min <= mu_max" in capsys.readouterr().err

@@ -62,7 +62,7 @@ def test_mu_target_schedule_and_conflict_boost() -> None:
 
 
 def test_mu_controller_ema_and_clamp() -> None:
-    c = MuController.from_config(PASTAConfig(mu_decay_steps=1000))
+    c = MuController.from_config(PASTAConfig(mu_decay_steps=1000, mu_max=10.0))
     assert c.mu == pytest.approx(10.0)
     mu1 = c.update(1000, 0.0)
     assert mu1 == pytest.approx(0.95 * 10.0 + 0.05 * 0.05)
@@ -74,6 +74,23 @@ def test_mu_controller_ema_and_clamp() -> None:
     for _ in range(400):
         c.update(2000, 1.0)
     assert c.mu == pytest.approx(10.0, abs=1e-5)
+
+
+def test_default_temperature_keeps_the_preference_in_the_attention() -> None:
+    """At the default mu range the attention follows the preference: the safety-first and the pace-first
+    preference put most of the weight on different objectives (at the reference's mu of 10 both are
+    nearly uniform)."""
+    cfg = PASTAConfig()
+    regret = np.array([1.2, 1.8, 1.0, 1.7, 0.5])  # regrets of the order training logs show
+    safety, pace = np.array([0.9, 0.0, 0.1 / 3, 0.1 / 3, 0.1 / 3]), np.array([0.1, 0.8, 0.1 / 3, 0.1 / 3, 0.1 / 3])
+    for mu in (cfg.mu_min, cfg.mu_max):
+        a_safe = attention_weights(regret, safety, mu, cfg.maintenance)
+        a_pace = attention_weights(regret, pace, mu, cfg.maintenance)
+        assert int(np.argmax(a_safe)) == 0 and int(np.argmax(a_pace)) == 1
+        assert a_safe[0] - a_pace[0] > 0.5
+    flat = attention_weights(regret, safety, 10.0, cfg.maintenance) - attention_weights(regret, pace, 10.0,
+                                                                                         cfg.maintenance)
+    assert np.abs(flat).max() < 0.05
 
 
 def test_utopia_is_a_slowly_relaxing_running_maximum() -> None:

@@ -1,0 +1,149 @@
+"""Does PASTA's preference input move its gamma? Two measurements.
+
+    python eval/pasta_preference.py probe                          # every variant, 2 seeds, 40,000 steps each
+    python eval/pasta_preference.py probe --variants shipped "mu 0.1, mid start" --steps 120000
+    python eval/pasta_preference.py respond --policy sofar_agents/checkpoints/pasta_lagunaseca_interactive.json \
+        --scenario interactive --opponents 8
+
+``probe`` trains PASTA on the small trade-off environment of
+:mod:`sofar_agents.evaluation.preference_probe` (no MPC: a run of 40,000 steps takes about a minute)
+with the shipped training recipe changed one factor at a time, and reports the trained policy's mean gamma
+at safety weights 0.1 ... 0.9 (overtakes 0.9 minus it, 0.1 / 3 for the other three objectives). A policy
+whose preference input works chooses a lower gamma as the safety weight grows. Writes
+``<out>/probe.md`` and ``probe.json``; rerunning skips the (variant, seed, steps) already in the JSON.
+
+``respond`` reads a trained checkpoint on real states: it drives seeded episodes of a world at fixed
+gammas, records the observations, and reports the policy's deterministic gamma per preference over them
+(mean, 10th and 90th percentile).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from sofar_agents.cli_types import nonneg_int, positive_int
+from sofar_agents.evaluation.preference_probe import (
+    PROBE_SAFETY_WEIGHTS,
+    PROBE_VARIANTS,
+    preference_response,
+    run_probe,
+    safety_preferences,
+)
+
+logger = logging.getLogger("pasta_preference")
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def probe(args: argparse.Namespace) -> None:
+    import torch
+
+    torch.set_num_threads(1)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    store = out / "probe.json"
+    rows = json.loads(store.read_text())["runs"] if store.exists() else []
+    done = {(r["variant"], r["seed"], r["steps_requested"]) for r in rows}
+    for variant in args.variants:
+        for seed in args.seeds:
+            if (variant, seed, args.steps) in done:
+                continue
+            res = run_probe(variant, seed, args.steps)
+            rows.append({"variant": variant, "seed": seed, "steps_requested": args.steps, "steps": res.steps,
+                         "mean_gamma": res.response.mean.round(4).tolist(),
+                         "p10": res.response.p10.round(4).tolist(), "p90": res.response.p90.round(4).tolist(),
+                         "spread": round(res.response.spread, 4), "monotone": res.response.monotone(),
+                         "final_mu": round(res.final_mu, 4),
+                         "final_attention": [round(a, 4) for a in res.final_attention],
+                         "wall_time_s": round(res.wall_time, 1)})
+            logger.info("%s seed %d: mean gamma %s (spread %.3f), mu %.3f", variant, seed,
+                        rows[-1]["mean_gamma"], res.response.spread, res.final_mu)
+            _atomic_write(store, json.dumps({"safety_weights": list(PROBE_SAFETY_WEIGHTS), "runs": rows}, indent=1))
+    lines = ["# Does the preference move the gamma? PASTA on the trade-off environment", "",
+             "Mean deterministic gamma over 11 traffic densities at each safety weight (overtakes 0.9 minus it); "
+             "spread = largest minus smallest mean. Command: `python eval/pasta_preference.py probe` (see "
+             "`sofar_agents/evaluation/preference_probe.py` for the environment and the variants).", "",
+             "| variant | seed | steps | " + " | ".join(f"safety {w:g}" for w in PROBE_SAFETY_WEIGHTS)
+             + " | spread | monotone | final mu | wall [s] |",
+             "|---|---:|---:|" + "---:|" * len(PROBE_SAFETY_WEIGHTS) + "---:|:---:|---:|---:|"]
+    for r in sorted(rows, key=lambda r: (list(PROBE_VARIANTS).index(r["variant"])
+                                         if r["variant"] in PROBE_VARIANTS else 99, r["steps"], r["seed"])):
+        lines.append(f"| {r['variant']} | {r['seed']} | {r['steps']:,} | "
+                     + " | ".join(f"{g:.3f}" for g in r["mean_gamma"])
+                     + f" | {r['spread']:.3f} | {'yes' if r['monotone'] else 'no'} | {r['final_mu']:.2f} "
+                       f"| {r['wall_time_s']:.0f} |")
+    _atomic_write(out / "probe.md", "\n".join(lines) + "\n")
+    sys.stdout.write("\n".join(lines) + "\n")
+
+
+def respond(args: argparse.Namespace) -> None:
+    import gymnasium as gym
+
+    import sofar_env  # noqa: F401  (registers the ids)
+    from sofar_agents.pasta import PASTA
+
+    agent = PASTA.load(args.policy)
+    kwargs = {"scenario": args.scenario}
+    if args.opponents is not None:
+        kwargs["n_opponents"] = args.opponents
+    env = gym.make(args.env_id, **kwargs)
+    observations = []
+    for i, gamma in enumerate(args.gammas):
+        for ep in range(args.episodes):
+            obs, _ = env.reset(seed=args.seed + 1000 * i + ep, options={"rho": args.rho})
+            for _ in range(args.steps):
+                observations.append(obs)
+                obs, _, terminated, truncated, _ = env.step(np.array([gamma], dtype=np.float32))
+                if terminated or truncated:
+                    break
+    env.close()
+    resp = preference_response(agent, np.asarray(observations), safety_preferences(args.safety_weights))
+    sys.stdout.write(f"{len(observations)} states of {args.env_id} ({args.scenario}), policy {args.policy}\n\n"
+                     "| safety weight | mean gamma | 10th pct | 90th pct |\n|---:|---:|---:|---:|\n")
+    for w, m, lo, hi in zip(args.safety_weights, resp.mean, resp.p10, resp.p90):
+        sys.stdout.write(f"| {w:g} | {m:.3f} | {lo:.3f} | {hi:.3f} |\n")
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="command", required=True)
+    pr = sub.add_parser("probe", help="train on the trade-off environment, one factor at a time")
+    pr.add_argument("--variants", nargs="+", default=list(PROBE_VARIANTS), choices=list(PROBE_VARIANTS),
+                    metavar="NAME", help=f"variants (default all: {'; '.join(PROBE_VARIANTS)})")
+    pr.add_argument("--seeds", nargs="+", type=nonneg_int, default=[0, 1], help="agent seeds (default 0 1)")
+    pr.add_argument("--steps", type=positive_int, default=40_000, help="env steps per run (default 40000)")
+    pr.add_argument("--out", default="results/pasta_preference", help="output folder")
+    rs = sub.add_parser("respond", help="a checkpoint's gamma per preference on recorded states")
+    rs.add_argument("--policy", required=True, help="PASTA checkpoint (.json)")
+    rs.add_argument("--env-id", default="SOfAR-LagunaSeca-v0")
+    rs.add_argument("--scenario", default="interactive")
+    rs.add_argument("--opponents", type=nonneg_int, default=None)
+    rs.add_argument("--rho", type=float, default=0.5)
+    rs.add_argument("--gammas", nargs="+", type=float, default=[0.05, 0.3])
+    rs.add_argument("--episodes", type=positive_int, default=2, help="episodes per gamma (default 2)")
+    rs.add_argument("--steps", type=positive_int, default=200, help="decisions recorded per episode (default 200)")
+    rs.add_argument("--seed", type=nonneg_int, default=9100)
+    rs.add_argument("--safety-weights", nargs="+", type=float, default=[0.1, 0.2, 0.3, 0.45, 0.6, 0.75, 0.9])
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> None:
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+    args = parse_args(argv)
+    probe(args) if args.command == "probe" else respond(args)
+
+
+if __name__ == "__main__":
+    main()
