@@ -11,7 +11,9 @@ manifest's (the defaults moved since: re-run the manifest into another folder, o
 defaults); rows without a hash (written before the column) are reported, not an error. ``verify`` exits
 with status 1 when a re-made row differs from the committed one in any column of the committed file but
 ``wall_time``. ``--backfill`` refuses a CSV of the first format (without the ``stack`` column), whose
-``stalled`` is unknown.
+``stalled`` is unknown. For an interventions manifest a unit is a failed episode with all its replays:
+``--rows N`` re-makes the N episodes of the fewest replayed steps (over all circuits), and ``--backfill``
+appends the ``config_hash`` column where ``interventions.csv`` has it (last).
 The logic lives in sofar_agents.evaluation.manifest.
 """
 
@@ -46,7 +48,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     sub.add_parser("check", help="compare every manifest's hash with the hashes its committed rows carry")
     v = sub.add_parser("verify", help="re-make the shortest committed rows of a manifest and compare them")
     v.add_argument("name")
-    v.add_argument("--rows", type=int_at_least(1), default=2, help="how many rows per circuit (the shortest episodes)")
+    v.add_argument("--rows", type=int_at_least(1), default=2,
+                   help="how many rows per circuit (the shortest episodes); interventions: how many failed episodes "
+                        "(the cheapest to replay)")
     v.add_argument("--backfill", action="store_true",
                    help="when every re-made row matches, give the CSV's rows the manifest's hash: rows without one "
                         "(written before the column), or rows of one other hash (a configuration whose hash moved "
@@ -67,14 +71,27 @@ def shortest_rows(m: mf.Manifest, n: int, root: Path = ROOT) -> list[dict[str, s
     cheapest to re-make); rows of the CSV that are not episodes of ``m`` (other runs into the same folder) are not
     candidates."""
     ids = mf.episode_ids(m, root)
-    rows = sorted((r for r in mf.raw_rows(root / m.out / m.csv_name, m.kind) if mf.row_id(m, r) in ids),
-                  key=lambda r: (mf.row_length(m, r), r["strategy"], r["seed"]))
+    mine = [r for r in mf.raw_rows(root / m.out / m.csv_name, m.kind) if mf.row_episode(m, r) in ids]
+    if m.kind == "interventions":
+        return cheapest_replays(m, mine, n)
+    rows = sorted(mine, key=lambda r: (mf.row_length(m, r), r["strategy"], r["seed"]))
     per_track: dict[str, list[dict[str, str]]] = {}
     for r in rows:
         mine = per_track.setdefault(r["track"], [])
         if len(mine) < n:
             mine.append(r)
     return [r for track in sorted(per_track) for r in per_track[track]]
+
+
+def cheapest_replays(m: mf.Manifest, rows: list[dict[str, str]], n: int) -> list[dict[str, str]]:
+    """Every row (replay) of the ``n`` episodes of ``rows`` (an ``interventions.csv``) with the fewest steps in
+    all, in file order."""
+    cost: dict[tuple, float] = {}
+    for r in rows:
+        key = mf.row_episode(m, r)
+        cost[key] = cost.get(key, 0.0) + mf.row_length(m, r)
+    chosen = set(sorted(cost, key=lambda k: (cost[k], k))[:n])
+    return [r for r in rows if mf.row_episode(m, r) in chosen]
 
 
 def main(argv=None) -> int:
@@ -118,14 +135,13 @@ def main(argv=None) -> int:
             return 1
         (old,) = check.hashes
         path = ROOT / m.out / m.csv_name
-        from sofar_agents.evaluation.protocol import exact_text
-
-        settings = {(r["stack"], r["scenario"], r["duration"]) for r in mf.raw_rows(path, m.kind)}
-        if settings != {(m.stack, m.scenario, exact_text(m.duration))}:
+        settings = {(r["stack"], r["scenario"], float(r["duration"])) for r in mf.raw_rows(path, m.kind)}
+        if settings != {(m.stack, m.scenario, float(m.duration))}:
             logger.error("%s: not back-filled: %s holds rows of other settings %s", m.name, path, sorted(settings))
             return 1
         try:
-            n = mf.restamp_hash(path, old, m.config_hash) if old else mf.backfill_hash(path, m.config_hash)
+            n = mf.restamp_hash(path, old, m.config_hash) if old else mf.backfill_hash(
+                path, m.config_hash, last=m.kind == "interventions")
         except ValueError as err:
             logger.error("%s: not back-filled: %s", m.name, err)
             return 1

@@ -1,37 +1,16 @@
 """Experiments as manifests: ``experiments/NAME.toml`` says what a results folder holds and how to make it.
 
-A manifest is a TOML file (``tomllib``, in the standard library from Python 3.11; on 3.10 the ``tomli``
-package if installed). TOML rather than JSON: it holds comments (why a table exists, what it is compared
-with) and reads like the command line it replaces. Keys (:class:`Manifest`):
-
-==============  ===========================================================================================
-``kind``        ``"table1"`` (:func:`~sofar_agents.evaluation.experiments.run_table1`), ``"table2"``
-                (:func:`~sofar_agents.evaluation.experiments.run_miqp_ablation`) or ``"multi-agent"``
-                (:func:`~sofar_agents.evaluation.multi_agent.run_multi_agent_table`); required
-``out``         the results folder, relative to the repository root; required
-``stack``       controller preset (default ``"sofar"``); ``scenario``: world (default ``"paper"``)
-``seed``        base seed of the paired episode seeds (default 0)
-``episodes``    per (track, rho) for table1, per (setting, strategy) for table2, races per circuit for
-                multi-agent (defaults 5, 10, 4)
-``duration``    episode horizon [s] (default 200)
-``tracks``,     circuits and pace ratios (defaults: the paper's; ``track``: table2's circuit, default
-``rhos``        LagunaSeca)
-``gammas``      the fixed gammas (default: the paper's six; table2: [0.5])
-``adaptive``    also the shipped PASTA policy of ``stack``/``scenario`` (default true); ``policy``: another
-                checkpoint, relative to the repository root
-``self_play``   multi-agent: a second checkpoint (relative to the root), the strategy ``self-play``
-``opponents``   table1: opponents per episode (default: the environment's); multi-agent: scripted opponents
-``cars``        multi-agent: controlled cars (default 4)
-``prefix``      file prefix in ``out`` (default ``table1``, ``table2``, ``multi_agent``)
-``description`` free text
-==============  ===========================================================================================
+The keys of a manifest and how it is read: :mod:`~sofar_agents.evaluation.manifest_spec` (:class:`Manifest`,
+:func:`load_manifest`, re-exported here); the kinds ``pareto`` and ``interventions``:
+:mod:`~sofar_agents.evaluation.manifest_replays`.
 
 :func:`run_manifest` runs a manifest into its folder (resuming, as the table scripts do) and writes
 ``manifest.json`` there: the manifest, its configuration hash, the code commit, the machine, its CPU flags
 and the wall time. :func:`check_manifest` compares the hash a manifest resolves to with the hashes the
 rows of its committed CSV carry. :func:`rerun_rows` re-makes chosen committed rows in another folder and
 compares them field by field (every column of the committed file but ``wall_time`` and ``config_hash``; for
-the multi-agent table the races, re-run one by one), which is what justifies
+the multi-agent table the races, re-run one by one; for interventions every replay of the episodes named, with
+all the manifest's interventions), which is what justifies
 giving rows written before the hash column the manifest's hash (:func:`backfill_hash`), or rows of a hash
 that moved without changing the episodes the new one (:func:`restamp_hash`).
 """
@@ -53,116 +32,41 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sofar_agents.evaluation.configs import episode_config, episode_config_hash, race_config, race_config_hash, row_hash
-from sofar_agents.evaluation.protocol import DEFAULT_DURATION, FIXED_GAMMAS, RHOS, TRACKS, Strategy, build_strategies
+from sofar_agents.evaluation import manifest_replays as replays
+from sofar_agents.evaluation.configs import row_hash
+from sofar_agents.evaluation.manifest_spec import KINDS, Manifest, load_manifest, manifest_paths
 from sofar_agents.evaluation.results import EPISODE_COLUMNS, read_csv_rows
 
 __all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths", "run_manifest", "check_manifest",
-           "ManifestCheck", "episode_ids", "row_id", "row_length", "raw_rows", "rerun_rows", "backfill_hash",
+           "ManifestCheck", "episode_ids", "row_id", "row_episode", "row_length", "raw_rows", "rerun_rows", "backfill_hash",
            "restamp_hash"]
 
 logger = logging.getLogger(__name__)
 
-KINDS = ("table1", "table2", "multi-agent")
-"""Command kinds a manifest may name."""
 _NOT_COMPARED = ("wall_time", "config_hash")
 """Columns that :func:`rerun_rows` does not compare (the wall time varies; old rows have no hash)."""
 
 
-def _toml_load(path: Path) -> dict[str, Any]:
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        try:
-            import tomli as tomllib  # type: ignore[no-redef]
-        except ModuleNotFoundError as err:
-            raise RuntimeError("reading experiment manifests on Python 3.10 needs the tomli package "
-                               "(pip install tomli); Python >= 3.11 reads them without it") from err
-    with open(path, "rb") as f:
-        return tomllib.load(f)
-
-
-@dataclass(frozen=True)
-class Manifest:
-    """One experiment (the module docstring lists the keys)."""
-
-    name: str
-    kind: str
-    out: str
-    stack: str = "sofar"
-    scenario: str = "paper"
-    seed: int = 0
-    episodes: int | None = None
-    duration: float = DEFAULT_DURATION
-    tracks: tuple[str, ...] = TRACKS
-    rhos: tuple[float, ...] = RHOS
-    track: str = "LagunaSeca"
-    gammas: tuple[float, ...] | None = None
-    adaptive: bool = True
-    policy: str | None = None
-    self_play: str | None = None
-    opponents: int | None = None
-    cars: int = 4
-    prefix: str | None = None
-    description: str = ""
-
-    def __post_init__(self) -> None:
-        if self.kind not in KINDS:
-            raise ValueError(f"manifest {self.name}: kind {self.kind!r} is not one of {', '.join(KINDS)}")
-
-    @property
-    def csv_name(self) -> str:
-        """The file of its rows in ``out``."""
-        if self.kind == "multi-agent":
-            return f"{self.prefix or 'multi_agent'}_races.csv"
-        return f"{self.prefix or self.kind}_episodes.csv"
-
-    @property
-    def config_hash(self) -> str:
-        """The configuration hash its rows carry (:mod:`sofar_agents.evaluation.configs`)."""
-        if self.kind == "multi-agent":
-            return race_config_hash(self.stack, self.scenario, self.duration, int(self.opponents or 0))
-        return episode_config_hash(self.stack, self.scenario, self.duration)
-
-    def config(self) -> Any:
-        """The resolved configuration of that hash (what ``config.json`` records)."""
-        if self.kind == "multi-agent":
-            return race_config(self.stack, self.scenario, float(self.duration), int(self.opponents or 0))
-        return episode_config(self.stack, self.scenario, float(self.duration))
-
-    def strategies(self, root: str | os.PathLike) -> list[Strategy]:
-        """Its strategies: the adaptive policy (``policy``, else the shipped one) when ``adaptive``, then the
-        fixed gammas. A missing shipped policy raises ``FileNotFoundError`` (a manifest does not silently
-        drop a row)."""
-        default = (0.5,) if self.kind == "table2" else FIXED_GAMMAS
-        gammas = default if self.gammas is None else self.gammas
-        policy = None
-        if self.adaptive:
-            from sofar_agents.evaluation.protocol import resolve_policy_path
-
-            policy = resolve_policy_path(Path(root) / self.policy if self.policy else None, stack=self.stack,
-                                         scenario=self.scenario)
-            if policy is None:
-                raise FileNotFoundError(f"manifest {self.name}: no adaptive policy for stack {self.stack!r}")
-        out = build_strategies(gammas, policy=policy, adaptive=self.adaptive)
-        if self.self_play:
-            if self.kind != "multi-agent":
-                raise ValueError(f"manifest {self.name}: self_play is a key of the multi-agent table")
-            out.append(Strategy.adaptive(Path(root) / self.self_play, name="self-play"))
-        return out
-
-
 def row_id(m: Manifest, row: dict[str, str]) -> tuple:
-    """What names an episode in a CSV of ``m``'s kind: ``(track, strategy, rho, seed, use_miqp)``, for the
-    multi-agent table ``(track, strategy, seed)``."""
+    """What names a row in a CSV of ``m``'s kind: the episode ``(track, strategy, rho, seed, use_miqp)``, for
+    the multi-agent table the race ``(track, strategy, seed)``, for interventions the replay
+    (:func:`~sofar_agents.evaluation.manifest_replays.replay_row_id`)."""
     if m.kind == "multi-agent":
         return row["track"], row["strategy"], row["seed"]
+    if m.kind == "interventions":
+        return replays.replay_row_id(row)
     return row["track"], row["strategy"], row["rho"], row["seed"], row["use_miqp"]
 
 
+def row_episode(m: Manifest, row: dict[str, str]) -> tuple:
+    """The episode (race) a row belongs to, as :func:`episode_ids` names them: :func:`row_id`, but for
+    interventions the replayed episode (:func:`~sofar_agents.evaluation.manifest_replays.replay_episode`)."""
+    return replays.replay_episode(row) if m.kind == "interventions" else row_id(m, row)
+
+
 def row_length(m: Manifest, row: dict[str, str]) -> float:
-    """How long a committed row's episode ran (steps; for a race the car-seconds driven over the possible):
-    :func:`rerun_rows` re-makes the shortest ones."""
+    """How long a committed row's episode ran (steps; for a race the car-seconds driven over the possible; for a
+    replay its steps): :func:`rerun_rows` re-makes the shortest ones."""
     return float(row["driven"] if m.kind == "multi-agent" else row["steps"])
 
 
@@ -174,12 +78,17 @@ def _race_tasks(m: Manifest, root: str | os.PathLike) -> list:
 
 
 def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple]:
-    """:func:`row_id` as written in a CSV, of every episode (race) of the table ``m`` (a CSV may hold rows of
-    other runs too)."""
+    """:func:`row_episode` as written in a CSV, of every episode (race; replayed episode) of the table ``m`` (a
+    CSV may hold rows of other runs too)."""
     from sofar_agents.evaluation.protocol import exact_text, miqp_ablation_tasks, table1_tasks
 
     if m.kind == "multi-agent":
         return {(t.track, t.strategy.name, str(t.seed)) for t in _race_tasks(m, root)}
+    if m.kind == "interventions":
+        return {replays.task_episode(t) for t in replays.failed_tasks(m, root)}
+    if m.kind == "pareto":
+        tasks = replays.pareto_tasks(m, root)
+        return {(t.track, t.strategy.name, exact_text(t.rho), str(t.seed), str(int(t.use_miqp))) for t in tasks}
     strategies = m.strategies(root)
     if m.kind == "table2":
         tasks = miqp_ablation_tasks(strategies, m.episodes or 10, m.rhos, m.track, m.seed, m.duration, stack=m.stack,
@@ -190,31 +99,6 @@ def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple]:
     else:
         raise ValueError(f"unknown kind {m.kind!r}")
     return {(t.track, t.strategy.name, exact_text(t.rho), str(t.seed), str(int(t.use_miqp))) for t in tasks}
-
-
-def manifest_paths(folder: str | os.PathLike) -> list[Path]:
-    """The manifests of ``folder`` (``*.toml``), sorted by name."""
-    return sorted(Path(folder).glob("*.toml"))
-
-
-def load_manifest(path: str | os.PathLike) -> Manifest:
-    """Read and check ``path``; ``ValueError`` naming the file for an unknown key or a wrong value."""
-    p = Path(path)
-    data = _toml_load(p)
-    names = {f.name for f in dataclasses.fields(Manifest)} - {"name"}
-    unknown = sorted(set(data) - names)
-    if unknown:
-        raise ValueError(f"{p}: unknown keys {unknown}; valid keys: {', '.join(sorted(names))}")
-    for key in ("tracks", "rhos", "gammas"):
-        if key in data:
-            data[key] = tuple(data[key])
-    for key in ("kind", "out"):
-        if key not in data:
-            raise ValueError(f"{p}: the key {key!r} is required")
-    try:
-        return Manifest(name=p.stem, **data)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{p}: {err}") from err
 
 
 def _git_commit(root: Path) -> str:
@@ -260,14 +144,21 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
                  out: str | os.PathLike | None = None, progress: bool = True, tasks_filter=None) -> Any:
     """Run ``m`` into ``root/m.out`` (or ``out``), resuming from its CSV, and write ``manifest.json`` there.
 
-    Returns the table's report. ``tasks_filter`` (for :func:`rerun_rows`) limits the episodes run.
+    Returns the table's report (``markdown``). ``tasks_filter`` (for :func:`rerun_rows`) limits the episodes
+    run (for pareto and interventions: runs only their rows, no report, and returns None).
     """
     root = Path(root)
     folder = Path(out) if out is not None else root / m.out
     folder.mkdir(parents=True, exist_ok=True)
     strategies = m.strategies(root)
     t0 = time.perf_counter()
-    if m.kind == "multi-agent":
+    if m.kind == "interventions":
+        report = replays.run_interventions_manifest(m, root, folder, workers, progress, keep=tasks_filter)
+    elif m.kind == "pareto" and tasks_filter is not None:
+        report = replays.run_pareto_rows(m, root, folder, tasks_filter, workers)
+    elif m.kind == "pareto":
+        report = replays.run_pareto_manifest(m, root, folder, workers, progress)
+    elif m.kind == "multi-agent":
         from sofar_agents.evaluation.multi_agent import run_multi_agent_table
 
         report = run_multi_agent_table(strategies, folder, tracks=m.tracks, races=m.episodes or 4,
@@ -343,8 +234,13 @@ _OLDER_RACE_COLUMNS = {"opponents": "0", "config_hash": ""}
 
 
 def raw_rows(path: str | os.PathLike, kind: str = "table1") -> list[dict[str, str]]:
-    """The complete rows of an episode CSV (``kind`` ``"multi-agent"``: a race CSV) as written (strings); the
-    columns of an older format that the file lacks hold the value its rows stand for (``config_hash`` "")."""
+    """The complete rows of an episode CSV (``kind`` ``"multi-agent"``: a race CSV; ``"interventions"``: an
+    ``interventions.csv``) as written (strings); the columns of an older format that the file lacks hold the
+    value its rows stand for (``config_hash`` "")."""
+    if kind == "interventions":
+        from sofar_agents.evaluation.interventions import _read_rows
+
+        return _read_rows(Path(path))
     if kind == "multi-agent":
         from sofar_agents.evaluation.multi_agent import RACE_COLUMNS
 
@@ -374,16 +270,19 @@ def _rerun_races(m: Manifest, root: str | os.PathLike, wanted: set[tuple], out: 
 
 def rerun_rows(m: Manifest, root: str | os.PathLike, rows: Sequence[dict[str, str]], out: str | os.PathLike,
                workers: int | None = 1, columns: Sequence[str] | None = None) -> list[str]:
-    """Run the episodes (races) of the committed ``rows`` (strings, as :func:`raw_rows` gives them) through ``m``
-    into ``out`` and compare ``columns`` (default: every column of ``m``'s committed CSV) but ``wall_time`` and
-    ``config_hash`` as written. Returns the differences (empty: the rows are re-made bit for bit); a row whose
-    episode ``m`` does not hold is a difference too."""
-    wanted = {row_id(m, r) for r in rows}
+    """Run the episodes (races; replayed episodes, with all their replays) of the committed ``rows`` (strings, as
+    :func:`raw_rows` gives them) through ``m`` into ``out`` and compare ``columns`` (default: every column of
+    ``m``'s committed CSV) but ``wall_time`` and ``config_hash`` as written. Returns the differences (empty: the
+    rows are re-made bit for bit); a row whose episode ``m`` does not hold is a difference too."""
+    wanted = {row_episode(m, r) for r in rows}
     if columns is None:
         committed = Path(root) / m.out / m.csv_name
         columns = _header(committed) if committed.is_file() else list(rows[0]) if rows else []
     if m.kind == "multi-agent":
         _rerun_races(m, root, wanted, Path(out))
+    elif m.kind == "interventions":
+        run_manifest(m, root, workers=workers, out=out, progress=False,
+                     tasks_filter=lambda task: replays.task_episode(task) in wanted)
     else:
         def keep(task) -> bool:
             from sofar_agents.evaluation.protocol import exact_text
@@ -442,12 +341,12 @@ def _replace_text(p: Path, text: str) -> None:
         Path(tmp).unlink(missing_ok=True)
 
 
-def backfill_hash(path: str | os.PathLike, config_hash: str) -> int:
+def backfill_hash(path: str | os.PathLike, config_hash: str, last: bool = False) -> int:
     """Give every row of the episode CSV ``path`` (written before the ``config_hash`` column) the hash
-    ``config_hash``: the column goes in after ``stack``, every other byte of the file stays as it is (values,
-    line endings). The file is replaced atomically. Only for rows shown to be re-made by the configuration of
-    that hash (:func:`rerun_rows`). Returns the number of rows; ``ValueError`` for a file that already has the
-    column, lacks ``stack`` or holds quoted values."""
+    ``config_hash``: the column goes in after ``stack`` (``last``: at the end, where an ``interventions.csv`` has
+    it), every other byte of the file stays as it is (values, line endings). The file is replaced atomically.
+    Only for rows shown to be re-made by the configuration of that hash (:func:`rerun_rows`). Returns the number
+    of rows; ``ValueError`` for a file that already has the column, lacks ``stack`` or holds quoted values."""
     p = Path(path)
     data = p.read_bytes().decode("utf-8")
     if '"' in data:
@@ -456,7 +355,7 @@ def backfill_hash(path: str | os.PathLike, config_hash: str) -> int:
     header = lines[0].rstrip("\r\n").split(",")
     if "config_hash" in header or "stack" not in header:
         raise ValueError(f"{p}: has a config_hash column already or no stack column")
-    at = header.index("stack") + 1
+    at = len(header) if last else header.index("stack") + 1
     out = []
     for i, line in enumerate(lines):
         body = line.rstrip("\r\n")

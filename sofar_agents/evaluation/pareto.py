@@ -36,7 +36,7 @@ from sofar_agents.evaluation.results import read_episode_csv, select_rows
 from sofar_agents.evaluation.sweep import SweepStats, run_sweep
 
 __all__ = ["OBJECTIVE_LABELS", "REFERENCE_POINT", "ParetoPoint", "ParetoReport", "preference_family",
-           "strategy_points", "pareto_front", "hypervolume", "plot_fronts", "run_pareto"]
+           "strategy_points", "pareto_front", "hypervolume", "plot_fronts", "pareto_strategies", "run_pareto"]
 
 OBJECTIVE_LABELS = ("success [%]", "overtakes per hour")
 """The two objectives of a point (both maximised)."""
@@ -197,6 +197,18 @@ def _markdown(points: Sequence[ParetoPoint], hv: Mapping[str, float], settings: 
     return "\n".join(lines) + "\n"
 
 
+def pareto_strategies(policy: str | os.PathLike | None, preferences: Sequence[Sequence[float]],
+                      gammas: Sequence[float]) -> list[Strategy]:
+    """The strategies of a sweep, in its order: each fixed gamma, then ``policy`` (if given) at each preference,
+    named ``pasta w=<the preference's weights, 3 significant digits, joined by />``."""
+    strategies = [Strategy.fixed(g) for g in gammas]
+    if policy is not None:
+        for pref in preferences:
+            label = "pasta w=" + "/".join(f"{w:.3g}" for w in pref)
+            strategies.append(Strategy.adaptive(policy, name=label, preference=pref))
+    return strategies
+
+
 def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[float]], gammas: Sequence[float],
                out_dir: str | os.PathLike, *, tracks: Sequence[str] = TRACKS, rhos: Sequence[float] = RHOS,
                episodes: int = 5, base_seed: int = 0, duration: float = DEFAULT_DURATION,
@@ -206,11 +218,7 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
     """Run (or resume) the sweep of the fixed ``gammas`` and of ``policy`` at each of ``preferences`` into
     ``out_dir/<prefix>_episodes.csv``; write ``<prefix>.md``, ``<prefix>.json`` and ``<prefix>.png``
     (``n_opponents``: the field size, None for the environment's default of 4)."""
-    strategies = [Strategy.fixed(g) for g in gammas]
-    if policy is not None:
-        for pref in preferences:
-            label = "pasta w=" + "/".join(f"{w:.3g}" for w in pref)
-            strategies.append(Strategy.adaptive(policy, name=label, preference=pref))
+    strategies = pareto_strategies(policy, preferences, gammas)
     if not strategies:
         raise ValueError("nothing to evaluate: give fixed gammas or a policy")
     out = Path(out_dir)

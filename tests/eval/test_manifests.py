@@ -16,12 +16,19 @@ ROOT = Path(__file__).resolve().parents[2]
 MANIFESTS = mf.manifest_paths(ROOT / "experiments")
 BACKFILLED = ("table1", "paper_stack_table1", "paper_stack_seed21", "paper_stack_seed42", "table2",
               "interactive_table1", "interactive_dense_table2", "interactive_dense_seed21", "interactive_dense_seed42",
-              "dynamic_table1", "dynamic_seed21", "multi_agent", "multi_agent_seed21")
+              "dynamic_table1", "dynamic_seed21", "multi_agent", "multi_agent_seed21", "interactive_dense_pareto",
+              "interactive_dense_pareto_seed42", "interactive_dense_budget_pareto",
+              "interactive_dense_budget_pareto_seed42", "reference_numerics_interventions",
+              "end_rows_interventions_recover_gamma05", "end_rows_interventions_recover", "end_rows_interventions_ends")
 """Committed tables written before the hash column whose rows were shown to be re-made by the current code
 (``python eval/manifest.py verify NAME --rows 2 --backfill``) and so carry their manifest's hash."""
 UNHASHED = {"table1_seed11": "an earlier controller", "table1_seed12": "an earlier controller",
             "table1_seed13": "the first CSV format", "table1_seed14": "the first CSV format",
-            "interactive_dense_table1": "the policy's former id"}
+            "interactive_dense_table1": "the policy's former id",
+            "interactive_dense_pareto_midstart": "the policy's former id",
+            "interactive_dense_pareto_midstart_seed42": "the policy's former id",
+            "paper_stack_interventions": "another CPU", "dynamic_interventions": "another CPU",
+            "interactive_dense_interventions": "another CPU"}
 """Committed tables that keep rows without a hash, and why (``experiments/README.md``): every other table with a
 manifest carries its manifest's hash."""
 
@@ -88,7 +95,9 @@ def test_every_committed_table_carries_the_hash_its_manifest_resolves_to(path: P
         assert hashes == {m.config_hash}, (m.name, hashes)
         assert {(r["stack"], r["scenario"]) for r in rows} == {(m.stack, m.scenario)}
     ids = mf.episode_ids(m, ROOT)
-    assert ids <= {mf.row_id(m, r) for r in rows}, f"{m.name}: episodes of the manifest missing from its CSV"
+    assert ids <= {mf.row_episode(m, r) for r in rows}, f"{m.name}: episodes of the manifest missing from its CSV"
+    if m.kind in ("pareto", "interventions"):  # nothing but the manifest's episodes in these files
+        assert {mf.row_episode(m, r) for r in rows} == ids, m.name
 
 
 def test_multi_agent_manifest_names_both_policies_as_its_rows_do() -> None:
@@ -119,7 +128,9 @@ def test_first_format_rows_read_and_refuse_a_backfill(tmp_path: Path) -> None:
 def test_backfilled_rows_are_remade_bit_for_bit(name: str, tmp_path: Path) -> None:
     m = mf.load_manifest(ROOT / "experiments" / f"{name}.toml")
     rows = sorted(_cli().shortest_rows(m, 1), key=lambda r: mf.row_length(m, r))[:1]  # the shortest episode
-    assert rows and rows[0]["config_hash"] == m.config_hash
+    if m.kind == "interventions":  # every replay of the cheapest failed episode
+        rows = _cli().shortest_rows(m, 1)
+    assert rows and all(r["config_hash"] == m.config_hash for r in rows)
     assert mf.rerun_rows(m, ROOT, rows, tmp_path) == []
 
 
@@ -139,6 +150,27 @@ def test_run_writes_manifest_json_and_rows_with_the_hash(tmp_path: Path) -> None
         mf.load_manifest(tmp_path / "bad.toml")
 
 
+def test_replay_manifests_are_their_scripts_settings() -> None:
+    """The interventions and pareto manifests resolve to the episodes and strategies their folders hold: the
+    failed episodes of the base gamma in the sources (every one replayed), and the pareto strategies with the
+    policy ids of the rows."""
+    for path in MANIFESTS:
+        m = mf.load_manifest(path)
+        if m.kind == "interventions":
+            rows = mf.raw_rows(ROOT / m.out / m.csv_name, m.kind)
+            assert {float(r["base_gamma"]) for r in rows} == {m.base_gamma}
+            switches = {float(r["gamma"]) for r in rows if r["kind"] == "switch"}
+            assert switches <= set(m.gammas or ()) and {r["stack"] for r in rows} == {m.stack}, m.name
+        elif m.kind == "pareto":
+            rows = mf.raw_rows(ROOT / m.out / m.csv_name, m.kind)
+            ids = {s.name: s.policy_id or "" for s in m.strategies(ROOT)}
+            assert {r["strategy"] for r in rows} == set(ids), m.name
+            if UNHASHED.get(m.name) != "the policy's former id":
+                assert {(r["strategy"], r["policy_id"]) for r in rows} == set(ids.items()), m.name
+    with pytest.raises(ValueError, match="sources"):
+        mf.Manifest(name="x", kind="interventions", out="x")
+
+
 def test_backfill_inserts_the_column_and_keeps_every_other_byte(tmp_path: Path) -> None:
     path = tmp_path / "t_episodes.csv"
     original = "a,stack,b\r\n1,sofar,2\n3,paper,\r\n"
@@ -149,3 +181,7 @@ def test_backfill_inserts_the_column_and_keeps_every_other_byte(tmp_path: Path) 
         mf.backfill_hash(path, "0123456789ab")
     assert mf.restamp_hash(path, "0123456789ab", "ba9876543210") == 2
     assert path.read_bytes() == b"a,stack,config_hash,b\r\n1,sofar,ba9876543210,2\n3,paper,ba9876543210,\r\n"
+    last = tmp_path / "interventions.csv"
+    last.write_bytes(b"a,stack,b\n1,sofar,\n")
+    assert mf.backfill_hash(last, "0123456789ab", last=True) == 1
+    assert last.read_bytes() == b"a,stack,b,config_hash\n1,sofar,,0123456789ab\n"
