@@ -36,6 +36,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--policy", default=None,
                    help="PASTA checkpoint (default: the one shipped for --stack / --scenario, if any)")
     p.add_argument("--no-policy", action="store_true", help="only the fixed gammas")
+    p.add_argument("--sb3", default=None, help="an SB3 PPO zip (train/ppo.py) evaluated as one more point")
     p.add_argument("--safety-weights", nargs="+", type=nonneg_float, default=None,
                    help="safety weights of the policy's preferences, each in [0, 0.9] "
                         f"(default {' '.join(f'{w:g}' for w in DEFAULT_SAFETY_WEIGHTS)}); the overtakes weight is "
@@ -87,7 +88,8 @@ def main(argv=None) -> int:
         report = ev.run_pareto(policy, preferences, gammas, out, tracks=tracks, rhos=rhos, episodes=episodes,
                                base_seed=args.seed, duration=duration, workers=args.workers,
                                progress=not args.no_progress, stack=args.stack, scenario=args.scenario,
-                               backend=args.backend, address=args.address, n_opponents=args.opponents)
+                               backend=args.backend, address=args.address, n_opponents=args.opponents,
+                               sb3=args.sb3)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished episodes are in {out}; rerun the same command to resume", file=sys.stderr)
         return 130

@@ -213,7 +213,10 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
         overrides["hidden_sizes"] = tuple(overrides["hidden_sizes"])
     if args.backend is None:
         several = args.num_workers is not None or (args.n_envs or 1) > 1
-        args.backend = "processes" if several else "local"
+        # preference switches within an episode are made by the local collector only
+        args.backend = "processes" if several and not overrides.get("preference_interval") else "local"
+    if overrides.get("preference_interval") and args.backend != "local":
+        parser.error("--preference-interval needs --backend local (the worker pools draw preferences per episode)")
     if args.backend not in BACKENDS:
         parser.error(f"--backend must be one of {', '.join(BACKENDS)}, got {args.backend!r}")
     if args.backend == "local" and args.num_workers is not None:

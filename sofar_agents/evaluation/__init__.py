@@ -52,7 +52,7 @@ from sofar_agents.evaluation.latency import (PAPER_LATENCY_MS, format_latency, l
                                              measure_latency, write_json)
 from sofar_agents.evaluation.paired import PairedComparison, compare_to, format_paired, label_by_stack, paired_comparison
 from sofar_agents.evaluation.pareto import (ParetoPoint, ParetoReport, hypervolume, pareto_front,
-                                            preference_family, run_pareto, strategy_points)
+                                            pareto_strategies, preference_family, run_pareto, strategy_points)
 from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FULL_TABLE1_STEPS, RHOS,
                                               TRACK_ABBREVIATIONS, TRACKS, EpisodeTask, Strategy,
                                               build_strategies, episode_seed, miqp_ablation_tasks,
@@ -99,6 +99,7 @@ __all__ = [
     "ParetoReport",
     "hypervolume",
     "pareto_front",
+    "pareto_strategies",
     "preference_family",
     "run_pareto",
     "strategy_points",

@@ -104,7 +104,7 @@ def strategy_points(rows: Sequence[Mapping[str, Any]], strategies: Sequence[Stra
         success = 100.0 * sum(bool(r["success"]) for r in mine) / len(mine)
         hours = sum(float(r["sim_time"]) for r in mine) / 3600.0
         rate = sum(int(r["overtakes"]) for r in mine) / hours if hours > 0 else 0.0
-        family = "fixed" if strat.kind == "fixed" else "policy"
+        family = {"fixed": "fixed", "sb3": "baseline"}.get(strat.kind, "policy")
         points.append(ParetoPoint(strat.name, family, success, rate, len(mine), strat.preference))
     return points
 
@@ -144,7 +144,8 @@ def plot_fronts(points: Sequence[ParetoPoint], path: str | os.PathLike, title: s
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.6), dpi=110)
-    styles = {"fixed": ("tab:blue", "o", "fixed gamma"), "policy": ("tab:red", "s", "PASTA, preference sweep")}
+    styles = {"fixed": ("tab:blue", "o", "fixed gamma"), "policy": ("tab:red", "s", "PASTA, preference sweep"),
+              "baseline": ("tab:green", "^", "PPO (SB3)")}
     for family, (colour, marker, label) in styles.items():
         pts = [p for p in points if p.family == family]
         if not pts:
@@ -182,7 +183,7 @@ def _markdown(points: Sequence[ParetoPoint], hv: Mapping[str, float], settings: 
              "dominated by a front above the reference point (0 %, 0 /h), with pymoo's HV indicator.", "",
              "| strategy | preference (safety, overtakes, ...) | success [%] | overtakes / h | episodes | front |",
              "|---|---|---:|---:|---:|:---:|"]
-    for family in ("fixed", "policy"):
+    for family in ("fixed", "policy", "baseline"):
         pts = [p for p in points if p.family == family]
         on_front = set()
         if pts:
@@ -198,14 +199,17 @@ def _markdown(points: Sequence[ParetoPoint], hv: Mapping[str, float], settings: 
 
 
 def pareto_strategies(policy: str | os.PathLike | None, preferences: Sequence[Sequence[float]],
-                      gammas: Sequence[float]) -> list[Strategy]:
+                      gammas: Sequence[float], sb3: str | os.PathLike | None = None) -> list[Strategy]:
     """The strategies of a sweep, in its order: each fixed gamma, then ``policy`` (if given) at each preference,
-    named ``pasta w=<the preference's weights, 3 significant digits, joined by />``."""
+    named ``pasta w=<the preference's weights, 3 significant digits, joined by />``, then the SB3 policy
+    ``sb3`` (if given), named ``PPO (SB3)``."""
     strategies = [Strategy.fixed(g) for g in gammas]
     if policy is not None:
         for pref in preferences:
             label = "pasta w=" + "/".join(f"{w:.3g}" for w in pref)
             strategies.append(Strategy.adaptive(policy, name=label, preference=pref))
+    if sb3 is not None:
+        strategies.append(Strategy.sb3(sb3, name="PPO (SB3)"))
     return strategies
 
 
@@ -214,11 +218,12 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
                episodes: int = 5, base_seed: int = 0, duration: float = DEFAULT_DURATION,
                workers: int | None = None, progress: bool = True, stack: str = "sofar", scenario: str = "paper",
                backend: str = "local", address: str | None = None, prefix: str = "pareto",
-               n_opponents: int | None = None) -> ParetoReport:
+               n_opponents: int | None = None, sb3: str | os.PathLike | None = None) -> ParetoReport:
     """Run (or resume) the sweep of the fixed ``gammas`` and of ``policy`` at each of ``preferences`` into
     ``out_dir/<prefix>_episodes.csv``; write ``<prefix>.md``, ``<prefix>.json`` and ``<prefix>.png``
-    (``n_opponents``: the field size, None for the environment's default of 4)."""
-    strategies = pareto_strategies(policy, preferences, gammas)
+    (``n_opponents``: the field size, None for the environment's default of 4; ``sb3``: an SB3 PPO zip
+    evaluated as one more point, family ``baseline``)."""
+    strategies = pareto_strategies(policy, preferences, gammas, sb3)
     if not strategies:
         raise ValueError("nothing to evaluate: give fixed gammas or a policy")
     out = Path(out_dir)
@@ -230,7 +235,7 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
     rows = select_rows(read_episode_csv(csv_path), tasks)
     points = strategy_points(rows, strategies)
     hv = {}
-    for family in ("fixed", "policy"):
+    for family in ("fixed", "policy", "baseline"):
         values = np.array([(p.success, p.overtakes_per_hour) for p in points if p.family == family])
         if len(values):
             hv[family] = hypervolume(values)

@@ -46,6 +46,16 @@ def test_strategy_points_aggregate_success_and_overtaking_rate():
         ("gamma=0.30", 50.0, 30.0, 2), ("gamma=0.70", 100.0, 30.0, 1)]
 
 
+def test_an_sb3_policy_is_its_own_family(tmp_path):
+    zip_path = tmp_path / "ppo.zip"
+    zip_path.write_bytes(b"not read here")
+    strategies = ev.pareto_strategies(None, [], [0.3], sb3=zip_path)
+    assert [s.name for s in strategies] == ["gamma=0.30", "PPO (SB3)"]
+    rows = [dict(strategy="gamma=0.30", success=True, sim_time=3600.0, overtakes=10),
+            dict(strategy="PPO (SB3)", success=False, sim_time=3600.0, overtakes=40)]
+    assert [p.family for p in ev.strategy_points(rows, strategies)] == ["fixed", "baseline"]
+
+
 def test_a_policy_strategy_takes_a_preference_it_can_use():
     path = default_policy_path()
     pref = ev.preference_family([0.5])[0]
