@@ -16,6 +16,7 @@ __all__ = [
     "compute_gae",
     "load_policy",
     "default_policy_path",
+    "named_policy_path",
     "FixedGammaPolicy",
     "SB3Policy",
 ]
@@ -26,6 +27,7 @@ _LAZY = {
     "compute_gae": "sofar_agents.pasta",
     "load_policy": "sofar_agents.policies",
     "default_policy_path": "sofar_agents.policies",
+    "named_policy_path": "sofar_agents.policies",
     "FixedGammaPolicy": "sofar_agents.policies",
     "SB3Policy": "sofar_agents.policies",
 }

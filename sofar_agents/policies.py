@@ -39,6 +39,8 @@ __all__ = [
     "SB3Policy",
     "load_policy",
     "default_policy_path",
+    "named_policy_path",
+    "NAMED_POLICIES",
     "checkpoint_paths",
     "read_checkpoint_metadata",
     "validate_actor_state",
@@ -125,7 +127,7 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
 
     Args:
         path: ``stem``, ``stem.json`` or ``stem.pt`` of a checkpoint written by
-            :meth:`sofar_agents.PASTA.save`.
+            :meth:`sofar_agents.PASTA.save`, or the name of a shipped policy (:data:`NAMED_POLICIES`).
         preference: override of the deployment preference stored in the JSON.
         obs_dim: expected observation size; a checkpoint for another size raises
             ``ValueError``.
@@ -138,7 +140,8 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
             without a positive finite sum, ...), or a tensor file that is not the one the
             JSON was written with (the message names the file and the field).
     """
-    meta, json_path, pt_path = read_checkpoint_metadata(path)
+    meta, json_path, pt_path = read_checkpoint_metadata(named_policy_path(path) if str(path) in NAMED_POLICIES
+                                                        else path)
     if obs_dim is not None and meta["obs_dim"] != obs_dim:
         raise ValueError(f"{json_path}: checkpoint expects observations of size {meta['obs_dim']}, "
                          f"not {obs_dim}")
@@ -157,6 +160,26 @@ SHIPPED_POLICIES: dict[tuple[str, str], str] = {
 """The shipped PASTA policies, by (controller preset, world scenario): all trained on Laguna Seca only. The
 interactive one was trained with a field of 8 opponents (``n_opponents=8``), the dense field of the
 interactive world, and observes the interactive world's 16 values."""
+
+
+NAMED_POLICIES: dict[str, str] = {
+    "lagunaseca": "pasta_lagunaseca.json",
+    "lagunaseca-paper": "pasta_lagunaseca_paper.json",
+    "lagunaseca-interactive": "pasta_lagunaseca_interactive.json",
+    "morl-dynamic": "pasta_morl_dynamic.json",
+}
+"""The shipped PASTA policies by name (:func:`named_policy_path`, :func:`load_policy`). ``morl-dynamic``: the
+preference-conditioned policy of the dynamic world, trained on Laguna Seca with a preference drawn every 64
+decisions; its gamma falls as the safety weight grows (``tests/agents/test_policies.py``)."""
+
+
+def named_policy_path(name: str) -> Path:
+    """Path of the shipped policy called ``name`` (:data:`NAMED_POLICIES`); ``KeyError`` naming the valid names."""
+    from importlib.resources import files
+
+    if name not in NAMED_POLICIES:
+        raise KeyError(f"no shipped policy called {name!r}; shipped: {', '.join(NAMED_POLICIES)}")
+    return Path(str(files("sofar_agents") / "checkpoints" / NAMED_POLICIES[name]))
 
 
 def default_policy_path(stack: str = "sofar", scenario: str = "paper") -> Path:

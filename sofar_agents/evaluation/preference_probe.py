@@ -126,10 +126,11 @@ def preference_response(agent: Any, observations: np.ndarray, preferences: np.nd
 
 
 SHIPPED_RECIPE: dict[str, Any] = {"action_squashing": "clip", "initial_action": 0.08, "log_std_init": -2.3,
-                                  "n_steps": 1024, "batch_size": 256, "conflict_every": 8}
+                                  "mu_max": 10.0, "n_steps": 1024, "batch_size": 256, "conflict_every": 8}
 """The training settings of the shipped dense-interactive policy (its ``--action-squashing clip
 --initial-action 0.08 --log-std-init -2.3 --n-steps 1024 --batch-size 256``; the conflict is measured on
-every 8th minibatch only, which shortens an update and changes nothing else)."""
+every 8th minibatch only, which shortens an update and changes nothing else) and the reference's attention
+temperature, ``mu_max = 10``, that it was trained with."""
 
 MID_START: dict[str, Any] = {"initial_action": 0.5, "log_std_init": -1.2}
 """Start in the middle of the gamma range with a spread of 0.3 (instead of 0.08 and 0.1)."""
@@ -144,6 +145,7 @@ PROBE_VARIANTS: dict[str, dict[str, Any]] = {
     "mu 0.3, mid start": {"fixed_mu": 0.3, **MID_START},
     "mu 0.1, mid start, no maintenance": {"fixed_mu": 0.1, "maintenance": 0.0, **MID_START},
     "mu 0.1, wide start at 0.08": {"fixed_mu": 0.1, "log_std_init": -1.2},
+    "mu in [0.05, 0.3] (the default), mid start": {"mu_max": 0.3, **MID_START},
     "mu decay over 20 %, mid start": {"mu_decay_fraction": 0.2, **MID_START},
     "mu decay over 20 %, no boost, mid start": {"mu_decay_fraction": 0.2, "conflict_boost": False, **MID_START},
 }

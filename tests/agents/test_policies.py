@@ -117,3 +117,28 @@ def test_sb3_policy(tmp_path: Path) -> None:
     action, _ = model.predict(obs[0], deterministic=True)
     assert single[0] == pytest.approx(0.05 + (np.clip(action[0], -1, 1) + 1) / 2 * 0.95, abs=1e-6)
     assert policy(obs).shape == (8, 1)
+
+
+def test_every_named_policy_ships_and_loads_by_name():
+    from sofar_agents.policies import NAMED_POLICIES, named_policy_path
+
+    for name in NAMED_POLICIES:
+        assert named_policy_path(name).is_file(), name
+        policy = load_policy(name)
+        assert policy(np.zeros(policy.obs_dim, np.float32)).shape == (1,)
+    with pytest.raises(KeyError, match="morl-dynamic"):
+        named_policy_path("morl")
+
+
+def test_the_shipped_morl_policy_lowers_gamma_as_safety_weighs_more():
+    """The documented direction of the preference input, on fixed states: the mean gamma over a set of
+    observations falls as the safety weight grows (overtakes weight 0.9 minus it)."""
+    from sofar_agents.evaluation.preference_probe import safety_preferences
+
+    policy = load_policy("morl-dynamic")
+    obs = np.random.default_rng(0).uniform(-0.5, 0.5, (200, policy.obs_dim)).astype(np.float32)
+    means = []
+    for w in safety_preferences([0.1, 0.5, 0.9]):
+        policy.set_preference(w)
+        means.append(float(np.mean([policy(o)[0] for o in obs])))
+    assert means[0] > means[1] > means[2], means
