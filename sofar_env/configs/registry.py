@@ -165,6 +165,11 @@ mode and the turned-car creep; candidate default, not yet default. Below 1 m/s u
 steering to full lock first when turned beyond ``e*``), and a follow decision does not brake a car turned more
 than 0.3 rad to the track below 2 m/s until it is turned less than 0.2 rad (``follow_creep_speed`` 2). The
 stall fixes of ``docs/decisions/stall-fixes.md``."""),
+    "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
+                                                                                   qp_solver="daqp")),
+                        """``"sofar"`` with the MPC's QP condensed onto its inputs and solved by DAQP
+(``mpc.qp_solver = "daqp"``: one QP solver for both layers) instead of PIQP: the same problem on another
+floating-point path, for the comparison of the two backends on the same episodes. Not a default."""),
     "reference-numerics": Entry(_reference_numerics(True), """A **bug-compatible** controller, never a default:
 ``"paper"`` on the reference's uniform time grid with the low-level MPC replaced by
 :class:`~sofar_env.control.refnum.ReferenceNumericsMPC`, which reproduces the numerical defects of the paper's
