@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sofar_agents.cli_types import nonneg_int, positive_int
+from sofar_agents.cli_types import float_in, gamma_value, nonneg_int, positive_int
 from sofar_agents.evaluation.preference_probe import (
     PROBE_SAFETY_WEIGHTS,
     PROBE_VARIANTS,
@@ -130,12 +130,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     rs.add_argument("--env-id", default="SOfAR-LagunaSeca-v0")
     rs.add_argument("--scenario", default="interactive")
     rs.add_argument("--opponents", type=nonneg_int, default=None)
-    rs.add_argument("--rho", type=float, default=0.5)
-    rs.add_argument("--gammas", nargs="+", type=float, default=[0.05, 0.3])
+    rs.add_argument("--rho", type=float_in(0.0, 1.0), default=0.5, help="opponents' pace ratio (default 0.5)")
+    rs.add_argument("--gammas", nargs="+", type=gamma_value, default=[0.05, 0.3],
+                    help="fixed gammas the recorded episodes are driven with (default 0.05 0.3)")
     rs.add_argument("--episodes", type=positive_int, default=2, help="episodes per gamma (default 2)")
     rs.add_argument("--steps", type=positive_int, default=200, help="decisions recorded per episode (default 200)")
     rs.add_argument("--seed", type=nonneg_int, default=9100)
-    rs.add_argument("--safety-weights", nargs="+", type=float, default=[0.1, 0.2, 0.3, 0.45, 0.6, 0.75, 0.9])
+    rs.add_argument("--safety-weights", nargs="+", type=float_in(0.0, 0.9),
+                    default=[0.1, 0.2, 0.3, 0.45, 0.6, 0.75, 0.9],
+                    help="safety weights in [0, 0.9]; overtakes get 0.9 minus each (default 0.1 0.2 0.3 0.45 0.6 0.75 0.9)")
     return p.parse_args(argv)
 
 

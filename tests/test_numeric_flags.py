@@ -62,7 +62,7 @@ def test_no_numeric_flag_takes_a_bare_int_or_float(path, parse_only):
     argv = {"eval/plot_training.py": ["run"], "eval/headroom.py": ["x.csv"], "eval/paired.py": ["x.csv"],
             "eval/interventions.py": ["x.csv"], "eval/trajectories.py": ["record", "--out", "x.npz"],
             "bench/bench_train.py": ["--compare", "HEAD"], "eval/reference_numerics.py": ["sweep"],
-            "eval/manifest.py": ["list"]}.get(path, [])
+            "eval/manifest.py": ["list"], "eval/pasta_preference.py": ["probe"]}.get(path, [])
     parser = _run(path, argv).parser
     actions = list(parser._actions)
     for sub in (a for a in parser._actions if isinstance(a, argparse._SubParsersAction)):
@@ -115,6 +115,10 @@ USAGE_ERRORS = [  # (script, argv, the flag named in the message)
     ("train/pasta.py", ["--total-steps", "0"], "--total-steps"),
     ("train/pasta.py", ["--n-envs", "0"], "--n-envs"),
     ("train/pasta.py", ["--torch-threads", "0"], "--torch-threads"),
+    ("train/pasta.py", ["--preference-interval", "-1"], "--preference-interval"),
+    ("eval/pasta_preference.py", ["probe", "--steps", "0"], "--steps"),
+    ("eval/pasta_preference.py", ["respond", "--policy", "x", "--gammas", "0.01"], "--gammas"),
+    ("eval/pasta_preference.py", ["respond", "--policy", "x", "--safety-weights", "0.95"], "--safety-weights"),
 ]
 
 
