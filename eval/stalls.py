@@ -29,6 +29,7 @@ from pathlib import Path
 
 from sofar_agents import evaluation as ev
 from sofar_agents.cli_types import gamma_value, nonneg_float, nonneg_int, positive_int
+from sofar_agents.evaluation import stall_rows as sr
 from sofar_agents.evaluation import stalls as st
 from sofar_agents.evaluation.protocol import exact_text
 
@@ -123,11 +124,11 @@ def run_tasks(tasks, labels, out: Path, episodes_csv: bool, restart_weight: floa
             rep = st.record_episode(t, lab, envs[t.env_key], restart_weight=restart_weight)
             name = _probe_name(t.stack, restart_weight)
             logger.info("%s %s rho %g seed %d gamma %g: %s at %.1f s %s (%.1f s)", name, t.track, t.rho, t.seed,
-                        t.strategy.gamma, st.report_rows([rep])[0]["outcome"], rep.result.sim_time, rep.cls,
+                        t.strategy.gamma, sr.report_rows([rep])[0]["outcome"], rep.result.sim_time, rep.cls,
                         time.perf_counter() - t1)
-            _append(out / "stalls.csv", st.REPORT_COLUMNS, [{**row, "stack": name} for row in st.report_rows([rep])])
+            _append(out / "stalls.csv", sr.REPORT_COLUMNS, [{**row, "stack": name} for row in sr.report_rows([rep])])
             if rep.records:
-                _append(out / RECORDS, st.RECORD_COLUMNS, [{**row, "stack": name} for row in st.record_rows(rep)])
+                _append(out / RECORDS, sr.RECORD_COLUMNS, [{**row, "stack": name} for row in sr.record_rows(rep)])
             if episodes_csv:
                 _append(out / "table1_episodes.csv", ev.EPISODE_COLUMNS, [{**_episode_row(rep.result), "stack": name}])
     finally:
@@ -178,21 +179,21 @@ def _fmt(v) -> str:
 
 def reclassify(out: Path) -> list[dict]:
     """The rows of ``out/stalls.csv``, each stall classified again from ``out/records.csv.gz``
-    (:func:`~sofar_agents.evaluation.stalls.records_from_rows`: the rooms measured by this version); the CSV is
+    (:func:`~sofar_agents.evaluation.stall_rows.records_from_rows`: the rooms measured by this version); the CSV is
     rewritten with them."""
     with open(out / "stalls.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     if not (out / RECORDS).exists():
         return rows
     with gzip.open(out / RECORDS, "rt", newline="") as f:
-        records = st.records_from_rows(csv.DictReader(f))
+        records = sr.records_from_rows(csv.DictReader(f))
     for row in rows:
         key = (row["track"], row["rho"], row["seed"], row["stack"], row["gamma"])
         if row["outcome"] == "stalled" and key in records:
             row["cls"], evidence = st.classify(records[key])
-            row.update({c: evidence[c] for c in st.REPORT_COLUMNS if c in evidence})
+            row.update({c: evidence[c] for c in sr.REPORT_COLUMNS if c in evidence})
     with open(out / "stalls.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(st.REPORT_COLUMNS), lineterminator="\n", extrasaction="ignore")
+        w = csv.DictWriter(f, fieldnames=list(sr.REPORT_COLUMNS), lineterminator="\n", extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
     return rows
@@ -217,12 +218,12 @@ def main(argv=None) -> int:
         if args.replay:
             tasks, labels = [], []
             for name, rows in ev.read_seed_sets(args.replay).items():
-                found = st.stalled_tasks(rows, args.stacks)[:args.limit]
+                found = sr.stalled_tasks(rows, args.stacks)[:args.limit]
                 logger.info("%s: %d stalls", name, len(found))
                 tasks += found
                 labels += [f"committed {name[name.find('results/'):] if 'results/' in name else name}"] * len(found)
         else:
-            tasks = st.fresh_tasks(args.stacks or ["sofar", "sofar-recover"], args.gammas, args.tracks, args.rhos,
+            tasks = sr.fresh_tasks(args.stacks or ["sofar", "sofar-recover"], args.gammas, args.tracks, args.rhos,
                                    args.episodes, args.seed, args.opponents, args.scenario)
             labels = [f"fresh seed {args.seed}"] * len(tasks)
     except ValueError as exc:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from sofar_agents.evaluation import stall_rows as sr
 from sofar_agents.evaluation import stalls as st
 
 from .episode_csv import write_episode_csv
@@ -75,15 +76,15 @@ def test_stalled_tasks_from_rows():
              "duration": 200.0, "n_opponents": "8", "stack": "sofar-recover", "scenario": "interactive"},
             {"track": "Monza", "strategy": "adaptive", "rho": 0.1, "seed": 9, "stalled": True, "use_miqp": True,
              "duration": 200.0, "n_opponents": "8", "stack": "sofar", "scenario": "interactive"}]
-    tasks = st.stalled_tasks(rows)
+    tasks = sr.stalled_tasks(rows)
     assert len(tasks) == 1
     t = tasks[0]
     assert (t.seed, t.strategy.gamma, t.n_opponents, t.stack, t.scenario) == (7, 0.3, 8, "sofar-recover", "interactive")
-    assert st.stalled_tasks(rows, stacks=["sofar"]) == []
+    assert sr.stalled_tasks(rows, stacks=["sofar"]) == []
 
 
 def test_fresh_tasks_pair_the_presets():
-    tasks = st.fresh_tasks(["sofar", "sofar-recover"], [0.05], ["Monza"], [0.1, 0.2], 2, base_seed=7301)
+    tasks = sr.fresh_tasks(["sofar", "sofar-recover"], [0.05], ["Monza"], [0.1, 0.2], 2, base_seed=7301)
     assert len(tasks) == 8
     assert [t.stack for t in tasks[:2]] == ["sofar", "sofar-recover"]
     assert tasks[0].seed == tasks[1].seed and tasks[0].n_opponents == 8 and tasks[0].scenario == "interactive"
@@ -109,7 +110,7 @@ def test_replay_of_a_stall(tmp_path):
         return
     assert first[0]["cls"] in st.CLASSES
     with gzip.open(out / stalls_cli.RECORDS, "rt", newline="") as f:
-        records = st.records_from_rows(csv.DictReader(f))
+        records = sr.records_from_rows(csv.DictReader(f))
     (steps,) = records.values()
     assert 200 <= len(steps) <= 220  # the 20 s below 1 m/s and up to 2 s before
     assert all(r.v < st.RECORD_SPEED for r in steps) and sum(r.v >= 1.0 for r in steps) <= 20
