@@ -165,6 +165,13 @@ mode and the turned-car creep; candidate default, not yet default. Below 1 m/s u
 steering to full lock first when turned beyond ``e*``), and a follow decision does not brake a car turned more
 than 0.3 rad to the track below 2 m/s until it is turned less than 0.2 rad (``follow_creep_speed`` 2). The
 stall fixes of ``docs/decisions/stall-fixes.md``."""),
+    "sofar-3": Entry(dataclasses.replace(StackConfig(), restart_lateral_weight=15.0, follow_creep_speed=2.0,
+                                         slow_rows_speed=10.0, slow_rows_exit_speed=12.0), """``"sofar"`` plus the
+stall fixes of ``"sofar-2"`` with the ends bounded only at low speed; candidate default, not yet default.
+Below 10 m/s (until 12 m/s) a second MPC bounds both ends of the car with room kept for turning back
+(``slow_rows_speed``: ``"sofar-recover"``'s rows, which in the dynamic world also raise collisions at racing
+speed), with the restart mode and the turned-car creep of ``"sofar-2"``. The stall fixes of
+``docs/decisions/stall-fixes.md``."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar"`` with the MPC's QP condensed onto its inputs and solved by DAQP

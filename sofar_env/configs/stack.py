@@ -139,6 +139,16 @@ class StackConfig:
     """|Heading error| above which the creep starts [rad], > 0."""
     follow_creep_release: float = neutral(real(0.2, ge=0.0, unit="rad"))
     """|Heading error| below which the creep ends [rad], in [0, ``follow_creep_angle``]."""
+    slow_rows_speed: float | None = neutral(real(None, gt=0.0, optional="off", unit="m/s"))
+    """*Slow end rows* (None: off, the default; only with ``mpc.track_rows = "reference"``). While the ego is
+    slower than this, and from then on until it is ``slow_rows_exit_speed`` fast, the MPC step is solved by a
+    second MPC that bounds both ends of the car with room kept for turning back (``track_rows =
+    "recoverable"``, :mod:`sofar_env.control.mpc.ends`; entered from a cold start, the stack's own MPC restarts
+    cold when it ends); the restart mode's MPC bounds them too. At racing speed the MPC keeps the reference
+    point's rows, whose edges the footprint-aware edges tighten [m/s], > 0. Decision:
+    ``docs/decisions/stall-fixes.md``."""
+    slow_rows_exit_speed: float = neutral(real(12.0, gt=0.0, unit="m/s"))
+    """Speed at which the slow end rows end [m/s], >= ``slow_rows_speed``."""
     parked_follow_gap: float | None = neutral(real(None, ge=0.0, optional="follow_gap", unit="m"))
     """Arc-length distance kept behind a followed car slower than ``parked_speed`` [m] (None: ``follow_gap``,
     the default), so that the ego stops where it can still steer around a near-stationary car. Decision:
@@ -165,6 +175,17 @@ class StackConfig:
         if not self.restart_speed <= self.restart_exit_speed:
             raise ConfigError(f"stack.restart_exit_speed must be >= restart_speed = {self.restart_speed} [m/s], "
                               f"got {self.restart_exit_speed!r}")
+        if self.slow_rows_speed is not None:
+            if self.mpc.track_rows != "reference":
+                raise ConfigError(f"stack.slow_rows_speed needs stack.mpc.track_rows = 'reference' (it switches to "
+                                  f"the 'recoverable' rows below that speed), got {self.mpc.track_rows!r}")
+            if not self.slow_rows_speed <= self.slow_rows_exit_speed:
+                raise ConfigError(f"stack.slow_rows_exit_speed must be >= slow_rows_speed = {self.slow_rows_speed} "
+                                  f"[m/s], got {self.slow_rows_exit_speed!r}")
+            if self.restart_lateral_weight is not None and self.slow_rows_speed < self.restart_exit_speed:
+                raise ConfigError(f"stack.slow_rows_speed must be >= restart_exit_speed = {self.restart_exit_speed} "
+                                  f"[m/s] with the restart mode on (its MPC bounds the ends too), got "
+                                  f"{self.slow_rows_speed!r}")
         if not self.follow_creep_release <= self.follow_creep_angle:
             raise ConfigError(f"stack.follow_creep_release must lie in [0, follow_creep_angle = "
                               f"{self.follow_creep_angle}] [rad], got {self.follow_creep_release!r}")

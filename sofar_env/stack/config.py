@@ -16,8 +16,8 @@ __all__ = ["StackConfig", "STACK_PRESETS", "stack_preset"]
 
 STACK_PRESETS = NameView(STACK_PRESET_REGISTRY)
 """Names accepted by :func:`stack_preset` (and by the environments' ``stack=`` key), in registration order:
-``"sofar"``, ``"paper"``, ``"sofar-ends"``, ``"sofar-recover"``, ``"reference-numerics"``,
-``"reference-numerics-no-phantoms"``. A live view of the registry that compares equal to the tuple of these
+``"sofar"``, ``"paper"``, ``"sofar-ends"``, ``"sofar-recover"``, ``"sofar-2"``, ``"sofar-3"``, ``"sofar-daqp"``,
+``"reference-numerics"``, ``"reference-numerics-no-phantoms"``. A live view of the registry that compares equal to the tuple of these
 names."""
 
 

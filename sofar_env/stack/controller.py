@@ -82,10 +82,15 @@ class OvertakingStack:
         self.edges = TrackEdges(track, vehicle, footprint_aware=cfg.footprint_edges)
         self._stage = StageLookup(track, self.edges, cfg.speed_factor)
         self.pass_or_follow = PassOrFollow(cfg, self.planner, track, self.predict, self.edges)
+        self._slow_mpc: MPCDCBF | None = None  # the slow end rows' MPC (slow_rows_speed)
+        slow = cfg.slow_rows_speed is not None and cfg.reference_numerics is None
+        if slow:
+            self._slow_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, track_rows="recoverable"), vehicle)
         self._restart_mpc: MPCDCBF | None = None  # the restart mode's MPC (restart_lateral_weight)
         if cfg.restart_lateral_weight is not None and cfg.reference_numerics is None:
             q = (cfg.mpc.q[0], float(cfg.restart_lateral_weight)) + tuple(cfg.mpc.q[2:])
-            self._restart_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, q=q), vehicle)
+            rows = "recoverable" if slow else cfg.mpc.track_rows
+            self._restart_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, q=q, track_rows=rows), vehicle)
             self._turn_back_angle = EndOffsets(vehicle, recoverable=True).e_star
         self._node_t = np.arange(cfg.miqp.nodes) * cfg.miqp.node_dt
         self._mpc_t = cfg.mpc.time_grid()
@@ -96,6 +101,9 @@ class OvertakingStack:
         self.mpc.reset()
         if self._restart_mpc is not None:
             self._restart_mpc.reset()
+        if self._slow_mpc is not None:
+            self._slow_mpc.reset()
+        self._slow = False  # the slow end rows are on (slow_rows_speed)
         self._restarting = False  # in the restart mode (restart_lateral_weight)
         self._creeping = False  # the follow cap keeps the creep speed (follow_creep_speed)
         self.planner.reset()
@@ -107,11 +115,12 @@ class OvertakingStack:
         self._last_pred: np.ndarray | None = None  # previous MPC prediction (for the heading error)
         self.counters = {"steps": 0, "mpc_failures": 0, "miqp_failures": 0, "miqp_solves": 0,
                          "follow_steps": 0, "parked_checks": 0, "parked_passes": 0, "mpc_restarts": 0,
-                         "mpc_restarts_taken": 0, "slow_restarts": 0, "creep_steps": 0}
+                         "mpc_restarts_taken": 0, "slow_restarts": 0, "creep_steps": 0, "slow_rows_steps": 0}
         """Episode counters: control steps, MPC / MIQP failures, MIQP solves, steps in follow mode,
         MIQP calls that tried / took a pass of near-stationary opponents (:mod:`~sofar_env.stack.follow`),
         MPC restarts from a cold guess tried / kept (``mpc.restart_slack``), restart modes entered
-        (``restart_lateral_weight``), steps with the creep floor on the follow cap (``follow_creep_speed``)."""
+        (``restart_lateral_weight``), steps with the creep floor on the follow cap (``follow_creep_speed``), steps
+        under the slow end rows (``slow_rows_speed``)."""
 
     @property
     def following(self) -> bool:
@@ -141,7 +150,7 @@ class OvertakingStack:
     def stage_data(self, ego_s: float) -> MPCStageData:
         """Per-stage data of the MPC at the s of its warm start (:class:`~sofar_env.stack.stage.StageLookup`)."""
         cfg = self.config
-        s_rel = self.mpc.predicted_s()
+        s_rel = (self._slow_mpc if self._slow else self.mpc).predicted_s()
         s_abs, kappa, v_ref, n_min, n_max = self._stage(ego_s, s_rel)
         if self._plan is not None and cfg.use_miqp:
             shift = float(self.track.gap(ego_s, self._plan_s))
@@ -154,7 +163,7 @@ class OvertakingStack:
             if cap is not None:
                 v_ref = np.minimum(v_ref, cap)
         # an MPC that bounds the car's ends itself gets the edges without the frozen-heading tightening
-        x_prev = self._last_pred if cfg.mpc.track_rows == "reference" else None
+        x_prev = self._last_pred if cfg.mpc.track_rows == "reference" and not self._slow else None
         n_min, n_max = self.edges.for_mpc(s_abs, x_prev, self._mpc_t, cfg.mpc.control_dt,
                                           edge_relative=cfg.use_miqp and self.pass_or_follow.parked_plan,
                                           edges=(n_min, n_max))
@@ -193,6 +202,8 @@ class OvertakingStack:
         if cfg.follow_creep_speed > 0.0:
             self._creeping = self._creep(e)
             self.counters["creep_steps"] += int(self._creeping)
+        if self._slow_mpc is not None:
+            self._slow_rows(v)
         stage = self.stage_data(s)
         opp_mpc = opp_rel
         if cfg.pace_prediction and len(opp_rel):
@@ -236,13 +247,24 @@ class OvertakingStack:
             return True
         return self._creeping and abs(e) >= cfg.follow_creep_release
 
+    def _slow_rows(self, v: float) -> None:
+        """Switch the slow end rows on below ``slow_rows_speed`` and off from ``slow_rows_exit_speed``; the MPC that
+        takes over starts cold."""
+        cfg = self.config
+        slow = v < cfg.slow_rows_speed or (self._slow and v < cfg.slow_rows_exit_speed)
+        if slow != self._slow:
+            (self._slow_mpc if slow else self.mpc).reset()
+        self._slow = slow
+        self.counters["slow_rows_steps"] += int(slow)
+
     def _solve_mpc(self, x0: np.ndarray, stage: MPCStageData, opponents: np.ndarray, gamma: float) -> MPCResult:
         """The MPC step: the stack's MPC, or in the restart mode (``restart_lateral_weight``) the second MPC,
         steering towards full lock while its plan stays below ``restart_speed`` with the car turned by ``e*``
         or more (:class:`~sofar_env.configs.stack.StackConfig`)."""
+        own = self._slow_mpc if self._slow else self.mpc
         spare = self._restart_mpc
         if spare is None:
-            return self.mpc.solve(x0, stage, opponents, gamma)
+            return own.solve(x0, stage, opponents, gamma)
         cfg = self.config
         v = float(x0[3])
         free = float(np.max(stage.v_ref)) >= cfg.restart_speed
@@ -254,8 +276,8 @@ class OvertakingStack:
             return self._steer_to_lock(spare.solve(x0, stage, opponents, gamma), x0)
         if self._restarting:  # back to the stack's own MPC, from a cold start
             self._restarting = False
-            self.mpc.reset()
-        return self.mpc.solve(x0, stage, opponents, gamma)
+            own.reset()
+        return own.solve(x0, stage, opponents, gamma)
 
     def _steer_to_lock(self, result: MPCResult, x0: np.ndarray) -> MPCResult:
         """``result`` with its steering rate replaced by one towards full lock on the side that turns the car back,

@@ -18,6 +18,7 @@ from .closed_loop import empty_race
 NEW_FIELDS = {  # field -> a value that switches it on or moves it
     "restart_lateral_weight": 15.0, "restart_speed": 0.5, "restart_exit_speed": 4.0,
     "follow_creep_speed": 2.0, "follow_creep_angle": 0.4, "follow_creep_release": 0.1, "parked_follow_gap": 20.0,
+    "slow_rows_speed": 10.0, "slow_rows_exit_speed": 14.0,
 }
 
 
@@ -29,6 +30,13 @@ def test_sofar_2_is_one_registry_entry_over_sofar_recover():
     assert "candidate default, not yet default" in doc
     assert stack_preset("sofar") == StackConfig()  # the default is unchanged
     assert len({config_hash(stack_preset(p)) for p in STACK_PRESETS}) == len(STACK_PRESETS)
+
+
+def test_sofar_3_is_sofar_with_the_fixes_and_the_slow_end_rows():
+    value, doc = registry.STACK_PRESET_REGISTRY["sofar-3"]
+    assert value == dataclasses.replace(StackConfig(), restart_lateral_weight=15.0, follow_creep_speed=2.0,
+                                        slow_rows_speed=10.0, slow_rows_exit_speed=12.0)
+    assert value.mpc.track_rows == "reference" and "candidate default, not yet default" in doc
 
 
 def test_sofar_2_runs_a_short_episode():
@@ -83,6 +91,28 @@ def test_invalid_stall_fix_settings_are_rejected():
         StackConfig(follow_creep_release=0.5)
     with pytest.raises(ValueError, match="restart_lateral_weight"):
         StackConfig(restart_lateral_weight=-1.0)
+    with pytest.raises(ValueError, match="slow_rows_exit_speed"):
+        StackConfig(slow_rows_speed=12.0, slow_rows_exit_speed=10.0)
+    with pytest.raises(ValueError, match="slow_rows_speed"):
+        StackConfig(slow_rows_speed=0.0)
+    with pytest.raises(ValueError, match="track_rows"):  # it switches from the reference rows to the ends
+        stack_preset("sofar-recover").__class__(mpc=stack_preset("sofar-recover").mpc, slow_rows_speed=10.0)
+    with pytest.raises(ValueError, match="restart_exit_speed"):  # the restart mode's MPC bounds the ends too
+        StackConfig(restart_lateral_weight=15.0, slow_rows_speed=2.0)
+
+
+def test_the_slow_end_rows_take_over_below_their_speed_and_hand_back_above_the_exit(tracks):
+    """Below ``slow_rows_speed`` the second MPC (the ends, with room to turn back) solves the step, from a cold
+    start; the stack's own MPC takes over again only from ``slow_rows_exit_speed`` on (hysteresis)."""
+    track = tracks["Monza"]
+    stack = OvertakingStack(track, StackConfig(slow_rows_speed=10.0, slow_rows_exit_speed=14.0))
+    assert stack._slow_mpc.config.track_rows == "recoverable" and stack.mpc.config.track_rows == "reference"
+    seen = []
+    for v in (20.0, 9.0, 12.0, 13.9, 14.0, 12.0):
+        stack.step(np.array([100.0, 0.0, 0.0, v, 0.0]), np.zeros((0, 3)), 0.5)
+        seen.append(stack._slow)
+    assert seen == [False, True, True, True, False, False]
+    assert stack.counters["slow_rows_steps"] == 3
 
 
 def test_the_creep_floors_the_follow_cap_only_with_room_ahead(tracks):
