@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from sofar_agents.evaluation import manifest_replays as replays
-from sofar_agents.evaluation.configs import row_hash
+from sofar_agents.evaluation.configs import row_hash, write_config_json
 from sofar_agents.evaluation.manifest_spec import KINDS, Manifest, load_manifest, manifest_paths
 from sofar_agents.evaluation.results import EPISODE_COLUMNS, read_csv_rows
 
@@ -142,7 +142,8 @@ def _write_json_atomically(path: Path, data: dict[str, Any]) -> None:
 
 def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = None,
                  out: str | os.PathLike | None = None, progress: bool = True, tasks_filter=None) -> Any:
-    """Run ``m`` into ``root/m.out`` (or ``out``), resuming from its CSV, and write ``manifest.json`` there.
+    """Run ``m`` into ``root/m.out`` (or ``out``), resuming from its CSV, and write ``manifest.json`` and the
+    resolved configuration (``config.json``) there.
 
     Returns the table's report (``markdown``). ``tasks_filter`` (for :func:`rerun_rows`) limits the episodes
     run (for pareto and interventions: runs only their rows, no report, and returns None).
@@ -151,6 +152,7 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
     folder = Path(out) if out is not None else root / m.out
     folder.mkdir(parents=True, exist_ok=True)
     strategies = m.strategies(root)
+    write_config_json(folder, [m.config()])
     t0 = time.perf_counter()
     if m.kind == "interventions":
         report = replays.run_interventions_manifest(m, root, folder, workers, progress, keep=tasks_filter)

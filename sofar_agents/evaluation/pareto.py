@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from sofar_agents.evaluation.configs import episode_config, write_config_json
 from sofar_agents.evaluation.protocol import DEFAULT_DURATION, RHOS, TRACKS, Strategy, _fmt_float, table1_tasks
 from sofar_agents.evaluation.results import read_episode_csv, select_rows
 from sofar_agents.evaluation.sweep import SweepStats, run_sweep
@@ -220,7 +221,8 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
                backend: str = "local", address: str | None = None, prefix: str = "pareto",
                n_opponents: int | None = None, sb3: str | os.PathLike | None = None) -> ParetoReport:
     """Run (or resume) the sweep of the fixed ``gammas`` and of ``policy`` at each of ``preferences`` into
-    ``out_dir/<prefix>_episodes.csv``; write ``<prefix>.md``, ``<prefix>.json`` and ``<prefix>.png``
+    ``out_dir/<prefix>_episodes.csv``; write ``<prefix>.md``, ``<prefix>.json``, ``<prefix>.png`` and the
+    resolved configuration to ``out_dir/config.json``
     (``n_opponents``: the field size, None for the environment's default of 4; ``sb3``: an SB3 PPO zip
     evaluated as one more point, family ``baseline``)."""
     strategies = pareto_strategies(policy, preferences, gammas, sb3)
@@ -231,6 +233,7 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
     tasks = table1_tasks(strategies, tracks, rhos, episodes, base_seed, duration, stack=stack, scenario=scenario,
                          n_opponents=n_opponents)
     csv_path = out / f"{prefix}_episodes.csv"
+    write_config_json(out, [episode_config(stack, scenario, float(duration))])
     stats = run_sweep(tasks, csv_path, workers=workers, progress=progress, backend=backend, address=address)
     rows = select_rows(read_episode_csv(csv_path), tasks)
     points = strategy_points(rows, strategies)
