@@ -131,12 +131,13 @@ def test_the_creep_floors_the_follow_cap_only_with_room_ahead(tracks):
 def test_a_replayed_stall_drives_off_with_sofar_2():
     """The stall of Laguna Seca (dense interactive world, rho 0.1, seed 4258579602, gamma 0.15): ``"sofar-recover"``
     brakes to a stop at 33.6 s turned 0.57 rad to the track under a follow decision behind a car at 2 m/s,
-    1.2 m from its lateral edge, and stands there (stalled at 54.8 s); ``"sofar-2"`` drives on."""
+    1.2 m from its lateral edge, and stands there (stalled at 54.8 s); ``"sofar-2"`` and ``"sofar-3"`` (the ends
+    bounded only below 10 m/s) drive on."""
     from sofar_agents.evaluation.episode import make_env, run_episode
     from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
 
     outcomes = {}
-    for stack in ("sofar-recover", "sofar-2"):
+    for stack in ("sofar-recover", "sofar-2", "sofar-3"):
         task = EpisodeTask("LagunaSeca", Strategy.fixed(0.15), 0.1, 0, 4258579602, duration=60.0, n_opponents=8,
                            stack=stack, scenario="interactive")
         env = make_env(task.track, duration=task.duration, stack=stack, scenario=task.scenario)
@@ -146,4 +147,5 @@ def test_a_replayed_stall_drives_off_with_sofar_2():
             env.close()
         outcomes[stack] = result
     assert outcomes["sofar-recover"].stalled and 50.0 < outcomes["sofar-recover"].sim_time < 60.0
-    assert not outcomes["sofar-2"].stalled and not outcomes["sofar-2"].collision
+    for stack in ("sofar-2", "sofar-3"):
+        assert not outcomes[stack].stalled and not outcomes[stack].collision
