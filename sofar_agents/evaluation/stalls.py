@@ -165,8 +165,11 @@ class _Recorder:
         self._plan_id, self._side = None, "free"
 
     def install(self, restart_weight: float | None = None) -> None:
-        mpc = self.env.stack.mpc
+        stack = self.env.stack
+        mpc = stack.mpc
         solve = type(mpc).solve.__get__(mpc)
+        for other in stack.mpcs[1:]:  # the slow end rows' and the restart mode's MPC: recorded as they solve
+            other.solve = self._recording(type(other).solve.__get__(other))
         spare = None
         if restart_weight is not None:
             import dataclasses
@@ -195,6 +198,13 @@ class _Recorder:
             return solve(x0, stage, opponents, gamma)
 
         mpc.solve = hooked
+
+    def _recording(self, solve):
+        def recorded(x0, stage, opponents, gamma):
+            self.stage, self.x0 = stage, np.asarray(x0, float)
+            return solve(x0, stage, opponents, gamma)
+
+        return recorded
 
     def record(self, step: int) -> StepRecord:
         env = self.env
@@ -240,7 +250,7 @@ class _Recorder:
             v_ref=float(np.max(self.stage.v_ref)),
             n_ref=float(self.stage.n_ref[-1]), accel=float(mpc.u[0]),
             gap_ahead=gap, n_ahead=n_o, v_ahead=v_o, room_beside=room_beside,
-            corner_room=_corner_room(track, veh, s, n, e), **rooms(stack.edges, veh, stack.config.mpc, s, n, e))
+            corner_room=_corner_room(track, veh, s, n, e), **rooms(stack.edges, veh, stack.mpc_in_force.config, s, n, e))
 
 
 def rooms(edges, vehicle, mpc_config, s: float, n: float, e: float) -> dict[str, float]:

@@ -104,6 +104,7 @@ class OvertakingStack:
         if self._slow_mpc is not None:
             self._slow_mpc.reset()
         self._slow = False  # the slow end rows are on (slow_rows_speed)
+        self._in_force = self.mpc  # the MPC that solved the last step
         self._restarting = False  # in the restart mode (restart_lateral_weight)
         self._creeping = False  # the follow cap keeps the creep speed (follow_creep_speed)
         self.planner.reset()
@@ -121,6 +122,16 @@ class OvertakingStack:
         MPC restarts from a cold guess tried / kept (``mpc.restart_slack``), restart modes entered
         (``restart_lateral_weight``), steps with the creep floor on the follow cap (``follow_creep_speed``), steps
         under the slow end rows (``slow_rows_speed``)."""
+
+    @property
+    def mpcs(self) -> tuple:
+        """Every MPC of the stack: its own, then the slow end rows' and the restart mode's where configured."""
+        return tuple(m for m in (self.mpc, self._slow_mpc, self._restart_mpc) if m is not None)
+
+    @property
+    def mpc_in_force(self):
+        """The MPC that solved the last step (the stack's own before the first)."""
+        return self._in_force
 
     @property
     def following(self) -> bool:
@@ -263,6 +274,7 @@ class OvertakingStack:
         or more (:class:`~sofar_env.configs.stack.StackConfig`)."""
         own = self._slow_mpc if self._slow else self.mpc
         spare = self._restart_mpc
+        self._in_force = own
         if spare is None:
             return own.solve(x0, stage, opponents, gamma)
         cfg = self.config
@@ -273,6 +285,7 @@ class OvertakingStack:
                 spare.reset()
                 self.counters["slow_restarts"] += 1
             self._restarting = True
+            self._in_force = spare
             return self._steer_to_lock(spare.solve(x0, stage, opponents, gamma), x0)
         if self._restarting:  # back to the stack's own MPC, from a cold start
             self._restarting = False

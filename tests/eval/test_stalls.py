@@ -123,3 +123,25 @@ def test_replay_of_a_stall(tmp_path):
                             "--log-level", "WARNING"]) == 0
     with open(out / "stalls.csv", newline="") as f:
         assert len(list(csv.DictReader(f))) == 1
+
+
+def test_replay_records_the_steps_of_every_mpc_of_the_stack(tmp_path):
+    """``"sofar-3"`` solves slow steps with its second MPC (the slow end rows): the recorder sees those steps too,
+    so its stall is classified from records. Held-out dense interactive episode (base seed 9600): Laguna Seca,
+    rho 0.1, gamma 0.5, stalled at 78.3 s turned about 0.46 rad beyond its turn-back room under a follow
+    decision (``edge_no_turn_back``)."""
+    row = {"track": "LagunaSeca", "rho": 0.1, "seed": 3422659077, "strategy": "gamma=0.5", "success": 0,
+           "use_miqp": 1, "stalled": 1, "duration": 80.0, "n_opponents": 8, "stack": "sofar-3",
+           "scenario": "interactive"}
+    write_episode_csv(tmp_path / "run" / "table1_episodes.csv", [row])
+    out = tmp_path / "stalls"
+    assert stalls_cli.main(["--replay", str(tmp_path / "run" / "table1_episodes.csv"), "--out", str(out),
+                            "--log-level", "WARNING"]) == 0
+    with open(out / "stalls.csv", newline="") as f:
+        (first,) = list(csv.DictReader(f))
+    if first["outcome"] != "stalled":  # a seeded run reproduces on one instruction set only
+        return
+    assert first["cls"] == "edge_no_turn_back"
+    with gzip.open(out / stalls_cli.RECORDS, "rt", newline="") as f:
+        (steps,) = sr.records_from_rows(csv.DictReader(f)).values()
+    assert len(steps) >= 150 and all(r.mpc_status for r in steps)

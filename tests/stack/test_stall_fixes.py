@@ -107,10 +107,11 @@ def test_the_slow_end_rows_take_over_below_their_speed_and_hand_back_above_the_e
     track = tracks["Monza"]
     stack = OvertakingStack(track, StackConfig(slow_rows_speed=10.0, slow_rows_exit_speed=14.0))
     assert stack._slow_mpc.config.track_rows == "recoverable" and stack.mpc.config.track_rows == "reference"
+    assert stack.mpcs == (stack.mpc, stack._slow_mpc) and stack.mpc_in_force is stack.mpc
     seen = []
     for v in (20.0, 9.0, 12.0, 13.9, 14.0, 12.0):
         stack.step(np.array([100.0, 0.0, 0.0, v, 0.0]), np.zeros((0, 3)), 0.5)
-        seen.append(stack._slow)
+        seen.append(stack.mpc_in_force is stack._slow_mpc)
     assert seen == [False, True, True, True, False, False]
     assert stack.counters["slow_rows_steps"] == 3
 
