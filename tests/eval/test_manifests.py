@@ -26,8 +26,7 @@ UNHASHED = {"table1_seed11": "an earlier controller", "table1_seed12": "an earli
             "table1_seed13": "the first CSV format", "table1_seed14": "the first CSV format",
             "interactive_dense_table1": "the policy's former id",
             "interactive_dense_pareto_midstart": "the policy's former id",
-            "interactive_dense_pareto_midstart_seed42": "the policy's former id",
-            "paper_stack_interventions": "another CPU"}
+            "interactive_dense_pareto_midstart_seed42": "the policy's former id"}
 """Committed tables that keep rows without a hash, and why (``experiments/README.md``): every other table with a
 manifest carries its manifest's hash."""
 
