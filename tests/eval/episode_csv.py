@@ -22,3 +22,11 @@ def write_episode_csv(path: Path, rows) -> None:
         w.writeheader()
         for r in rows:
             w.writerow({**_DEFAULTS, **{k: int(v) if isinstance(v, bool) else v for k, v in r.items()}})
+
+
+FIRST_FORMAT = """track,strategy,rho,seed,success,sim_time,laps,overtakes,collision,off_track,slack_steps,steps,\
+mean_gamma,mpc_failures,miqp_failures,wall_time,episode,use_miqp,duration,policy_id
+Indianapolis,adaptive,0.1,547565627,1,200,2.07752,68,0,0,0,2000,0.626424,0,0,7.43006,1,1,200,3ba9d76272
+Indianapolis,gamma=0.05,0.1,1454761822,1,200,2.03478,67,0,0,7,2000,0.05,0,0,7.57868,0,1,200,
+"""
+"""Rows of the first CSV format (the former ``seed13/``, ``seed14/`` files, before they were re-made)."""
