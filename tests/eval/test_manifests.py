@@ -24,8 +24,7 @@ BACKFILLED = ("table1", "paper_stack_table1", "paper_stack_seed21", "paper_stack
               "end_rows_interventions_recover_gamma05", "end_rows_interventions_recover", "end_rows_interventions_ends")
 """Committed tables written before the hash column whose rows were shown to be re-made by the current code
 (``python eval/manifest.py verify NAME --rows 2 --backfill``) and so carry their manifest's hash."""
-UNHASHED = {"interactive_dense_pareto_midstart": "the policy's former id",
-            "interactive_dense_pareto_midstart_seed42": "the policy's former id"}
+UNHASHED = {"interactive_dense_pareto_midstart_seed42": "the policy's former id"}
 """Committed tables that keep rows without a hash, and why (``experiments/README.md``): every other table with a
 manifest carries its manifest's hash."""
 
