@@ -21,7 +21,9 @@ BACKFILLED = ("table1", "paper_stack_table1", "paper_stack_seed21", "paper_stack
               "dynamic_table1", "dynamic_seed21", "multi_agent", "multi_agent_seed21", "interactive_dense_pareto",
               "interactive_dense_pareto_seed42", "interactive_dense_budget_pareto",
               "interactive_dense_budget_pareto_seed42", "reference_numerics_interventions",
-              "end_rows_interventions_recover_gamma05", "end_rows_interventions_recover", "end_rows_interventions_ends")
+              "end_rows_interventions_recover_gamma05", "end_rows_interventions_recover", "end_rows_interventions_ends",
+              "end_rows_sofar", "end_rows_sofar_ends", "end_rows_sofar_recover", "end_rows_sofar_seed21",
+              "end_rows_sofar_recover_seed21", "paper_stack_table2")
 """Committed tables written before the hash column whose rows were shown to be re-made by the current code
 (``python eval/manifest.py verify NAME --rows 2 --backfill``) and so carry their manifest's hash."""
 UNHASHED = {"interactive_dense_pareto_midstart_seed42": "the policy's former id"}
