@@ -26,7 +26,7 @@ BACKFILLED = ("table1", "paper_stack_table1", "paper_stack_seed21", "paper_stack
               "end_rows_sofar_recover_seed21", "paper_stack_table2")
 """Committed tables written before the hash column whose rows were shown to be re-made by the current code
 (``python eval/manifest.py verify NAME --rows 2 --backfill``) and so carry their manifest's hash."""
-UNHASHED = {"interactive_dense_pareto_midstart_seed42": "the policy's former id"}
+UNHASHED: dict[str, str] = {}
 """Committed tables that keep rows without a hash, and why (``experiments/README.md``): every other table with a
 manifest carries its manifest's hash."""
 
@@ -163,8 +163,7 @@ def test_replay_manifests_are_their_scripts_settings() -> None:
             rows = mf.raw_rows(ROOT / m.out / m.csv_name, m.kind)
             ids = {s.name: s.policy_id or "" for s in m.strategies(ROOT)}
             assert {r["strategy"] for r in rows} == set(ids), m.name
-            if UNHASHED.get(m.name) != "the policy's former id":
-                assert {(r["strategy"], r["policy_id"]) for r in rows} == set(ids.items()), m.name
+            assert {(r["strategy"], r["policy_id"]) for r in rows} == set(ids.items()), m.name
     with pytest.raises(ValueError, match="sources"):
         mf.Manifest(name="x", kind="interventions", out="x")
 
