@@ -104,7 +104,6 @@ class OvertakingStack:
         if self._slow_mpc is not None:
             self._slow_mpc.reset()
         self._slow = False  # the slow end rows are on (slow_rows_speed)
-        self._in_force = self.mpc  # the MPC that solved the last step
         self._restarting = False  # in the restart mode (restart_lateral_weight)
         self._creeping = False  # the follow cap keeps the creep speed (follow_creep_speed)
         self.planner.reset()
@@ -131,7 +130,12 @@ class OvertakingStack:
     @property
     def mpc_in_force(self):
         """The MPC that solved the last step (the stack's own before the first)."""
-        return self._in_force
+        return self._restart_mpc if self._restarting else self._own_mpc
+
+    @property
+    def _own_mpc(self) -> MPCDCBF:
+        """The stack's MPC at this speed: the slow end rows' below ``slow_rows_speed``, else its own."""
+        return self._slow_mpc if self._slow else self.mpc
 
     @property
     def following(self) -> bool:
@@ -161,7 +165,7 @@ class OvertakingStack:
     def stage_data(self, ego_s: float) -> MPCStageData:
         """Per-stage data of the MPC at the s of its warm start (:class:`~sofar_env.stack.stage.StageLookup`)."""
         cfg = self.config
-        s_rel = (self._slow_mpc if self._slow else self.mpc).predicted_s()
+        s_rel = self._own_mpc.predicted_s()
         s_abs, kappa, v_ref, n_min, n_max = self._stage(ego_s, s_rel)
         if self._plan is not None and cfg.use_miqp:
             shift = float(self.track.gap(ego_s, self._plan_s))
@@ -272,9 +276,8 @@ class OvertakingStack:
         """The MPC step: the stack's MPC, or in the restart mode (``restart_lateral_weight``) the second MPC,
         steering towards full lock while its plan stays below ``restart_speed`` with the car turned by ``e*``
         or more (:class:`~sofar_env.configs.stack.StackConfig`)."""
-        own = self._slow_mpc if self._slow else self.mpc
+        own = self._own_mpc
         spare = self._restart_mpc
-        self._in_force = own
         if spare is None:
             return own.solve(x0, stage, opponents, gamma)
         cfg = self.config
@@ -285,7 +288,6 @@ class OvertakingStack:
                 spare.reset()
                 self.counters["slow_restarts"] += 1
             self._restarting = True
-            self._in_force = spare
             return self._steer_to_lock(spare.solve(x0, stage, opponents, gamma), x0)
         if self._restarting:  # back to the stack's own MPC, from a cold start
             self._restarting = False

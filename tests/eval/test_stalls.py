@@ -90,6 +90,17 @@ def test_fresh_tasks_pair_the_presets():
     assert tasks[0].seed == tasks[1].seed and tasks[0].n_opponents == 8 and tasks[0].scenario == "interactive"
 
 
+def _replay_rows(tmp_path, row):
+    """Write ``row`` as a one-episode CSV, replay its stall with the script; the output folder and the rows of its
+    ``stalls.csv``."""
+    write_episode_csv(tmp_path / "run" / "table1_episodes.csv", [row])
+    out = tmp_path / "stalls"
+    assert stalls_cli.main(["--replay", str(tmp_path / "run" / "table1_episodes.csv"), "--out", str(out),
+                            "--log-level", "WARNING"]) == 0
+    with open(out / "stalls.csv", newline="") as f:
+        return out, list(csv.DictReader(f))
+
+
 def test_replay_of_a_stall(tmp_path):
     """Laguna Seca, rho 0.1, gamma 0.15 with "sofar-recover": a committed stall at 54.8 s (base seed 0), replayed
     with a 60 s horizon by the script, then re-classified from its records. A seeded run reproduces on one
@@ -97,12 +108,7 @@ def test_replay_of_a_stall(tmp_path):
     row = {"track": "LagunaSeca", "rho": 0.1, "seed": 4258579602, "strategy": "gamma=0.15", "success": 0,
            "use_miqp": 1, "stalled": 1, "duration": 60.0, "n_opponents": 8, "stack": "sofar-recover",
            "scenario": "interactive"}
-    write_episode_csv(tmp_path / "run" / "table1_episodes.csv", [row])
-    out = tmp_path / "stalls"
-    assert stalls_cli.main(["--replay", str(tmp_path / "run" / "table1_episodes.csv"), "--out", str(out),
-                            "--log-level", "WARNING"]) == 0
-    with open(out / "stalls.csv", newline="") as f:
-        first = list(csv.DictReader(f))
+    out, first = _replay_rows(tmp_path, row)
     assert len(first) == 1 and first[0]["stack"] == "sofar-recover"
     assert (out / "stalls.md").is_file()
     if first[0]["outcome"] != "stalled":
@@ -133,12 +139,7 @@ def test_replay_records_the_steps_of_every_mpc_of_the_stack(tmp_path):
     row = {"track": "LagunaSeca", "rho": 0.1, "seed": 3422659077, "strategy": "gamma=0.5", "success": 0,
            "use_miqp": 1, "stalled": 1, "duration": 80.0, "n_opponents": 8, "stack": "sofar-3",
            "scenario": "interactive"}
-    write_episode_csv(tmp_path / "run" / "table1_episodes.csv", [row])
-    out = tmp_path / "stalls"
-    assert stalls_cli.main(["--replay", str(tmp_path / "run" / "table1_episodes.csv"), "--out", str(out),
-                            "--log-level", "WARNING"]) == 0
-    with open(out / "stalls.csv", newline="") as f:
-        (first,) = list(csv.DictReader(f))
+    out, (first,) = _replay_rows(tmp_path, row)
     if first["outcome"] != "stalled":  # a seeded run reproduces on one instruction set only
         return
     assert first["cls"] == "edge_no_turn_back"
