@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from sofar_agents import evaluation as ev
+from sofar_agents.evaluation.figures import FIGURE_TRACE, gamma_summary, record_figure_episodes
 from sofar_agents.cli_types import nonneg_float, nonneg_int, positive_float, positive_int
 from sofar_env.scenarios import SCENARIOS
 from sofar_env.stack.config import STACK_PRESETS
@@ -69,21 +70,13 @@ def main(argv=None) -> int:
             print("error: no adaptive policy to record (train one or pass --policy PATH)", file=sys.stderr)
             return 2
         strategies = [ev.Strategy.adaptive(policy)]
-        # the trace rows carry no policy id: never mix the steps of two policies in one plot
-        recorded = out / "episodes.csv"
-        others = sorted({str(r["policy_id"]) for r in (ev.read_episode_csv(recorded) if recorded.exists() else [])
-                         if r["strategy"] == "adaptive"} - {strategies[0].policy_id})
-        if others:
-            print(f"error: {out} holds the episodes of another policy ({', '.join(others)}); use another --out, "
-                  f"or delete {recorded} and {out / 'trace.csv'} to record this one", file=sys.stderr)
-            return 2
-        tasks = ev.table1_tasks(strategies, [args.track], args.rhos, args.episodes, args.seed, args.duration,
-                                trace=True, stack=args.stack, scenario=args.scenario, n_opponents=args.opponents)
-        trace_path = out / "trace.csv"
+        trace_path = out / FIGURE_TRACE
         try:
-            stats = ev.run_sweep(tasks, out / "episodes.csv", workers=args.workers, trace_path=trace_path,
-                                 backend=args.backend, address=args.address)
-        except ImportError as exc:  # --backend ray without Ray
+            stats = record_figure_episodes(strategies, out, tracks=[args.track], rhos=args.rhos,
+                                           episodes=args.episodes, seed=args.seed, duration=args.duration,
+                                           stack=args.stack, scenario=args.scenario, n_opponents=args.opponents,
+                                           workers=args.workers, backend=args.backend, address=args.address)
+        except (ImportError, ValueError) as exc:  # --backend ray without Ray; a folder of another policy
             print(f"error: {exc}", file=sys.stderr)
             return 2
         incomplete = ev.incomplete_message(stats, out)
@@ -94,9 +87,7 @@ def main(argv=None) -> int:
         print(f"error: no steps of strategy {args.strategy!r} in {trace_path}", file=sys.stderr)
         return 2
     paths = ev.plot_gamma_figures(trace, out, max_distance=args.max_distance)
-    g = trace["gamma"]
-    print(f"{g.size} steps: gamma mean {g.mean():.3f}, median {np.median(g):.3f}, "
-          f"5-95% [{np.percentile(g, 5):.3f}, {np.percentile(g, 95):.3f}]")
+    print(gamma_summary(trace))
     for p in paths:
         print(f"Wrote {p}")
     return 0

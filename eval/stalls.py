@@ -54,10 +54,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--seed", type=nonneg_int, default=7301, help="base seed of the seed set's episode seeds")
     p.add_argument("--opponents", type=nonneg_int, default=8, help="opponents per episode of the seed set")
     p.add_argument("--scenario", default="interactive", help="world of the seed set")
-    p.add_argument("--restart-weight", type=nonneg_float, default=None,
-                   help="probe a candidate fix (not a preset): restarts from standstill solved with this lateral "
-                        "weight q_n, steering to full lock first (record_episode's restart_weight); the rows name "
-                        "the preset <stack>+restart<weight>")
     p.add_argument("--log-level", default="INFO")
     args = p.parse_args(argv)
     if args.replay and args.report:
@@ -75,7 +71,15 @@ RECORDS = "records.csv.gz"
 
 
 def _append(path: Path, columns, rows) -> None:
+    """Append ``rows`` to the CSV ``path`` (a header first when it is new); ``ValueError`` naming the file when it
+    has other columns (written by an older version: use another ``--out``)."""
     new = not path.exists() or path.stat().st_size == 0
+    if not new:
+        with (gzip.open(path, "rt", newline="") if path.suffix == ".gz" else open(path, newline="")) as f:
+            header = next(csv.reader(f), [])
+        if header != list(columns):
+            raise ValueError(f"{path} has the columns of another version ({len(header)} against {len(columns)}); "
+                             f"use another --out")
     with (gzip.open(path, "at", newline="") if path.suffix == ".gz" else open(path, "a", newline="")) as f:
         w = csv.DictWriter(f, fieldnames=list(columns), lineterminator="\n", extrasaction="ignore")
         if new:
@@ -95,18 +99,14 @@ def _episode_row(result) -> dict:
     return out
 
 
-def _probe_name(stack: str, weight: float | None) -> str:
-    return stack if weight is None else f"{stack}+restart{weight:g}"
-
-
-def run_tasks(tasks, labels, out: Path, episodes_csv: bool, restart_weight: float | None = None) -> float:
+def run_tasks(tasks, labels, out: Path, episodes_csv: bool) -> float:
     """Run the tasks not yet in ``out/stalls.csv``, appending each episode's rows; the wall time [s]."""
     done = set()
     if (out / "stalls.csv").exists():
         with open(out / "stalls.csv", newline="") as f:
             done = {_key(r) for r in csv.DictReader(f)}
     todo = [(t, lab) for t, lab in zip(tasks, labels)
-            if (lab, _probe_name(t.stack, restart_weight), t.track, exact_text(t.rho), t.seed,
+            if (lab, t.stack, t.track, exact_text(t.rho), t.seed,
                 exact_text(t.strategy.gamma)) not in done]
     logger.info("%d episodes, %d already in %s", len(tasks), len(tasks) - len(todo), out / "stalls.csv")
     t0 = time.perf_counter()
@@ -121,16 +121,15 @@ def run_tasks(tasks, labels, out: Path, episodes_csv: bool, restart_weight: floa
                 envs[t.env_key] = ev.make_env(t.track, use_miqp=t.use_miqp, duration=t.duration, stack=t.stack,
                                               scenario=t.scenario)
             t1 = time.perf_counter()
-            rep = st.record_episode(t, lab, envs[t.env_key], restart_weight=restart_weight)
-            name = _probe_name(t.stack, restart_weight)
-            logger.info("%s %s rho %g seed %d gamma %g: %s at %.1f s %s (%.1f s)", name, t.track, t.rho, t.seed,
+            rep = st.record_episode(t, lab, envs[t.env_key])
+            logger.info("%s %s rho %g seed %d gamma %g: %s at %.1f s %s (%.1f s)", t.stack, t.track, t.rho, t.seed,
                         t.strategy.gamma, sr.report_rows([rep])[0]["outcome"], rep.result.sim_time, rep.cls,
                         time.perf_counter() - t1)
-            _append(out / "stalls.csv", sr.REPORT_COLUMNS, [{**row, "stack": name} for row in sr.report_rows([rep])])
+            _append(out / "stalls.csv", sr.REPORT_COLUMNS, sr.report_rows([rep]))
             if rep.records:
-                _append(out / RECORDS, sr.RECORD_COLUMNS, [{**row, "stack": name} for row in sr.record_rows(rep)])
+                _append(out / RECORDS, sr.RECORD_COLUMNS, sr.record_rows(rep))
             if episodes_csv:
-                _append(out / "table1_episodes.csv", ev.EPISODE_COLUMNS, [{**_episode_row(rep.result), "stack": name}])
+                _append(out / "table1_episodes.csv", ev.EPISODE_COLUMNS, [_episode_row(rep.result)])
     finally:
         for env in envs.values():
             env.close()
@@ -229,7 +228,11 @@ def main(argv=None) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    wall = run_tasks(tasks, labels, out, episodes_csv=not args.replay, restart_weight=args.restart_weight)
+    try:
+        wall = run_tasks(tasks, labels, out, episodes_csv=not args.replay)
+    except ValueError as exc:  # a stalls.csv of another version in --out
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     command = "python eval/stalls.py " + " ".join(argv if argv is not None else sys.argv[1:])
     print(write_report(out, f"\n{len(tasks)} episodes; this call ran for {wall:.0f} s in one process. "
                             f"Command: `{command}`\n"))

@@ -93,8 +93,8 @@ def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple]:
     if m.kind == "table2":
         tasks = miqp_ablation_tasks(strategies, m.episodes or 10, m.rhos, m.track, m.seed, m.duration, stack=m.stack,
                                     scenario=m.scenario)
-    elif m.kind == "table1":
-        tasks = table1_tasks(strategies, m.tracks, m.rhos, m.episodes or 5, m.seed, m.duration, stack=m.stack,
+    elif m.kind in ("table1", "figures"):
+        tasks = table1_tasks(strategies, m.tracks, m.rhos, m.episodes or (3 if m.kind == "figures" else 5), m.seed, m.duration, stack=m.stack,
                              scenario=m.scenario, n_opponents=m.opponents)
     else:
         raise ValueError(f"unknown kind {m.kind!r}")
@@ -156,6 +156,8 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
     t0 = time.perf_counter()
     if m.kind == "interventions":
         report = replays.run_interventions_manifest(m, root, folder, workers, progress, keep=tasks_filter)
+    elif m.kind == "figures":
+        report = replays.run_figures_manifest(m, root, folder, workers, progress, keep=tasks_filter)
     elif m.kind == "pareto" and tasks_filter is not None:
         report = replays.run_pareto_rows(m, root, folder, tasks_filter, workers)
     elif m.kind == "pareto":

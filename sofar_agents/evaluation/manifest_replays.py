@@ -1,4 +1,5 @@
-"""The manifest kinds ``pareto`` and ``interventions``: their episodes, how they run and how rows are named.
+"""The manifest kinds ``pareto``, ``interventions`` and ``figures``: their episodes, how they run and how rows are
+named.
 
 ``pareto`` runs what ``eval/pareto.py`` runs (:func:`~sofar_agents.evaluation.pareto.run_pareto`: the fixed
 gammas, then the policy at each preference, on the Table I protocol's episodes) and its rows are episode rows
@@ -7,6 +8,8 @@ as Table I's. ``interventions`` runs what ``eval/interventions.py`` runs
 the ``sources`` CSVs, replayed once as it was and once per intervention of
 :func:`~sofar_agents.evaluation.interventions.default_interventions`); its rows are ``interventions.csv``
 rows, one per replay, named by :func:`replay_row_id` and grouped into episodes by :func:`replay_episode`.
+``figures`` runs what ``eval/figures.py`` runs (:func:`~sofar_agents.evaluation.figures.record_figure_episodes`,
+then the two PNGs of Fig. 5 from the adaptive strategy's trace); its rows are episode rows as Table I's.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from sofar_agents.evaluation.manifest_spec import DEFAULT_SWITCH_GAMMAS, Manifes
 from sofar_agents.evaluation.protocol import EpisodeTask
 
 __all__ = ["pareto_tasks", "run_pareto_manifest", "run_pareto_rows", "interventions_of", "failed_tasks",
-           "replay_episode", "replay_row_id", "task_episode", "run_interventions_manifest"]
+           "replay_episode", "replay_row_id", "task_episode", "run_interventions_manifest", "run_figures_manifest"]
 
 _REPLAY_ID = ("track", "rho", "seed", "use_miqp", "base_gamma", "kind", "gamma", "window_s", "hold_s", "lead_s")
 """The columns that name one replay in an ``interventions.csv``."""
@@ -127,3 +130,28 @@ def run_interventions_manifest(m: Manifest, root: str | os.PathLike, folder: Pat
              f"Manifest: `python eval/manifest.py run {m.name}`\n")
     write_markdown(folder / "interventions.md", text)
     return SimpleNamespace(markdown=text, stats=stats)
+
+
+def run_figures_manifest(m: Manifest, root: str | os.PathLike, folder: Path, workers: int | None, progress: bool,
+                         keep: Callable[[EpisodeTask], bool] | None = None) -> Any:
+    """Run (or resume) the episodes of a figures manifest into ``folder`` (``episodes.csv``, ``trace.csv``) and draw
+    Fig. 5 there from the adaptive strategy's steps, as ``eval/figures.py`` does; ``keep``: only the episodes it
+    keeps, and no figure. Returns the report (``markdown``: the gamma summary; None with ``keep``);
+    ``RuntimeError`` when episodes are left unfinished."""
+    from types import SimpleNamespace
+
+    from sofar_agents.evaluation.figures import (FIGURE_TRACE, gamma_summary, plot_gamma_figures,
+                                                 record_figure_episodes)
+    from sofar_agents.evaluation.results import read_trace_csv
+
+    stats = record_figure_episodes(m.strategies(root), folder, tracks=m.tracks, rhos=m.rhos,
+                                   episodes=m.episodes or 3, seed=m.seed, duration=m.duration, stack=m.stack,
+                                   scenario=m.scenario, n_opponents=m.opponents, workers=workers, progress=progress,
+                                   tasks_filter=keep)
+    if stats.unfinished:
+        raise RuntimeError(f"manifest {m.name}: {stats.unfinished} episodes did not finish; rerun to resume")
+    if keep is not None:
+        return None
+    trace = read_trace_csv(folder / FIGURE_TRACE, strategy="adaptive")
+    plot_gamma_figures(trace, folder)
+    return SimpleNamespace(markdown=gamma_summary(trace), stats=stats)

@@ -8,17 +8,19 @@ with) and reads like the command line it replaces. Keys (:class:`Manifest`):
 ``kind``           ``"table1"`` (:func:`~sofar_agents.evaluation.experiments.run_table1`), ``"table2"``
                    (:func:`~sofar_agents.evaluation.experiments.run_miqp_ablation`), ``"multi-agent"``
                    (:func:`~sofar_agents.evaluation.multi_agent.run_multi_agent_table`), ``"pareto"``
-                   (:func:`~sofar_agents.evaluation.pareto.run_pareto`) or ``"interventions"``
-                   (:func:`~sofar_agents.evaluation.interventions.replay_interventions`); required
+                   (:func:`~sofar_agents.evaluation.pareto.run_pareto`), ``"interventions"``
+                   (:func:`~sofar_agents.evaluation.interventions.replay_interventions`) or ``"figures"``
+                   (Fig. 5: :func:`~sofar_agents.evaluation.figures.record_figure_episodes`, then
+                   :func:`~sofar_agents.evaluation.figures.plot_gamma_figures`); required
 ``out``            the results folder, relative to the repository root; required
 ``stack``          controller preset (default ``"sofar"``); ``scenario``: world (default ``"paper"``)
 ``seed``           base seed of the paired episode seeds (default 0)
-``episodes``       per (track, rho) for table1 and pareto, per (setting, strategy) for table2, races per
-                   circuit for multi-agent (defaults 5, 5, 10, 4)
+``episodes``       per (track, rho) for table1, pareto and figures, per (setting, strategy) for table2, races
+                   per circuit for multi-agent (defaults 5, 5, 3, 10, 4)
 ``duration``       episode horizon [s] (default 200)
 ``tracks``,        circuits and pace ratios (defaults: the paper's; ``track``: table2's circuit, default
 ``rhos``           LagunaSeca)
-``gammas``         the fixed gammas (default: the paper's six; table2: [0.5]); interventions: the gammas
+``gammas``         the fixed gammas (default: the paper's six; table2: [0.5]; figures: none); interventions: the gammas
                    switched to inside the window (default [0.15, 0.3, 0.6])
 ``adaptive``       also the shipped PASTA policy of ``stack``/``scenario`` (default true); ``policy``: another
                    checkpoint, relative to the repository root
@@ -35,7 +37,8 @@ with) and reads like the command line it replaces. Keys (:class:`Manifest`):
 ``placebo_delta``, interventions: the placebos' gamma change (default 0.01) and shift [s] (default 20)
 ``placebo_lead``
 ``limit``          interventions: at most this many failed episodes per source CSV (default: all)
-``prefix``         file prefix in ``out`` (default ``table1``, ``table2``, ``multi_agent``, ``pareto``)
+``prefix``         file prefix in ``out`` (default ``table1``, ``table2``, ``multi_agent``, ``pareto``; figures
+                   write ``episodes.csv`` and ``trace.csv`` and take none)
 ``description``    free text
 =================  ========================================================================================
 
@@ -57,7 +60,7 @@ from sofar_agents.evaluation.protocol import DEFAULT_DURATION, FIXED_GAMMAS, RHO
 
 __all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths"]
 
-KINDS = ("table1", "table2", "multi-agent", "pareto", "interventions")
+KINDS = ("table1", "table2", "multi-agent", "pareto", "interventions", "figures")
 """Command kinds a manifest may name."""
 DEFAULT_SAFETY_WEIGHTS = (0.1, 0.3, 0.5, 0.7, 0.9)
 """Safety weights of a pareto manifest's preferences (those of ``eval/pareto.py``)."""
@@ -116,6 +119,8 @@ class Manifest:
             raise ValueError(f"manifest {self.name}: kind {self.kind!r} is not one of {', '.join(KINDS)}")
         if (self.kind == "interventions") != bool(self.sources):
             raise ValueError(f"manifest {self.name}: sources is the (required) key of the interventions kind")
+        if self.kind == "figures" and self.prefix is not None:
+            raise ValueError(f"manifest {self.name}: a figures folder holds episodes.csv and trace.csv; no prefix")
 
     @property
     def csv_name(self) -> str:
@@ -124,6 +129,8 @@ class Manifest:
             return f"{self.prefix or 'multi_agent'}_races.csv"
         if self.kind == "interventions":
             return "interventions.csv"
+        if self.kind == "figures":
+            return "episodes.csv"
         return f"{self.prefix or self.kind}_episodes.csv"
 
     @property
@@ -162,7 +169,7 @@ class Manifest:
             return pareto_strategies(self.policy_path(root) if self.adaptive else None,
                                      preference_family(self.safety_weights),
                                      FIXED_GAMMAS if self.gammas is None else self.gammas)
-        default = (0.5,) if self.kind == "table2" else FIXED_GAMMAS
+        default = {"table2": (0.5,), "figures": ()}.get(self.kind, FIXED_GAMMAS)
         gammas = default if self.gammas is None else self.gammas
         policy = self.policy_path(root) if self.adaptive else None
         out = build_strategies(gammas, policy=policy, adaptive=self.adaptive)

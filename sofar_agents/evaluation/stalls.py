@@ -45,8 +45,6 @@ shares ``fallback``, ``follow``, ``stopped_ahead``, ``angled`` and ``away``, and
 of the last uninterrupted run below 1 m/s, where the stall began: time, decision, heading error, gap to and speed
 of the car ahead).
 
-:func:`record_episode` can also run a probe of a candidate fix (``restart_weight``); it patches the controller's
-instance in this process only and is not a preset.
 """
 
 from __future__ import annotations
@@ -63,7 +61,7 @@ from sofar_agents.evaluation.protocol import EpisodeTask
 from sofar_agents.evaluation.results import EpisodeResult
 
 __all__ = ["StepRecord", "StallReport", "CLASSES", "RECORD_SPEED", "WINDOW_STEPS", "NEAR_GAP", "ANGLE", "ROOM",
-           "RESTART_EXIT", "record_episode", "classify", "rooms"]
+           "record_episode", "classify", "rooms"]
 
 RECORD_SPEED = 3.0
 """Steps slower than this [m/s] are recorded; a faster step drops the records (the final slow phase is left)."""
@@ -77,8 +75,6 @@ first moving further out (``e*`` of :class:`~sofar_env.control.mpc.ends.EndOffse
 ROOM = 0.1
 """Room of the MPC's own track rows [m] (``row_room``) below which the car counts as having no room to turn back."""
 SLOW = 1.0  # the stall rule's speed [m/s]
-RESTART_EXIT = 3.0
-"""The restart probe (:func:`record_episode`, ``restart_weight``) ends once the ego is this fast [m/s]."""
 _BUFFER = 0.25
 """Lateral buffer beside a stopped car, each side [m] (that of the MPC's track margin)."""
 _HALF_WIDTH = 0.95
@@ -152,7 +148,8 @@ class StallReport:
     evidence: dict = field(default_factory=dict)
     records: list = field(default_factory=list)
     restarts: int = 0
-    """Restarts of the probe of :func:`record_episode` (``restart_weight``) in the episode."""
+    """Times the controller's restart mode came on in the episode (``StackConfig.restart_lateral_weight``; the
+    counter ``slow_restarts``)."""
 
 
 class _Recorder:
@@ -164,40 +161,11 @@ class _Recorder:
         self.x0 = None
         self._plan_id, self._side = None, "free"
 
-    def install(self, restart_weight: float | None = None) -> None:
-        stack = self.env.stack
-        mpc = stack.mpc
-        solve = type(mpc).solve.__get__(mpc)
-        for other in stack.mpcs[1:]:  # the slow end rows' and the restart mode's MPC: recorded as they solve
-            other.solve = self._recording(type(other).solve.__get__(other))
-        spare = None
-        if restart_weight is not None:
-            import dataclasses
-
-            cfg = mpc.config
-            q = (cfg.q[0], float(restart_weight)) + tuple(cfg.q[2:])
-            spare = type(mpc)(dataclasses.replace(cfg, q=q), mpc.vehicle)
-        self.restarting = False
-        self.restarts = 0
-
-        def hooked(x0, stage, opponents, gamma):
-            self.stage, self.x0 = stage, np.asarray(x0, float)
-            if spare is None:
-                return solve(x0, stage, opponents, gamma)
-            v, free = float(x0[3]), float(np.max(stage.v_ref)) >= SLOW
-            if free and (v < SLOW or (self.restarting and v < RESTART_EXIT)):
-                if not self.restarting:
-                    spare.reset()
-                    self.restarts += 1
-                self.restarting = True
-                result = spare.solve(x0, stage, opponents, gamma)
-                return _steer_to_lock(result, np.asarray(x0, float), mpc.vehicle, mpc.config.control_dt)
-            if self.restarting:  # back to the controller's own MPC, from a cold start
-                self.restarting = False
-                mpc.reset()
-            return solve(x0, stage, opponents, gamma)
-
-        mpc.solve = hooked
+    def install(self) -> None:
+        """Record the stage data of every solve of each of the stack's MPCs (the restart mode's and the slow end
+        rows' too)."""
+        for mpc in self.env.stack.mpcs:
+            mpc.solve = self._recording(type(mpc).solve.__get__(mpc))
 
     def _recording(self, solve):
         def recorded(x0, stage, opponents, gamma):
@@ -281,23 +249,6 @@ def rooms(edges, vehicle, mpc_config, s: float, n: float, e: float) -> dict[str,
     return {"turn_room": float(turn), "row_room": float(row)}
 
 
-def _steer_to_lock(result, x0: np.ndarray, vehicle, dt: float):
-    """The restart probe's steering: a plan that stays below 1 m/s while the car is turned by ``ANGLE`` or more
-    steers towards full lock on the side that turns it back (at the steering rate limit), since at standstill the
-    MPC's model gives steering no effect (``e' = v tan(delta) / L ...`` is zero at ``v = 0``), and a car short of
-    full lock that stands at its recoverable bound cannot drive off without first steering."""
-    import dataclasses
-
-    e, delta = float(x0[2]), float(x0[4])
-    if float(result.x_pred[1, 3]) >= SLOW or abs(e) < ANGLE:
-        return result
-    lock = -math.copysign(vehicle.steer_max, e)
-    if abs(lock - delta) < 1e-3:
-        return result
-    rate = float(np.clip((lock - delta) / max(dt, 1e-9), -vehicle.steer_rate_max, vehicle.steer_rate_max))
-    return dataclasses.replace(result, u=np.array([float(result.u[0]), rate]))
-
-
 def _corner_room(track, veh, s: float, n: float, e: float) -> float:
     """Smallest distance [m] of the footprint's four corners to the edge on their side (< 0: outside)."""
     half = 0.5 * veh.width
@@ -314,13 +265,13 @@ def _corner_room(track, veh, s: float, n: float, e: float) -> float:
 class _Policy:
     """Fixed gamma; records the previous step at each call (the env's last output is that step's)."""
 
-    def __init__(self, gamma: float, recorder: _Recorder, keep: list, restart_weight: float | None = None):
-        self.gamma, self.recorder, self.keep, self.restart_weight = float(gamma), recorder, keep, restart_weight
+    def __init__(self, gamma: float, recorder: _Recorder, keep: list):
+        self.gamma, self.recorder, self.keep = float(gamma), recorder, keep
         self.k = 0
 
     def __call__(self, obs):
         if self.k == 0:
-            self.recorder.install(self.restart_weight)
+            self.recorder.install()
         else:
             self.flush()
         self.k += 1
@@ -336,17 +287,11 @@ class _Policy:
             self.keep.clear()
 
 
-def record_episode(task: EpisodeTask, label: str = "", env=None, restart_weight: float | None = None) -> StallReport:
+def record_episode(task: EpisodeTask, label: str = "", env=None) -> StallReport:
     """Run ``task`` (a fixed gamma) and record its final slow phase; a stall is classified (:func:`classify`).
 
-    ``env``: an environment of ``task``'s track and settings to reuse (else one is built and closed).
-    ``restart_weight``: a probe of a candidate fix, not a preset. While the ego is slower than 1 m/s with a speed
-    reference of at least 1 m/s (no follow decision holds it), and until it is :data:`RESTART_EXIT` fast, the MPC
-    step is solved by a second MPC whose lateral-tracking weight ``q_n`` is ``restart_weight`` instead of the
-    configured one (from a cold start; the controller's own MPC restarts cold afterwards), and a plan that stays
-    below 1 m/s with the car turned by :data:`ANGLE` or more steers to full lock first (:func:`_steer_to_lock`).
-    The controller's
-    configuration, and so the row's ``config_hash``, stays that of ``task.stack``."""
+    ``env``: an environment of ``task``'s track and settings to reuse (else one is built and closed). The
+    controller runs as ``task.stack`` configures it (the recorder only reads its solves)."""
     if task.strategy.kind != "fixed":
         raise ValueError(f"stall replays take a fixed gamma, got strategy {task.strategy.name!r}")
     own = env is None
@@ -356,13 +301,14 @@ def record_episode(task: EpisodeTask, label: str = "", env=None, restart_weight:
     try:
         records: list[StepRecord] = []
         recorder = _Recorder(env)
-        policy = _Policy(task.strategy.gamma, recorder, records, restart_weight)
+        policy = _Policy(task.strategy.gamma, recorder, records)
         result, _ = run_episode(env, policy, task)
         policy.flush()  # the last step
+        restarts = int(env.unwrapped.stack.counters.get("slow_restarts", 0))
     finally:
         if own:
             env.close()
-    report = StallReport(task, result, label, restarts=getattr(recorder, "restarts", 0))
+    report = StallReport(task, result, label, restarts=restarts)
     if result.stalled:
         report.cls, report.evidence = classify(records)
         report.records = _stall_phase(records)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from sofar_agents.evaluation.multi_agent import RaceResult, read_race_csv
+from sofar_agents.evaluation.multi_agent import RaceResult
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -46,9 +46,3 @@ def test_a_contact_at_a_chicane_with_the_cars_turned_is_inside_the_aligned_ellip
     assert "no contact with this code" in table
     assert "clear (h >= 0) at 1 of them with the aligned ellipse and at 1 with the cars' own barrier" in table
     assert script.first_contact(_row()) is None
-
-
-def test_the_committed_table_has_the_replayed_races():
-    rows = read_race_csv(ROOT / "results" / "multi_agent" / "before_heading" / "multi_agent_races.csv")
-    assert any(r.track == "Monza" and r.seed == 2286877623 and r.strategy == "gamma=0.50" and r.collided
-               for r in rows)

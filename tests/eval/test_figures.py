@@ -37,7 +37,8 @@ def test_figures_script_refuses_a_folder_of_another_policy(tmp_path, capsys):
     # the folder holds the paper-stack policy's episodes; ask for the default stack's policy
     assert script.main(["--out", str(out), "--stack", "sofar", "--episodes", "1", "--rhos", "0.3"]) == 2
     err = capsys.readouterr().err
-    assert "holds the episodes of another policy" in err and "use another --out" in err
+    assert "holds the episodes of another policy" in err and "use another folder" in err
+    assert not (out / "trace.csv").exists()  # refused before anything ran
 
 
 def test_figures_script_records_the_interactive_policy_in_its_world(tmp_path):

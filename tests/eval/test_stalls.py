@@ -13,10 +13,12 @@ import pytest
 
 from sofar_agents.evaluation import stall_rows as sr
 from sofar_agents.evaluation import stalls as st
+from sofar_agents.evaluation.configs import episode_config_hash
 
 from .episode_csv import write_episode_csv
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "eval"))
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "eval"))
 import stalls as stalls_cli  # noqa: E402
 
 # A racing step with nothing wrong: every rule's property is false.
@@ -110,6 +112,8 @@ def test_replay_of_a_stall(tmp_path):
            "scenario": "interactive"}
     out, first = _replay_rows(tmp_path, row)
     assert len(first) == 1 and first[0]["stack"] == "sofar-recover"
+    assert first[0]["config_hash"] == episode_config_hash("sofar-recover", "interactive", 60.0)
+    assert first[0]["restarts"] == "0"  # "sofar-recover" has no restart mode
     assert (out / "stalls.md").is_file()
     if first[0]["outcome"] != "stalled":
         assert first[0]["cls"] == "" and not (out / stalls_cli.RECORDS).exists()
@@ -129,6 +133,13 @@ def test_replay_of_a_stall(tmp_path):
                             "--log-level", "WARNING"]) == 0
     with open(out / "stalls.csv", newline="") as f:
         assert len(list(csv.DictReader(f))) == 1
+    # a stalls.csv of another version (without the config_hash column) is refused, not appended to
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "stalls.csv").write_text("label,track,rho,seed,stack,gamma\n")
+    assert stalls_cli.main(["--replay", str(tmp_path / "run" / "table1_episodes.csv"), "--out", str(old),
+                            "--log-level", "WARNING"]) == 2
+    assert (old / "stalls.csv").read_text() == "label,track,rho,seed,stack,gamma\n"
 
 
 def test_replay_records_the_steps_of_every_mpc_of_the_stack(tmp_path):
@@ -146,3 +157,28 @@ def test_replay_records_the_steps_of_every_mpc_of_the_stack(tmp_path):
     with gzip.open(out / stalls_cli.RECORDS, "rt", newline="") as f:
         (steps,) = sr.records_from_rows(csv.DictReader(f)).values()
     assert len(steps) >= 150 and all(r.mpc_status for r in steps)
+
+
+def _episode_hashes(path: Path) -> dict[tuple, str]:
+    with open(path, newline="") as f:
+        return {(r["track"], float(r["rho"]), int(r["seed"]), float(r["strategy"][6:]), r["stack"]): r["config_hash"]
+                for r in csv.DictReader(f) if r["strategy"].startswith("gamma=")}
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "results").glob("**/stalls.csv")),
+                         ids=lambda p: str(p.parent.relative_to(ROOT / "results")))
+def test_committed_stall_rows_carry_the_hash_of_the_episode_they_replay(path: Path) -> None:
+    """Each row of a committed stalls.csv names its episode: a row of a committed per-episode CSV (label
+    ``committed <folder>``) or of the folder's own seed set (``fresh seed N``); it carries that row's hash."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert rows and list(rows[0]) == list(sr.REPORT_COLUMNS)
+    sources: dict[Path, dict] = {}
+    for r in rows:
+        label = r["label"]
+        src = (ROOT / label.removeprefix("committed ") if label.startswith("committed ") else path.parent)
+        src = src / "table1_episodes.csv"
+        if src not in sources:
+            sources[src] = _episode_hashes(src)
+        key = (r["track"], float(r["rho"]), int(r["seed"]), float(r["gamma"]), r["stack"])
+        assert r["config_hash"] and sources[src].get(key) == r["config_hash"], (label, key)
