@@ -1,7 +1,7 @@
 """Experiments as manifests (experiments/NAME.toml): run one, check them all, verify old rows.
 
-    python eval/manifest.py list                       # the manifests and the configuration hash of each
-    python eval/manifest.py run NAME [--workers N]     # run (or resume) it into its folder, write manifest.json
+    python eval/manifest.py list [--stack sofar]       # the manifests (of one controller) and the hash of each
+    python eval/manifest.py run NAME [NAME ...] [--workers N]   # run (or resume) each into its folder, in one pass
     python eval/manifest.py check                      # every manifest resolves; committed rows carry its hash
     python eval/manifest.py verify NAME [--rows 2]     # re-make its shortest rows (races) per circuit in a temporary folder
     python eval/manifest.py verify NAME --backfill     # ... and, when they match, give its rows the manifest's hash
@@ -23,6 +23,7 @@ import argparse
 import logging
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 from sofar_agents.cli_types import int_at_least
@@ -39,11 +40,12 @@ def parse_args(argv=None) -> argparse.Namespace:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--folder", default=str(FOLDER), help="folder of the manifests (default experiments/)")
     sub = p.add_subparsers(dest="command", required=True)
-    sub.add_parser("list", help="the manifests and their configuration hashes")
-    r = sub.add_parser("run", help="run a manifest into its results folder")
-    r.add_argument("name")
+    ls = sub.add_parser("list", help="the manifests and their configuration hashes")
+    ls.add_argument("--stack", default=None, help="only the manifests of this controller preset")
+    r = sub.add_parser("run", help="run manifests into their results folders, one after the other")
+    r.add_argument("name", nargs="+", help="manifest names; each is run (or resumed) and its wall time logged")
     r.add_argument("--workers", type=int_at_least(1), default=None, help="worker processes (default: one per CPU)")
-    r.add_argument("--out", default=None, help="another results folder (default: the manifest's)")
+    r.add_argument("--out", default=None, help="another results folder (default: the manifest's; one manifest only)")
     r.add_argument("--no-progress", action="store_true")
     sub.add_parser("check", help="compare every manifest's hash with the hashes its committed rows carry")
     v = sub.add_parser("verify", help="re-make the shortest committed rows of a manifest and compare them")
@@ -101,6 +103,8 @@ def main(argv=None) -> int:
     if args.command == "list":
         for path in mf.manifest_paths(folder):
             m = mf.load_manifest(path)
+            if args.stack is not None and m.stack != args.stack:
+                continue
             logger.info("%s: %s %s (stack %s, world %s) -> %s", m.name, m.kind, m.config_hash, m.stack, m.scenario,
                         m.out)
         return 0
@@ -111,11 +115,20 @@ def main(argv=None) -> int:
             (logger.error if result.status == "mismatch" else logger.info)("%s", result.line())
             bad += result.status == "mismatch"
         return 1 if bad else 0
-    m = _load(folder, args.name)
     if args.command == "run":
-        report = mf.run_manifest(m, ROOT, workers=args.workers, out=args.out, progress=not args.no_progress)
-        logger.info("%s", report.markdown)
+        manifests = [_load(folder, name) for name in args.name]  # every name checked before anything runs
+        if args.out is not None and len(manifests) > 1:
+            raise SystemExit("--out takes one manifest")
+        walls = []
+        for m in manifests:
+            t0 = time.perf_counter()
+            report = mf.run_manifest(m, ROOT, workers=args.workers, out=args.out, progress=not args.no_progress)
+            walls.append((m.name, time.perf_counter() - t0))
+            logger.info("%s", report.markdown if report is not None else "")
+        for name, wall in walls:
+            logger.info("%s: %.0f s", name, wall)
         return 0
+    m = _load(folder, args.name)
     rows = shortest_rows(m, args.rows)
     if not rows:
         logger.error("%s: no committed rows in %s", m.name, ROOT / m.out / m.csv_name)

@@ -5,8 +5,8 @@ The keys of a manifest and how it is read: :mod:`~sofar_agents.evaluation.manife
 :mod:`~sofar_agents.evaluation.manifest_replays`.
 
 :func:`run_manifest` runs a manifest into its folder (resuming, as the table scripts do) and writes
-``manifest.json`` there: the manifest, its configuration hash, the code commit, the machine, its CPU flags
-and the wall time. :func:`check_manifest` compares the hash a manifest resolves to with the hashes the
+``<name>.manifest.json`` there (:func:`record_path`; one per manifest, so that two manifests of one folder keep
+theirs): the manifest, its configuration hash, the code commit, the machine, its CPU flags and the wall time. :func:`check_manifest` compares the hash a manifest resolves to with the hashes the
 rows of its committed CSV carry. :func:`rerun_rows` re-makes chosen committed rows in another folder and
 compares them field by field (every column of the committed file but ``wall_time`` and ``config_hash``; for
 the multi-agent table the races, re-run one by one; for interventions every replay of the episodes named, with
@@ -37,7 +37,7 @@ from sofar_agents.evaluation.configs import row_hash, write_config_json
 from sofar_agents.evaluation.manifest_spec import KINDS, Manifest, load_manifest, manifest_paths
 from sofar_agents.evaluation.results import EPISODE_COLUMNS, read_csv_rows
 
-__all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths", "run_manifest", "check_manifest",
+__all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths", "run_manifest", "record_path", "check_manifest",
            "ManifestCheck", "episode_ids", "row_id", "row_episode", "row_length", "raw_rows", "rerun_rows", "backfill_hash",
            "restamp_hash"]
 
@@ -129,6 +129,11 @@ def _cpu() -> dict[str, Any]:
     return info
 
 
+def record_path(m: Manifest, folder: str | os.PathLike) -> Path:
+    """The run record of ``m`` in ``folder``: ``<name>.manifest.json``."""
+    return Path(folder) / f"{m.name}.manifest.json"
+
+
 def _write_json_atomically(path: Path, data: dict[str, Any]) -> None:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
@@ -142,7 +147,7 @@ def _write_json_atomically(path: Path, data: dict[str, Any]) -> None:
 
 def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = None,
                  out: str | os.PathLike | None = None, progress: bool = True, tasks_filter=None) -> Any:
-    """Run ``m`` into ``root/m.out`` (or ``out``), resuming from its CSV, and write ``manifest.json`` and the
+    """Run ``m`` into ``root/m.out`` (or ``out``), resuming from its CSV, and write :func:`record_path` and the
     resolved configuration (``config.json``) there.
 
     Returns the table's report (``markdown``). ``tasks_filter`` (for :func:`rerun_rows`) limits the episodes
@@ -188,7 +193,7 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
               "machine": {"node": platform.node(), "platform": platform.platform(), "python": sys.version.split()[0],
                           "cpu": _cpu()},
               "wall_time_s": round(time.perf_counter() - t0, 3), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    _write_json_atomically(folder / "manifest.json", record)
+    _write_json_atomically(record_path(m, folder), record)
     return report
 
 

@@ -239,7 +239,7 @@ def rooms(edges, vehicle, mpc_config, s: float, n: float, e: float) -> dict[str,
     reach = max(vehicle.cg_to_front, vehicle.cg_to_rear)
     left = e >= 0.0
     turn = hi - (n + g[0]) if left else (n + g[1]) - lo
-    if mpc_config.track_rows == "recoverable":
+    if mpc_config.track_rows.startswith("recoverable"):  # the curved rows: the room on a straight
         row = turn
     elif mpc_config.track_rows == "ends":
         row = hi - (n + reach * math.sin(e)) if left else (n + reach * math.sin(e)) - lo

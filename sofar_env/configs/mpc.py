@@ -39,7 +39,7 @@ class BarrierParams:
         check_fields(self, "stack.mpc.barrier")
 
 
-TRACK_ROWS = ("reference", "ends", "recoverable")
+TRACK_ROWS = ("reference", "ends", "recoverable", "recoverable-curved")
 """The values of :attr:`MPCConfig.track_rows`."""
 
 
@@ -77,8 +77,9 @@ class MPCConfig:
     both ends of the car (``l = max(l_f, l_r)`` of the vehicle), linearised at each iterate, so that the
     QP sees that turning towards the track's direction brings the ends in, or ``"recoverable"``, the ends
     with room kept for turning back to the track's direction at full lock, so that the car never stands
-    turned towards an edge it cannot drive away from (:mod:`.ends`). Both have four track rows per stage
-    instead of two and always include them."""
+    turned towards an edge it cannot drive away from (:mod:`.ends`), or ``"recoverable-curved"``, that room
+    counted with the track's curvature at each stage (in a corner a car turned towards the outside edge needs
+    more). These have four track rows per stage instead of two and always include them."""
     max_opponents: int = integer(4, ge=0)
     """Number of opponent slots in the QP [-]."""
     opponent_range_ahead: float = real(150.0, ge=0.0, unit="m")

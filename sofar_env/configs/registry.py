@@ -160,17 +160,23 @@ turns back to the track's direction at full lock (:mod:`sofar_env.control.mpc.en
 turned towards an edge it cannot drive away from. The other candidate fix of the stalls."""),
     "sofar-2": Entry(dataclasses.replace(_track_rows("recoverable"), restart_lateral_weight=15.0,
                                          follow_creep_speed=2.0), """``"sofar-recover"`` plus the restart
-mode and the turned-car creep; candidate default, not yet default. Below 1 m/s under a free speed reference
+mode and the turned-car creep; a candidate default superseded by ``"sofar-3"`` and ``"sofar-4"``. Below 1 m/s under a free speed reference
 (until 3 m/s) the MPC tracks the lateral reference with a tenth of its weight (``restart_lateral_weight`` 15,
 steering to full lock first when turned beyond ``e*``), and a follow decision does not brake a car turned more
 than 0.3 rad to the track below 2 m/s until it is turned less than 0.2 rad (``follow_creep_speed`` 2). The
 stall fixes of ``docs/decisions/stall-fixes.md``."""),
     "sofar-3": Entry(dataclasses.replace(StackConfig(), restart_lateral_weight=15.0, follow_creep_speed=2.0,
                                          slow_rows_speed=10.0, slow_rows_exit_speed=12.0), """``"sofar"`` plus the
-stall fixes of ``"sofar-2"`` with the ends bounded only at low speed; candidate default, not yet default.
+stall fixes of ``"sofar-2"`` with the ends bounded only at low speed; superseded as the candidate by ``"sofar-4"``.
 Below 10 m/s (until 12 m/s) a second MPC bounds both ends of the car with room kept for turning back
 (``slow_rows_speed``: ``"sofar-recover"``'s rows, which in the dynamic world also raise collisions at racing
 speed), with the restart mode and the turned-car creep of ``"sofar-2"``. The stall fixes of
+``docs/decisions/stall-fixes.md``."""),
+    "sofar-4": Entry(dataclasses.replace(StackConfig(), restart_lateral_weight=15.0, follow_creep_speed=2.0,
+                                         slow_rows_speed=10.0, slow_rows_exit_speed=12.0, slow_rows_curved=True),
+                     """``"sofar-3"`` with the slow end rows counting the track's curvature in the room kept for
+turning back (``slow_rows_curved``: in a corner a car turned towards the outside edge needs more room to turn
+back, since the track turns away while it does); candidate default, not yet default. The stall fixes of
 ``docs/decisions/stall-fixes.md``."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),

@@ -149,6 +149,10 @@ class StackConfig:
     ``docs/decisions/stall-fixes.md``."""
     slow_rows_exit_speed: float = neutral(real(12.0, gt=0.0, unit="m/s"))
     """Speed at which the slow end rows end [m/s], >= ``slow_rows_speed``."""
+    slow_rows_curved: bool = neutral(flag(False))
+    """Whether the slow end rows (and the restart mode's) count the track's curvature in the room kept for turning
+    back (``track_rows = "recoverable-curved"``: in a corner a car turned towards the outside edge needs more);
+    only with ``slow_rows_speed``. Decision: ``docs/decisions/stall-fixes.md``."""
     parked_follow_gap: float | None = neutral(real(None, ge=0.0, optional="follow_gap", unit="m"))
     """Arc-length distance kept behind a followed car slower than ``parked_speed`` [m] (None: ``follow_gap``,
     the default), so that the ego stops where it can still steer around a near-stationary car. Decision:
@@ -186,6 +190,9 @@ class StackConfig:
                 raise ConfigError(f"stack.slow_rows_speed must be >= restart_exit_speed = {self.restart_exit_speed} "
                                   f"[m/s] with the restart mode on (its MPC bounds the ends too), got "
                                   f"{self.slow_rows_speed!r}")
+        if self.slow_rows_curved and self.slow_rows_speed is None:
+            raise ConfigError("stack.slow_rows_curved needs stack.slow_rows_speed (it is a property of the slow end "
+                              "rows), got slow_rows_speed = None")
         if not self.follow_creep_release <= self.follow_creep_angle:
             raise ConfigError(f"stack.follow_creep_release must lie in [0, follow_creep_angle = "
                               f"{self.follow_creep_angle}] [rad], got {self.follow_creep_release!r}")

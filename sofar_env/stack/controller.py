@@ -84,12 +84,13 @@ class OvertakingStack:
         self.pass_or_follow = PassOrFollow(cfg, self.planner, track, self.predict, self.edges)
         self._slow_mpc: MPCDCBF | None = None  # the slow end rows' MPC (slow_rows_speed)
         slow = cfg.slow_rows_speed is not None and cfg.reference_numerics is None
+        slow_rows = "recoverable-curved" if cfg.slow_rows_curved else "recoverable"
         if slow:
-            self._slow_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, track_rows="recoverable"), vehicle)
+            self._slow_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, track_rows=slow_rows), vehicle)
         self._restart_mpc: MPCDCBF | None = None  # the restart mode's MPC (restart_lateral_weight)
         if cfg.restart_lateral_weight is not None and cfg.reference_numerics is None:
             q = (cfg.mpc.q[0], float(cfg.restart_lateral_weight)) + tuple(cfg.mpc.q[2:])
-            rows = "recoverable" if slow else cfg.mpc.track_rows
+            rows = slow_rows if slow else cfg.mpc.track_rows
             self._restart_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, q=q, track_rows=rows), vehicle)
             self._turn_back_angle = EndOffsets(vehicle, recoverable=True).e_star
         self._node_t = np.arange(cfg.miqp.nodes) * cfg.miqp.node_dt

@@ -31,3 +31,33 @@ def test_no_env_id_no_record_and_an_unknown_env_does_not_stop_a_save(tmp_path) -
     assert training_env_record({"env_id": "NoSuchEnv-v0"}) == {}
     path = _agent().save(tmp_path / "agent", metadata={"env_id": "NoSuchEnv-v0"})
     assert "env_config_hash" not in json.loads(path.read_text())["training"]
+
+
+def _committed_checkpoints() -> list:
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    paths = sorted((root / "sofar_agents" / "checkpoints").glob("*.json")) + sorted((root / "results").glob("**/*.json"))
+    return [p for p in paths if "weights_file" in json.loads(p.read_text())]
+
+
+TRAINED_BEFORE_THE_RECORD = {
+    "pasta_lagunaseca.json", "pasta_lagunaseca_interactive.json", "pasta_lagunaseca_paper.json", "pasta_dynamic.json",
+    "pasta_dynamic_low.json", "pasta_midstart.json", "selfplay_lagunaseca.json", "pasta_midstart_800k.json",
+    "pasta_paper_800k.json", "pasta_paper_seed72.json",
+}
+"""Committed checkpoints trained before checkpoints recorded their training environment's configuration: what
+that configuration was is known by its command (``training.command``), not by value, so they carry no hash (the
+tables they made carry the hash of the controller they were evaluated with). Re-trained, they gain one."""
+
+
+def test_every_committed_checkpoint_carries_its_training_config_hash_or_predates_it() -> None:
+    paths = _committed_checkpoints()
+    assert len(paths) >= 10
+    for path in paths:
+        training = json.loads(path.read_text())["training"]
+        if path.name in TRAINED_BEFORE_THE_RECORD:
+            assert "env_config_hash" not in training and training.get("command"), path
+        else:
+            assert training["env_config_hash"] == hash_of_canonical(training["env_config"]), path
+    assert TRAINED_BEFORE_THE_RECORD <= {p.name for p in paths}

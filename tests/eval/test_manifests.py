@@ -1,5 +1,5 @@
 """experiments/*.toml: every manifest resolves; committed rows carry their manifest's hash; back-filled
-tables are re-made bit for bit; run writes manifest.json; back-filling changes nothing but the column."""
+tables are re-made bit for bit; run writes NAME.manifest.json; back-filling changes nothing but the column."""
 
 from __future__ import annotations
 
@@ -144,7 +144,7 @@ def test_run_writes_manifest_json_and_rows_with_the_hash(tmp_path: Path) -> None
     m = mf.load_manifest(path)
     report = mf.run_manifest(m, ROOT, workers=1, out=tmp_path / "out", progress=False)
     assert [r["config_hash"] for r in report.rows] == [m.config_hash]
-    record = json.loads((tmp_path / "out" / "manifest.json").read_text())
+    record = json.loads((tmp_path / "out" / "tiny.manifest.json").read_text())
     assert record["config_hash"] == [m.config_hash] and record["manifest"] == "tiny"
     assert record["commit"] and record["wall_time_s"] >= 0 and "cpu" in record["machine"]
     assert m.config_hash in read_config_json(tmp_path / "out")
@@ -192,7 +192,7 @@ def test_backfill_inserts_the_column_and_keeps_every_other_byte(tmp_path: Path) 
 
 def test_a_figures_manifest_records_its_episodes_with_their_trace_and_draws_fig5(tmp_path: Path) -> None:
     """kind figures: the shipped policy's episodes as Table I rows (with the manifest's hash) in episodes.csv, their
-    steps in trace.csv, both PNGs, manifest.json; a prefix is refused (the file names are fixed)."""
+    steps in trace.csv, both PNGs, its record NAME.manifest.json; a prefix is refused (the file names are fixed)."""
     m = mf.Manifest(name="fig", kind="figures", out="x", stack="sofar", scenario="interactive", opponents=2,
                     episodes=1, duration=2.0, tracks=("LagunaSeca",), rhos=(0.3,))
     assert m.csv_name == "episodes.csv" and [s.name for s in m.strategies(ROOT)] == ["adaptive"]
@@ -203,7 +203,7 @@ def test_a_figures_manifest_records_its_episodes_with_their_trace_and_draws_fig5
     assert {r["episode"] for r in rows} == {"0"} and mf.episode_ids(m, ROOT) == {mf.row_id(m, r) for r in rows}
     assert (tmp_path / "trace.csv").stat().st_size > 0
     assert (tmp_path / "gamma_hist.png").exists() and (tmp_path / "distance_vs_gamma.png").exists()
-    assert json.loads((tmp_path / "manifest.json").read_text())["config_hash"] == [m.config_hash]
+    assert json.loads((tmp_path / "fig.manifest.json").read_text())["config_hash"] == [m.config_hash]
     with pytest.raises(ValueError, match="no prefix"):
         mf.Manifest(name="fig", kind="figures", out="x", prefix="fig5")
 
@@ -234,3 +234,23 @@ def test_every_committed_episode_row_carries_the_hash_its_settings_resolve_to(pa
             assert h == episode_config_hash(stack, scenario, float(duration)), (stack, scenario, duration)
         else:  # read_config_json checks that the entry's content has its hash
             assert h in read_config_json(path.parent), (stack, h)
+
+
+def test_the_cli_runs_several_manifests_in_one_pass_and_lists_one_controller_s(tmp_path: Path, caplog) -> None:
+    cli = _cli()
+    for name, stack in (("a", "sofar"), ("b", "paper")):
+        (tmp_path / f"{name}.toml").write_text(
+            f'kind = "table1"\nout = "{tmp_path / name}"\nstack = "{stack}"\ntracks = ["LagunaSeca"]\nrhos = [0.5]\n'
+            'episodes = 1\nduration = 0.3\ngammas = [0.5]\nadaptive = false\n')
+    with pytest.raises(SystemExit, match="no manifest"):  # every name is checked before anything runs
+        cli.main(["--folder", str(tmp_path), "run", "a", "nosuch", "--workers", "1", "--no-progress"])
+    assert not (tmp_path / "a").exists()
+    caplog.set_level("INFO")
+    assert cli.main(["--folder", str(tmp_path), "run", "a", "b", "--workers", "1", "--no-progress"]) == 0
+    for name in ("a", "b"):
+        assert len(mf.raw_rows(tmp_path / name / "table1_episodes.csv")) == 1
+        assert json.loads((tmp_path / name / f"{name}.manifest.json").read_text())["manifest"] == name
+    assert "a: " in caplog.text and "b: " in caplog.text
+    caplog.clear()
+    assert cli.main(["--folder", str(tmp_path), "list", "--stack", "paper"]) == 0
+    assert "b: table1" in caplog.text and "a: table1" not in caplog.text

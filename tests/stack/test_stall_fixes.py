@@ -18,8 +18,10 @@ from .closed_loop import empty_race
 NEW_FIELDS = {  # field -> a value that switches it on or moves it
     "restart_lateral_weight": 15.0, "restart_speed": 0.5, "restart_exit_speed": 4.0,
     "follow_creep_speed": 2.0, "follow_creep_angle": 0.4, "follow_creep_release": 0.1, "parked_follow_gap": 20.0,
-    "slow_rows_speed": 10.0, "slow_rows_exit_speed": 14.0,
+    "slow_rows_speed": 10.0, "slow_rows_exit_speed": 14.0, "slow_rows_curved": True,
 }
+NEEDS = {"slow_rows_curved": {"slow_rows_speed": 10.0}}
+"""Fields that act only with another one set: the base they are compared on."""
 
 
 def test_sofar_2_is_one_registry_entry_over_sofar_recover():
@@ -27,7 +29,7 @@ def test_sofar_2_is_one_registry_entry_over_sofar_recover():
     value, doc = registry.STACK_PRESET_REGISTRY["sofar-2"]
     assert value == dataclasses.replace(stack_preset("sofar-recover"), restart_lateral_weight=15.0,
                                         follow_creep_speed=2.0)
-    assert "candidate default, not yet default" in doc
+    assert "superseded" in doc
     assert stack_preset("sofar") == StackConfig()  # the default is unchanged
     assert len({config_hash(stack_preset(p)) for p in STACK_PRESETS}) == len(STACK_PRESETS)
 
@@ -36,21 +38,22 @@ def test_sofar_3_is_sofar_with_the_fixes_and_the_slow_end_rows():
     value, doc = registry.STACK_PRESET_REGISTRY["sofar-3"]
     assert value == dataclasses.replace(StackConfig(), restart_lateral_weight=15.0, follow_creep_speed=2.0,
                                         slow_rows_speed=10.0, slow_rows_exit_speed=12.0)
-    assert value.mpc.track_rows == "reference" and "candidate default, not yet default" in doc
+    assert value.mpc.track_rows == "reference" and "superseded as the candidate" in doc
 
 
-def test_sofar_2_runs_a_short_episode():
+@pytest.mark.parametrize("preset", ["sofar-2", "sofar-4"])
+def test_the_candidates_run_a_short_episode(preset):
     import gymnasium as gym
 
     import sofar_env  # noqa: F401
 
-    env = gym.make("SOfAR-LagunaSeca-v0", config={"stack": "sofar-2", "scenario": "interactive"})
+    env = gym.make("SOfAR-LagunaSeca-v0", config={"stack": preset, "scenario": "interactive"})
     try:
         env.reset(seed=3, options={"rho": 0.3})
         for _ in range(20):
             *_, terminated, truncated, _info = env.step(np.array([0.5]))
             assert not (terminated or truncated)
-        assert env.unwrapped.config.stack == stack_preset("sofar-2")
+        assert env.unwrapped.config.stack == stack_preset(preset)
     finally:
         env.close()
 
@@ -59,7 +62,7 @@ def test_sofar_2_runs_a_short_episode():
 def test_each_new_field_is_neutral_at_its_default(name):
     field = {f.name: f for f in dataclasses.fields(StackConfig)}[name]
     assert field.metadata.get(NEUTRAL_KEY)
-    base = StackConfig()
+    base = StackConfig(**NEEDS.get(name, {}))
     at_default = dataclasses.replace(base, **{name: field.default})
     assert config_hash(at_default) == config_hash(base)
     assert config_hash(dataclasses.replace(base, **{name: NEW_FIELDS[name]})) != config_hash(base)
@@ -73,7 +76,8 @@ def test_each_new_field_leaves_the_plan_of_a_car_at_speed_unchanged(tracks, name
     on a slow car, or on a followed car while turned); at its default, the controller is today's."""
     track = tracks["Monza"]
     outputs = []
-    for cfg in (StackConfig(), dataclasses.replace(StackConfig(), **{name: NEW_FIELDS[name]})):
+    base = StackConfig(**NEEDS.get(name, {}))
+    for cfg in (base, dataclasses.replace(base, **{name: NEW_FIELDS[name]})):
         race, stack = empty_race(track, start_s=100.0), OvertakingStack(track, cfg)
         us = []
         for _ in range(15):
@@ -99,6 +103,19 @@ def test_invalid_stall_fix_settings_are_rejected():
         stack_preset("sofar-recover").__class__(mpc=stack_preset("sofar-recover").mpc, slow_rows_speed=10.0)
     with pytest.raises(ValueError, match="restart_exit_speed"):  # the restart mode's MPC bounds the ends too
         StackConfig(restart_lateral_weight=15.0, slow_rows_speed=2.0)
+    with pytest.raises(ValueError, match="slow_rows_curved needs stack.slow_rows_speed"):
+        StackConfig(slow_rows_curved=True)
+
+
+def test_sofar_4_is_sofar_3_with_the_curved_slow_rows(tracks):
+    value, doc = registry.STACK_PRESET_REGISTRY["sofar-4"]
+    assert value == dataclasses.replace(stack_preset("sofar-3"), slow_rows_curved=True)
+    assert "candidate default, not yet default" in doc
+    stack = OvertakingStack(tracks["Monza"], value)
+    assert stack._slow_mpc.config.track_rows == "recoverable-curved" == stack._restart_mpc.config.track_rows
+    assert stack.mpc.config.track_rows == "reference"
+    three = OvertakingStack(tracks["Monza"], stack_preset("sofar-3"))
+    assert three._slow_mpc.config.track_rows == "recoverable" == three._restart_mpc.config.track_rows
 
 
 def test_the_slow_end_rows_take_over_below_their_speed_and_hand_back_above_the_exit(tracks):

@@ -291,11 +291,13 @@ class QPStructure:
         slot_offset[: self.m] = 3 * act
         self.G.data[:] = flat[self.g_src + slot_offset[self.g_slot]] * (self.g_fac + (1.0 - gamma) * self.g_gam)
 
-    def fill_ends(self, e_bar: np.ndarray, trk_lo: np.ndarray, trk_hi: np.ndarray) -> None:
+    def fill_ends(self, e_bar: np.ndarray, trk_lo: np.ndarray, trk_hi: np.ndarray,
+                  kappa: np.ndarray | None = None) -> None:
         """With end rows: their ``de`` entries and their bounds, at the headings ``e_bar`` (N,) of
         x_1..x_N; ``trk_lo``/``trk_hi`` (N,) bound ``dn`` of the reference point. Row ``r`` keeps
-        ``n + g_r(e)`` inside them: ``dn + g_r'(ebar) de`` within ``[trk_lo, trk_hi] - g_r(ebar)``."""
-        values, slopes = self.end_offsets(e_bar)
+        ``n + g_r(e)`` inside them: ``dn + g_r'(ebar) de`` within ``[trk_lo, trk_hi] - g_r(ebar)``.
+        ``kappa`` (N,): the track's curvature at those stages (for ``"recoverable-curved"`` rows)."""
+        values, slopes = self.end_offsets(e_bar, kappa)
         self.G.data[self.end_pos] = slopes.ravel()
         r = self.row_trk
         self.hu_buf[:, r] = trk_hi - values[0]

@@ -111,7 +111,7 @@ class IpoptReference:
                 lbg += [-ca.inf, 0.0]
                 ubg += [0.0, ca.inf]
             else:
-                up, lo, rear_up, rear_lo = ends.symbolic(x[2])
+                up, lo, rear_up, rear_lo = ends.symbolic(x[2], kappa[k + 1])
                 g += [x[1] + up - st - n_hi[k], x[1] + lo + st - n_lo[k],
                       x[1] + rear_up - st - n_hi[k], x[1] + rear_lo + st - n_lo[k]]
                 lbg += [-ca.inf, 0.0, -ca.inf, 0.0]

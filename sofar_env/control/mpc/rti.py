@@ -389,7 +389,7 @@ class MPCDCBF:
             qs.lat, qs.row_lat, self.vehicle.lat_acc_max, qs.trk, qs.row_trk, self._trk_lo, self._trk_hi, qs.row_cbf,
             qs.c_buf, qs.b_buf, qs.hl_buf, qs.hu_buf, qs.xl_buf, qs.xu_buf, self._box_lo, self._box_hi)
         if qs.ends:
-            qs.fill_ends(xbar[1:, 2], self._trk_lo, self._trk_hi)
+            qs.fill_ends(xbar[1:, 2], self._trk_lo, self._trk_hi, arrays[0, 1:])
         return qs.data(), status
 
     def _qp_solve(self, qs: QPStructure, data, status: int) -> tuple[np.ndarray | None, int, str]:
