@@ -6,8 +6,9 @@ The keys of a manifest and how it is read: :mod:`~sofar_agents.evaluation.manife
 
 :func:`run_manifest` runs a manifest into its folder (resuming, as the table scripts do) and writes
 ``<name>.manifest.json`` there (:func:`record_path`; one per manifest, so that two manifests of one folder keep
-theirs): the manifest, its configuration hash, the code commit, the machine, its CPU flags and the wall time. :func:`check_manifest` compares the hash a manifest resolves to with the hashes the
-rows of its committed CSV carry. :func:`rerun_rows` re-makes chosen committed rows in another folder and
+theirs): the manifest, its configuration hash, the code commit, the machine, its CPU flags and the wall time.
+:func:`check_manifest` compares the hash a manifest resolves to with the hashes the rows of its committed CSV
+carry. :func:`rerun_rows` re-makes chosen committed rows in another folder and
 compares them field by field (every column of the committed file but ``wall_time`` and ``config_hash``; for
 the multi-agent table the races, re-run one by one; for interventions every replay of the episodes named, with
 all the manifest's interventions), which is what justifies
@@ -73,7 +74,7 @@ def row_length(m: Manifest, row: dict[str, str]) -> float:
 def _race_tasks(m: Manifest, root: str | os.PathLike) -> list:
     from sofar_agents.evaluation.multi_agent import multi_agent_tasks
 
-    return multi_agent_tasks(m.strategies(root), m.tracks, m.episodes or 4, m.seed, m.cars, m.duration, m.stack,
+    return multi_agent_tasks(m.strategies(root), m.tracks, m.episode_count, m.seed, m.cars, m.duration, m.stack,
                              m.scenario, int(m.opponents or 0))
 
 
@@ -91,10 +92,10 @@ def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple]:
         return {(t.track, t.strategy.name, exact_text(t.rho), str(t.seed), str(int(t.use_miqp))) for t in tasks}
     strategies = m.strategies(root)
     if m.kind == "table2":
-        tasks = miqp_ablation_tasks(strategies, m.episodes or 10, m.rhos, m.track, m.seed, m.duration, stack=m.stack,
+        tasks = miqp_ablation_tasks(strategies, m.episode_count, m.rhos, m.track, m.seed, m.duration, stack=m.stack,
                                     scenario=m.scenario)
     elif m.kind in ("table1", "figures"):
-        tasks = table1_tasks(strategies, m.tracks, m.rhos, m.episodes or (3 if m.kind == "figures" else 5), m.seed, m.duration, stack=m.stack,
+        tasks = table1_tasks(strategies, m.tracks, m.rhos, m.episode_count, m.seed, m.duration, stack=m.stack,
                              scenario=m.scenario, n_opponents=m.opponents)
     else:
         raise ValueError(f"unknown kind {m.kind!r}")
@@ -170,21 +171,21 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
     elif m.kind == "multi-agent":
         from sofar_agents.evaluation.multi_agent import run_multi_agent_table
 
-        report = run_multi_agent_table(strategies, folder, tracks=m.tracks, races=m.episodes or 4,
+        report = run_multi_agent_table(strategies, folder, tracks=m.tracks, races=m.episode_count,
                                        base_seed=m.seed, cars=m.cars, duration=m.duration, stack=m.stack,
                                        scenario=m.scenario, workers=workers, progress=progress,
                                        opponents=int(m.opponents or 0), prefix=m.prefix or "multi_agent")
     elif m.kind == "table2":
         from sofar_agents.evaluation.experiments import run_miqp_ablation
 
-        report = run_miqp_ablation(strategies, folder, episodes=m.episodes or 10, rhos=m.rhos, track=m.track,
+        report = run_miqp_ablation(strategies, folder, episodes=m.episode_count, rhos=m.rhos, track=m.track,
                                    base_seed=m.seed, duration=m.duration, workers=workers, progress=progress,
                                    prefix=m.prefix or "table2", stack=m.stack, scenario=m.scenario,
                                    tasks_filter=tasks_filter)
     else:
         from sofar_agents.evaluation.experiments import run_table1
 
-        report = run_table1(strategies, folder, tracks=m.tracks, rhos=m.rhos, episodes=m.episodes or 5,
+        report = run_table1(strategies, folder, tracks=m.tracks, rhos=m.rhos, episodes=m.episode_count,
                             base_seed=m.seed, duration=m.duration, workers=workers, progress=progress,
                             prefix=m.prefix or "table1", stack=m.stack, scenario=m.scenario,
                             n_opponents=m.opponents, tasks_filter=tasks_filter)

@@ -34,7 +34,7 @@ def pareto_tasks(m: Manifest, root: str | os.PathLike) -> list[EpisodeTask]:
     them."""
     from sofar_agents.evaluation.protocol import table1_tasks
 
-    return table1_tasks(m.strategies(root), m.tracks, m.rhos, m.episodes or 5, m.seed, m.duration, stack=m.stack,
+    return table1_tasks(m.strategies(root), m.tracks, m.rhos, m.episode_count, m.seed, m.duration, stack=m.stack,
                         scenario=m.scenario, n_opponents=m.opponents)
 
 
@@ -46,7 +46,7 @@ def run_pareto_manifest(m: Manifest, root: str | os.PathLike, folder: Path, work
 
     return run_pareto(m.policy_path(root) if m.adaptive else None, preference_family(m.safety_weights),
                       FIXED_GAMMAS if m.gammas is None else m.gammas, folder, tracks=m.tracks, rhos=m.rhos,
-                      episodes=m.episodes or 5, base_seed=m.seed, duration=m.duration, workers=workers,
+                      episodes=m.episode_count, base_seed=m.seed, duration=m.duration, workers=workers,
                       progress=progress, stack=m.stack, scenario=m.scenario, prefix=m.prefix or "pareto",
                       n_opponents=m.opponents)
 
@@ -145,7 +145,7 @@ def run_figures_manifest(m: Manifest, root: str | os.PathLike, folder: Path, wor
     from sofar_agents.evaluation.results import read_trace_csv
 
     stats = record_figure_episodes(m.strategies(root), folder, tracks=m.tracks, rhos=m.rhos,
-                                   episodes=m.episodes or 3, seed=m.seed, duration=m.duration, stack=m.stack,
+                                   episodes=m.episode_count, seed=m.seed, duration=m.duration, stack=m.stack,
                                    scenario=m.scenario, n_opponents=m.opponents, workers=workers, progress=progress,
                                    tasks_filter=keep)
     if stats.unfinished:

@@ -62,6 +62,8 @@ __all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths"]
 
 KINDS = ("table1", "table2", "multi-agent", "pareto", "interventions", "figures")
 """Command kinds a manifest may name."""
+DEFAULT_EPISODES = {"table1": 5, "pareto": 5, "figures": 3, "table2": 10, "multi-agent": 4}
+"""Episodes per cell (races per circuit for multi-agent) of a manifest without ``episodes``, by kind."""
 DEFAULT_SAFETY_WEIGHTS = (0.1, 0.3, 0.5, 0.7, 0.9)
 """Safety weights of a pareto manifest's preferences (those of ``eval/pareto.py``)."""
 DEFAULT_SWITCH_GAMMAS = (0.15, 0.3, 0.6)
@@ -121,6 +123,11 @@ class Manifest:
             raise ValueError(f"manifest {self.name}: sources is the (required) key of the interventions kind")
         if self.kind == "figures" and self.prefix is not None:
             raise ValueError(f"manifest {self.name}: a figures folder holds episodes.csv and trace.csv; no prefix")
+
+    @property
+    def episode_count(self) -> int:
+        """``episodes``, else the kind's default (:data:`DEFAULT_EPISODES`)."""
+        return self.episodes or DEFAULT_EPISODES.get(self.kind, 5)
 
     @property
     def csv_name(self) -> str:

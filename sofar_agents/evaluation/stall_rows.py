@@ -47,11 +47,11 @@ def fresh_tasks(stacks: Sequence[str], gammas: Sequence[float], tracks: Sequence
     return [t for group in zip(*per_stack) for t in group]
 
 
-REPORT_COLUMNS = ("label", "track", "rho", "seed", "stack", "config_hash", "gamma", "outcome", "sim_time", "cls", "decision",
-                  "fallback", "follow", "stopped_ahead", "angled", "away", "e", "v_plan", "v_ref", "gap_ahead",
-                  "v_ahead", "room_beside", "corner_room", "turn_room", "row_room", "v_next", "accel", "n", "n_ref",
-                  "track_slack", "barrier_slack", "h_min", "plan_slack", "followed_v", "onset_t", "onset_decision",
-                  "onset_e", "onset_gap", "onset_v_ahead", "restarts", "wall_time")
+REPORT_COLUMNS = ("label", "track", "rho", "seed", "stack", "config_hash", "gamma", "outcome", "sim_time", "cls",
+                  "decision", "fallback", "follow", "stopped_ahead", "angled", "away", "e", "v_plan", "v_ref",
+                  "gap_ahead", "v_ahead", "room_beside", "corner_room", "turn_room", "row_room", "v_next", "accel", "n",
+                  "n_ref", "track_slack", "barrier_slack", "h_min", "plan_slack", "followed_v", "onset_t",
+                  "onset_decision", "onset_e", "onset_gap", "onset_v_ahead", "restarts", "wall_time")
 """Columns of :func:`report_rows` (one row per episode; ``config_hash``: that of the episode's resolved configuration,
 as its row in a per-episode CSV carries it; ``restarts``: times the controller's restart mode came on, empty in rows
 of a preset with a restart mode recorded before it was counted)."""
@@ -63,7 +63,8 @@ def report_rows(reports: Iterable[StallReport]) -> list[dict]:
     for rep in reports:
         t, r = rep.task, rep.result
         row = {"label": rep.label, "track": t.track, "rho": t.rho, "seed": t.seed, "stack": t.stack,
-               "config_hash": t.config_hash, "gamma": t.strategy.gamma, "outcome": _outcome(r), "sim_time": round(r.sim_time, 1), "cls": rep.cls,
+               "config_hash": t.config_hash, "gamma": t.strategy.gamma, "outcome": _outcome(r),
+               "sim_time": round(r.sim_time, 1), "cls": rep.cls,
                "restarts": rep.restarts, "wall_time": round(r.wall_time, 2)}
         for c in REPORT_COLUMNS:
             row.setdefault(c, rep.evidence.get(c, ""))

@@ -218,7 +218,8 @@ class _Recorder:
             v_ref=float(np.max(self.stage.v_ref)),
             n_ref=float(self.stage.n_ref[-1]), accel=float(mpc.u[0]),
             gap_ahead=gap, n_ahead=n_o, v_ahead=v_o, room_beside=room_beside,
-            corner_room=_corner_room(track, veh, s, n, e), **rooms(stack.edges, veh, stack.mpc_in_force.config, s, n, e))
+            corner_room=_corner_room(track, veh, s, n, e),
+            **rooms(stack.edges, veh, stack.mpc_in_force.config, s, n, e))
 
 
 def rooms(edges, vehicle, mpc_config, s: float, n: float, e: float) -> dict[str, float]:

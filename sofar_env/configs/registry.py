@@ -160,11 +160,11 @@ turns back to the track's direction at full lock (:mod:`sofar_env.control.mpc.en
 turned towards an edge it cannot drive away from. The other candidate fix of the stalls."""),
     "sofar-2": Entry(dataclasses.replace(_track_rows("recoverable"), restart_lateral_weight=15.0,
                                          follow_creep_speed=2.0), """``"sofar-recover"`` plus the restart
-mode and the turned-car creep; a candidate default superseded by ``"sofar-3"`` and ``"sofar-4"``. Below 1 m/s under a free speed reference
-(until 3 m/s) the MPC tracks the lateral reference with a tenth of its weight (``restart_lateral_weight`` 15,
-steering to full lock first when turned beyond ``e*``), and a follow decision does not brake a car turned more
-than 0.3 rad to the track below 2 m/s until it is turned less than 0.2 rad (``follow_creep_speed`` 2). The
-stall fixes of ``docs/decisions/stall-fixes.md``."""),
+mode and the turned-car creep; a candidate default superseded by ``"sofar-3"`` and ``"sofar-4"``. Below 1 m/s
+under a free speed reference (until 3 m/s) the MPC tracks the lateral reference with a tenth of its weight
+(``restart_lateral_weight`` 15, steering to full lock first when turned beyond ``e*``), and a follow decision
+does not brake a car turned more than 0.3 rad to the track below 2 m/s until it is turned less than 0.2 rad
+(``follow_creep_speed`` 2). The stall fixes of ``docs/decisions/stall-fixes.md``."""),
     "sofar-3": Entry(dataclasses.replace(StackConfig(), restart_lateral_weight=15.0, follow_creep_speed=2.0,
                                          slow_rows_speed=10.0, slow_rows_exit_speed=12.0), """``"sofar"`` plus the
 stall fixes of ``"sofar-2"`` with the ends bounded only at low speed; superseded as the candidate by ``"sofar-4"``.

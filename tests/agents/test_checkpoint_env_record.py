@@ -37,7 +37,8 @@ def _committed_checkpoints() -> list:
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[2]
-    paths = sorted((root / "sofar_agents" / "checkpoints").glob("*.json")) + sorted((root / "results").glob("**/*.json"))
+    paths = [*sorted((root / "sofar_agents" / "checkpoints").glob("*.json")),
+             *sorted((root / "results").glob("**/*.json"))]
     return [p for p in paths if "weights_file" in json.loads(p.read_text())]
 
 

@@ -33,8 +33,8 @@ def test_the_miqp_side_windows_use_the_barrier_braking_distance():
 
 
 def test_sofar_preset_is_the_default():
-    assert STACK_PRESETS == ("sofar", "paper", "sofar-ends", "sofar-recover", "sofar-2", "sofar-3", "sofar-4", "sofar-daqp", "reference-numerics",
-                             "reference-numerics-no-phantoms")
+    assert STACK_PRESETS == ("sofar", "paper", "sofar-ends", "sofar-recover", "sofar-2", "sofar-3", "sofar-4",
+                             "sofar-daqp", "reference-numerics", "reference-numerics-no-phantoms")
     assert stack_preset("sofar") == StackConfig()
     assert stack_preset(" SoFAR ") == StackConfig()
 

@@ -96,18 +96,21 @@ class EndOffsets:
         """``g_up(e)`` and its slope; ``k``: the turn-back curvature of each entry (default: the lock's)."""
         g = self.reach * np.sin(e)
         dg = self.reach * np.cos(e)
-        if self.recoverable:
-            if k is None:
-                e_star, top, k = self.e_star, self._top, self.curvature
-            else:
-                e_star = np.arctan2(self.reach * k - math.sin(self.beta), math.cos(self.beta))
-                top = self.reach * np.sin(e_star)
-            out = e > e_star
-            if np.any(out):
-                sel = (lambda a: a[out]) if np.ndim(k) else (lambda a: a)
+        if not self.recoverable:
+            return g, dg
+        if k is None:  # the lock's curvature: the constants of __init__
+            out = e > self.e_star
+            if out.any():
                 eb = e[out] + self.beta
-                g[out] = sel(top) + (np.cos(sel(e_star) + self.beta) - np.cos(eb)) / sel(k)
-                dg[out] = np.sin(eb) / sel(k)
+                g[out] = self._top + (math.cos(self.e_star + self.beta) - np.cos(eb)) / self.curvature
+                dg[out] = np.sin(eb) / self.curvature
+            return g, dg
+        e_star = np.arctan2(self.reach * k - math.sin(self.beta), math.cos(self.beta))
+        out = e > e_star
+        if out.any():
+            eb, k_out, star = e[out] + self.beta, k[out], e_star[out]
+            g[out] = self.reach * np.sin(star) + (np.cos(star + self.beta) - np.cos(eb)) / k_out
+            dg[out] = np.sin(eb) / k_out
         return g, dg
 
     def __call__(self, e: np.ndarray, kappa: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
