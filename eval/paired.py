@@ -7,6 +7,7 @@
 
     python eval/paired.py results/interactive_dense/end_rows/*/table1_episodes.csv --by-stack \
         --a sofar-recover:gamma=0.05 --b sofar:gamma=0.05
+    python eval/paired.py --before-after results/sofar-1/table1/table1_episodes.csv results/table1_episodes.csv
 
 Each CSV is one seed set (from `eval/table.py`); the sets are pooled with their episodes kept apart.
 Strategy names are those of the CSV's `strategy` column (`adaptive`, `gamma=0.05`, ...). Without
@@ -16,6 +17,10 @@ exact McNemar p-value. With `--by-stack` the strategies are named `<stack>:<stra
 controller presets (`eval/table.py --stack`) run on the same episodes; the CSVs are then pooled into
 one set, episodes matched by circuit, pace ratio and seed (one CSV per preset and seed set). No episode
 is run. The logic is in sofar_agents.evaluation.paired.
+
+With `--before-after BEFORE AFTER` the two CSVs are one seed set run by two controllers: per strategy and for
+all fixed gammas together, success with the paired test and collisions, off-tracks, stalls and overtakes per
+hour, each as before -> after (sofar_agents.evaluation.before_after).
 """
 
 from __future__ import annotations
@@ -29,18 +34,23 @@ from sofar_agents import evaluation as ev
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("csv", nargs="+", help="per-episode CSVs (table1_episodes.csv), one per seed set")
+    p.add_argument("csv", nargs="+", help="per-episode CSVs (table1_episodes.csv), one per seed set; with "
+                                          "--before-after: the before CSV, then the after CSV")
     p.add_argument("--a", default="adaptive", help="the strategy under test (default: adaptive)")
     p.add_argument("--b", nargs="+", default=None, help="strategies to compare it with (default: every other one)")
     p.add_argument("--by-stack", action="store_true",
                    help="name strategies <stack>:<strategy> (e.g. sofar:gamma=0.05) and pool the CSVs, to compare "
                         "controller presets run on the same episodes")
+    p.add_argument("--before-after", action="store_true",
+                   help="compare two CSVs of the same episodes run by two controllers, on every outcome")
     p.add_argument("--out", default=None, help="also write the Markdown table to this file")
     return p.parse_args(argv)
 
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.before_after:
+        return _before_after(args)
     try:
         sets = ev.read_seed_sets(args.csv)
         if args.by_stack:  # one set: the presets' CSVs hold the same episodes, matched by their seeds
@@ -50,6 +60,26 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     text = f"Paired comparisons over {', '.join(sets)}:\n\n" + ev.format_paired(rows)
+    print(text, end="")
+    if args.out:
+        ev.write_markdown(args.out, text)
+    return 0
+
+
+def _before_after(args: argparse.Namespace) -> int:
+    from sofar_agents.evaluation.before_after import before_after, format_before_after
+
+    if len(args.csv) != 2:
+        print(f"error: --before-after takes two CSVs (before, after), got {len(args.csv)}", file=sys.stderr)
+        return 2
+    try:
+        sets = ev.read_seed_sets(args.csv)
+        (b_name, before), (a_name, after) = sets.items()
+        lines = before_after(before, after)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    text = f"Before: {b_name}; after: {a_name}.\n\n" + format_before_after(lines)
     print(text, end="")
     if args.out:
         ev.write_markdown(args.out, text)

@@ -132,7 +132,7 @@ def run_table(args) -> str:
             sets[name] = ev.read_episode_csv(path)
     rows = [r for rs in sets.values() for r in rs]
     per = ev.aggregate(ev.label_by_stack({"all": rows})["all"], ("track", "strategy"))
-    stacks = [s for s in (STACK, "paper", "sofar") if any((r.get("stack") or "sofar") == s for r in rows)]
+    stacks = [s for s in (STACK, "paper", "sofar-1", "sofar") if any((r.get("stack") or "sofar-1") == s for r in rows)]
     lines = ["# Table I under the bug-compatible controller, beside the paper's and the project's controllers\n",
              f"Success [%] per circuit and fixed γ; the project's rows on the same seeded episodes (base seed "
              f"{args.seed}, 25 per circuit and γ; `all`: the circuits of this run).\n",
@@ -144,7 +144,7 @@ def run_table(args) -> str:
             cells = []
             for s in stacks:
                 if track == "all":
-                    hits = [r for r in rows if (r.get("stack") or "sofar") == s and r["strategy"] == strategy
+                    hits = [r for r in rows if (r.get("stack") or "sofar-1") == s and r["strategy"] == strategy
                             and r["track"] in args.tracks]
                     cells.append(f"{100 * sum(bool(r['success']) for r in hits) / len(hits):.0f}" if hits else "–")
                 else:
@@ -180,7 +180,7 @@ def run_table(args) -> str:
                 except ValueError:
                     continue
                 by_group.append(dataclasses.replace(c, a=f"{c.a}, {group}"))
-    refnum = [r for r in rows if (r.get("stack") or "sofar") == STACK]
+    refnum = [r for r in rows if (r.get("stack") or "sofar-1") == STACK]
     points = th.sweep_points(refnum)
     adaptive = [r for r in refnum if r["strategy"] == "adaptive"]
     if adaptive:

@@ -2,7 +2,7 @@
 
     python eval/stalls.py --replay results/interactive_dense/end_rows/sofar-recover/table1_episodes.csv \
         --out results/interactive_dense/stalls/committed
-    python eval/stalls.py --stacks sofar sofar-recover --gammas 0.05 0.5 --rhos 0.1 0.2 0.3 --episodes 2 \
+    python eval/stalls.py --stacks sofar-1 sofar-recover --gammas 0.05 0.5 --rhos 0.1 0.2 0.3 --episodes 2 \
         --seed 7301 --out results/interactive_dense/stalls/seed7301
     python eval/stalls.py --report results/interactive_dense/stalls/seed7301     # re-make stalls.md, nothing runs
 
@@ -45,7 +45,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="re-make FOLDER/stalls.md from its stalls.csv and records.csv.gz (no episode is run)")
     p.add_argument("--out", default="results/stalls", help="output folder (default results/stalls)")
     p.add_argument("--stacks", nargs="+", default=None,
-                   help="controller presets (default: sofar sofar-recover; with --replay: every preset in the CSVs)")
+                   help="controller presets (default: sofar sofar-1, the default and its former version; with "
+                        "--replay: every preset in the CSVs)")
     p.add_argument("--limit", type=positive_int, default=None, help="with --replay: at most this many stalls per CSV")
     p.add_argument("--gammas", nargs="+", type=gamma_value, default=[0.05, 0.5], help="fixed gammas of the seed set")
     p.add_argument("--tracks", nargs="+", default=list(ev.TRACKS), help="circuits of the seed set")
@@ -222,7 +223,7 @@ def main(argv=None) -> int:
                 tasks += found
                 labels += [f"committed {name[name.find('results/'):] if 'results/' in name else name}"] * len(found)
         else:
-            tasks = sr.fresh_tasks(args.stacks or ["sofar", "sofar-recover"], args.gammas, args.tracks, args.rhos,
+            tasks = sr.fresh_tasks(args.stacks or ["sofar", "sofar-1"], args.gammas, args.tracks, args.rhos,
                                    args.episodes, args.seed, args.opponents, args.scenario)
             labels = [f"fresh seed {args.seed}"] * len(tasks)
     except ValueError as exc:

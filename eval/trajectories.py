@@ -10,6 +10,7 @@ vector reward) and of the PettingZoo race, and writes all arrays to one ``.npz``
     python eval/trajectories.py record --out /tmp/after.npz         # on the new code
     python eval/trajectories.py compare /tmp/before.npz /tmp/after.npz
     python eval/trajectories.py record --worlds paper interactive --out /tmp/both.npz   # also the interactive ids
+    python eval/trajectories.py record --variant stack=sofar-1 --out /tmp/v.npz   # also every id with stack=sofar-1
 
 Wall-clock timings are never recorded (``timing_info=False``).
 """
@@ -67,12 +68,13 @@ def record_single(env_id: str, episodes: int, steps: int, extra: dict) -> dict[s
     return out
 
 
-def record_multi(episodes: int, steps: int) -> dict[str, np.ndarray]:
+def record_multi(episodes: int, steps: int, extra: dict | None = None) -> dict[str, np.ndarray]:
     from sofar_env.multi_agent import parallel_env
 
     out: dict[str, np.ndarray] = {}
+    extra = extra or {}
     env = parallel_env("LagunaSeca", n_agents=3, reward_mode="vector", timing_info=False,
-                       speed_factors=[0.6, 0.75, 0.9])
+                       speed_factors=[0.6, 0.75, 0.9], **extra)
     for ep in range(episodes):
         obs, infos = env.reset(seed=2000 + ep)
         rows = []
@@ -84,7 +86,7 @@ def record_multi(episodes: int, steps: int) -> dict[str, np.ndarray]:
             for a in sorted(obs):
                 rows.append(np.concatenate([[t, int(a.split("_")[1])], obs[a], np.atleast_1d(rew[a]),
                                             _info_row(infos[a]), [term[a], trunc[a]]]))
-        out[f"multi|ep{ep}"] = np.asarray(rows, float)
+        out[f"multi{''.join(f'|{k}={v}' for k, v in sorted(extra.items()))}|ep{ep}"] = np.asarray(rows, float)
     env.close()
     return out
 
@@ -100,7 +102,8 @@ def record(args: argparse.Namespace) -> int:
     for env_id in ids:
         for extra in variants:
             data.update(record_single(env_id, args.episodes, args.steps, extra))
-    data.update(record_multi(args.episodes, min(args.steps, 200)))
+    for extra in variants:
+        data.update(record_multi(args.episodes, min(args.steps, 200), extra))
     np.savez_compressed(args.out, **data)
     logger.info("wrote %d arrays to %s in %.1f s", len(data), args.out, time.perf_counter() - t0)
     return 0
@@ -140,7 +143,8 @@ def main(argv: list[str] | None = None) -> int:
     rec.add_argument("--worlds", nargs="+", default=["paper"], choices=("paper", "interactive", "dynamic"),
                      help="record the ids of these worlds (default: paper; the PettingZoo race is always recorded)")
     rec.add_argument("--variant", nargs="*", default=[], metavar="KEY=VALUE",
-                     help="also record every id with these gym.make keyword arguments (strings)")
+                     help="also record every id, and the PettingZoo race, with these keyword arguments (strings; "
+                          "e.g. stack=sofar-1 to compare a controller across a change of the default)")
     cmp_ = sub.add_parser("compare", help="compare two recordings bit for bit")
     cmp_.add_argument("a")
     cmp_.add_argument("b")

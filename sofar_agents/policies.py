@@ -26,6 +26,7 @@ from sofar_agents.pasta.checkpoint import (
     validate_actor_state,
 )
 from sofar_agents.pasta.config import SQUASHINGS
+from sofar_env.configs.registry import DEFAULT_STACK_PRESET
 from sofar_env.constants import GAMMA_MAX, GAMMA_MIN
 
 # FORMAT_VERSION, checkpoint_paths, read_checkpoint_metadata and validate_actor_state are
@@ -153,22 +154,30 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
 
 
 SHIPPED_POLICIES: dict[tuple[str, str], str] = {
-    ("sofar", "paper"): "pasta_lagunaseca.json",
+    ("sofar-4", "paper"): "pasta_lagunaseca_sofar4.json",
+    ("sofar-4", "interactive"): "pasta_lagunaseca_interactive_sofar4.json",
+    ("sofar-1", "paper"): "pasta_lagunaseca.json",
+    ("sofar-1", "interactive"): "pasta_lagunaseca_interactive.json",
     ("paper", "paper"): "pasta_lagunaseca_paper.json",
-    ("sofar", "interactive"): "pasta_lagunaseca_interactive.json",
 }
-"""The shipped PASTA policies, by (controller preset, world scenario): all trained on Laguna Seca only. The
-interactive one was trained with a field of 8 opponents (``n_opponents=8``), the dense field of the
-interactive world, and observes the interactive world's 16 values."""
+"""The shipped PASTA policies, by (controller preset they were trained with, world scenario): all trained on
+Laguna Seca only; ``"sofar"`` looks up the default controller's version (``"sofar-4"``). The interactive ones were
+trained with a field of 8 opponents (``n_opponents=8``), the dense field of the interactive world, and observe
+the interactive world's 16 values. The ``"sofar-1"`` ones were trained with the former default and made its
+tables."""
 
 
 NAMED_POLICIES: dict[str, str] = {
     "lagunaseca": "pasta_lagunaseca.json",
+    "lagunaseca-sofar-4": "pasta_lagunaseca_sofar4.json",
     "lagunaseca-paper": "pasta_lagunaseca_paper.json",
     "lagunaseca-interactive": "pasta_lagunaseca_interactive.json",
+    "lagunaseca-interactive-sofar-4": "pasta_lagunaseca_interactive_sofar4.json",
     "morl-dynamic": "pasta_morl_dynamic.json",
 }
-"""The shipped PASTA policies by name (:func:`named_policy_path`, :func:`load_policy`). ``morl-dynamic``: the
+"""The shipped PASTA policies by name (:func:`named_policy_path`, :func:`load_policy`). ``lagunaseca`` and
+``lagunaseca-interactive``: trained with ``"sofar-1"``, the former default; ``lagunaseca-sofar-4`` and
+``lagunaseca-interactive-sofar-4``: the same recipes with the default controller. ``morl-dynamic``: the
 preference-conditioned policy of the dynamic world, trained on Laguna Seca with a preference drawn every 64
 decisions; its gamma falls as the safety weight grows (``tests/agents/test_policies.py``)."""
 
@@ -185,14 +194,16 @@ def named_policy_path(name: str) -> Path:
 def default_policy_path(stack: str = "sofar", scenario: str = "paper") -> Path:
     """Path of the PASTA policy shipped for a controller preset and a world (trained on Laguna Seca).
 
-    ``stack="sofar"`` (default): trained with the default controller; ``stack="paper"``: trained with
-    the paper's Algorithm 1 as written (``gym.make(..., stack="paper")``). Raises ``ValueError`` for a
-    combination without a shipped policy and ``FileNotFoundError`` (with instructions) when its files
-    are missing.
+    ``stack="sofar"`` (default) or ``"sofar-4"``: trained with the default controller; ``stack="sofar-1"``: trained
+    with the default before it; ``stack="paper"``: trained with the paper's Algorithm 1 as written
+    (``gym.make(..., stack="paper")``). Raises ``ValueError`` for a combination without a shipped policy and
+    ``FileNotFoundError`` (with instructions) when its files are missing.
     """
     from importlib.resources import files
 
-    key = (str(stack).lower(), str(scenario).lower())
+    key = (str(stack).strip().lower(), str(scenario).strip().lower())
+    if key[0] == "sofar":  # the default controller, by its version
+        key = (DEFAULT_STACK_PRESET, key[1])
     if key not in SHIPPED_POLICIES:
         have = ", ".join(f"stack={a!r}, scenario={b!r}" for a, b in SHIPPED_POLICIES)
         raise ValueError(f"no shipped PASTA policy for stack={stack!r}, scenario={scenario!r}; shipped: {have}")

@@ -48,7 +48,7 @@ from typing import Any
 from sofar_agents.evaluation.episode import make_env, run_episode
 from sofar_agents.evaluation.paired import PairedComparison, format_paired, paired_comparison
 from sofar_agents.evaluation.protocol import EpisodeTask, Strategy, _key, exact_text, gamma_text
-from sofar_agents.evaluation.results import read_csv_rows
+from sofar_agents.evaluation.results import LEGACY_STACK, read_csv_rows
 from sofar_agents.executor import Job, RunStats, execute
 
 __all__ = ["Intervention", "InterventionResult", "INTERVENTION_COLUMNS", "ReplayTask", "default_interventions",
@@ -233,7 +233,7 @@ def failed_episodes(rows: Iterable[Mapping[str, Any]], gamma: float, limit: int 
         out.append(EpisodeTask(
             track=str(r["track"]), strategy=strategy, rho=float(r["rho"]), episode=int(r.get("episode", 0)),
             seed=int(r["seed"]), use_miqp=bool(r["use_miqp"]), duration=float(r["duration"]),
-            n_opponents=None if n_opp in ("", None) else int(float(n_opp)), stack=str(r.get("stack") or "sofar"),
+            n_opponents=None if n_opp in ("", None) else int(float(n_opp)), stack=str(r.get("stack") or LEGACY_STACK),
             scenario=str(r.get("scenario") or "paper")))
         if limit is not None and len(out) >= limit:
             break

@@ -6,7 +6,8 @@ The keys of a manifest and how it is read: :mod:`~sofar_agents.evaluation.manife
 
 :func:`run_manifest` runs a manifest into its folder (resuming, as the table scripts do) and writes
 ``<name>.manifest.json`` there (:func:`record_path`; one per manifest, so that two manifests of one folder keep
-theirs): the manifest, its configuration hash, the code commit, the machine, its CPU flags and the wall time.
+theirs): the manifest, its configuration hash, the code commit, the machine, its CPU flags and the wall time;
+``earlier_runs`` lists the commit, wall time and end of the runs of the same hash that a resumed run continued.
 :func:`check_manifest` compares the hash a manifest resolves to with the hashes the rows of its committed CSV
 carry. :func:`rerun_rows` re-makes chosen committed rows in another folder and
 compares them field by field (every column of the committed file but ``wall_time`` and ``config_hash``; for
@@ -36,7 +37,7 @@ from typing import Any
 from sofar_agents.evaluation import manifest_replays as replays
 from sofar_agents.evaluation.configs import row_hash, write_config_json
 from sofar_agents.evaluation.manifest_spec import KINDS, Manifest, load_manifest, manifest_paths
-from sofar_agents.evaluation.results import EPISODE_COLUMNS, read_csv_rows
+from sofar_agents.evaluation.results import EPISODE_COLUMNS, LEGACY_STACK, read_csv_rows
 
 __all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths", "run_manifest", "record_path", "check_manifest",
            "ManifestCheck", "episode_ids", "row_id", "row_episode", "row_length", "raw_rows", "rerun_rows", "backfill_hash",
@@ -194,8 +195,22 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
               "machine": {"node": platform.node(), "platform": platform.platform(), "python": sys.version.split()[0],
                           "cpu": _cpu()},
               "wall_time_s": round(time.perf_counter() - t0, 3), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    record["earlier_runs"] = _earlier_runs(record_path(m, folder), m.config_hash)
     _write_json_atomically(record_path(m, folder), record)
     return report
+
+
+def _earlier_runs(path: Path, config_hash: str) -> list[dict[str, Any]]:
+    """The runs a resumed table was made by before this one: those of the record at ``path`` (its own run and its
+    ``earlier_runs``) when it is of the same configuration hash; [] for a fresh folder or another hash."""
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return []
+    if not isinstance(old, dict) or old.get("config_hash") != [config_hash]:
+        return []
+    runs = [r for r in old.get("earlier_runs", []) if isinstance(r, dict)]
+    return runs + [{k: old.get(k) for k in ("commit", "wall_time_s", "finished_at")}]
 
 
 @dataclass
@@ -237,7 +252,8 @@ def check_manifest(m: Manifest, root: str | os.PathLike) -> ManifestCheck:
     return check
 
 
-_OLDER_EPISODE_COLUMNS = {"stack": "sofar", "n_opponents": "", "scenario": "paper", "stalled": "", "config_hash": ""}
+_OLDER_EPISODE_COLUMNS = {"stack": LEGACY_STACK, "n_opponents": "", "scenario": "paper", "stalled": "",
+                          "config_hash": ""}
 """Episode columns that CSVs of older formats lack, with the value their rows stand for (as the table reader has
 them; "" of ``stalled``: unknown)."""
 _OLDER_RACE_COLUMNS = {"opponents": "0", "config_hash": ""}

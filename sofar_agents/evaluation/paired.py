@@ -63,10 +63,13 @@ class PairedComparison:
 
 
 def label_by_stack(sets: Mapping[str, Iterable[Mapping[str, Any]]]) -> dict[str, list[dict[str, Any]]]:
-    """The seed sets with each row's strategy named ``<stack>:<strategy>`` (``stack`` column, ``"sofar"``
-    when empty), so that one strategy run with two controller presets on the same episodes can be compared
+    """The seed sets with each row's strategy named ``<stack>:<strategy>`` (``stack`` column, ``"sofar-1"``
+    when empty: :data:`~sofar_agents.evaluation.protocol.LEGACY_STACK`), so that one strategy run with two
+    controller presets on the same episodes can be compared
     (``"sofar-recover:gamma=0.05"`` against ``"sofar:gamma=0.05"``). The rows given are not changed."""
-    return {name: [{**r, "strategy": f"{r.get('stack') or 'sofar'}:{r['strategy']}"} for r in rows]
+    from sofar_agents.evaluation.protocol import LEGACY_STACK
+
+    return {name: [{**r, "strategy": f"{r.get('stack') or LEGACY_STACK}:{r['strategy']}"} for r in rows]
             for name, rows in sets.items()}
 
 

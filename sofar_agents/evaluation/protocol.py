@@ -209,13 +209,19 @@ class EpisodeTask:
         return (self.track, bool(self.use_miqp), float(self.duration), self.stack, self.scenario)
 
 
+LEGACY_STACK = "sofar-1"
+"""The controller of a row without a ``stack`` value: made before the column existed, by the default of that
+time, the controller now named ``"sofar-1"`` (rows never default to ``"sofar"``, whose meaning moves with the
+default)."""
+
+
 def _key(track, strategy, policy_id, rho, seed, use_miqp, duration, stack, n_opponents, scenario="paper",
          config_hash="") -> tuple:
-    """The resume key: every setting that changes an episode (rows of older files: stack "sofar", the
+    """The resume key: every setting that changes an episode (rows of older files: stack :data:`LEGACY_STACK`, the
     default opponent count, config hash "": none, which no task of this version has)."""
     n_opp = "" if n_opponents in (None, "") else str(int(float(n_opponents)))
     return (str(track), str(strategy), str(policy_id or ""), _fmt_float(rho), int(seed), bool(use_miqp),
-            _fmt_float(duration), str(stack or "sofar"), n_opp, str(scenario or "paper"), str(config_hash or ""))
+            _fmt_float(duration), str(stack or LEGACY_STACK), n_opp, str(scenario or "paper"), str(config_hash or ""))
 
 
 def episode_seed(base_seed: int, track: str, rho: float, episode: int) -> int:

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from sofar_agents.evaluation.protocol import DEFAULT_DURATION, EpisodeTask, _key, exact_text
+from sofar_agents.evaluation.protocol import DEFAULT_DURATION, LEGACY_STACK, EpisodeTask, _key, exact_text
 
 logger = logging.getLogger(__name__)
 
@@ -213,7 +213,7 @@ def write_markdown(path: str | os.PathLike, text: str) -> Path:
     return p
 
 
-_ADDED_COLUMNS = {"stack": "sofar", "n_opponents": "", "scenario": "paper", "stalled": "", "config_hash": ""}
+_ADDED_COLUMNS = {"stack": LEGACY_STACK, "n_opponents": "", "scenario": "paper", "stalled": "", "config_hash": ""}
 """Columns added after the first format, with the value that rows of older files stand for ("" of
 ``stalled``: unknown, see the module docstring)."""
 _MAY_BE_EMPTY = {"policy_id", "n_opponents", "stalled", "config_hash"}
@@ -289,7 +289,7 @@ class _AppendingCSV:
 def _row_key(row: Mapping[str, Any]) -> tuple:
     return _key(row["track"], row["strategy"], row.get("policy_id", ""), row["rho"], row["seed"],
                 _as_bool(row.get("use_miqp", True)), row.get("duration", DEFAULT_DURATION),
-                row.get("stack") or "sofar", row.get("n_opponents"), row.get("scenario") or "paper",
+                row.get("stack") or LEGACY_STACK, row.get("n_opponents"), row.get("scenario") or "paper",
                 row.get("config_hash") or "")
 
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .paired import PairedComparison, label_by_stack, paired_comparison
+from .protocol import LEGACY_STACK
 
 __all__ = ["GammaPoint", "PREDICTED_THRESHOLDS", "sweep_points", "phantom_effects", "failure_excess", "failure_edges",
            "format_sweep", "plot_sweep", "wilson_interval"]
@@ -79,7 +80,7 @@ def sweep_points(rows: Iterable[Mapping[str, Any]]) -> list[GammaPoint]:
         g = _gamma(str(r["strategy"]))
         if g is None:
             continue
-        a = acc[(str(r.get("stack") or "sofar"), g)]
+        a = acc[(str(r.get("stack") or LEGACY_STACK), g)]
         ok, fails = bool(r["success"]), int(float(r.get("mpc_failures") or 0))
         a[0] += 1
         a[1] += ok
@@ -109,7 +110,7 @@ def _failure_flags(rows: Iterable[Mapping[str, Any]], stack: str) -> dict[float,
     out: dict[float, dict[tuple, bool]] = defaultdict(dict)
     for r in rows:
         g = _gamma(str(r["strategy"]))
-        if g is None or str(r.get("stack") or "sofar") != stack:
+        if g is None or str(r.get("stack") or LEGACY_STACK) != stack:
             continue
         out[g][(str(r["track"]), round(float(r["rho"]), 6), int(r["seed"]))] = int(float(r.get("mpc_failures") or 0)) > 0
     return out

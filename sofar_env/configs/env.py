@@ -20,7 +20,7 @@ from ..domains import check_fields, choice, custom, flag, integer, nested, real
 from ..errors import ConfigError
 from .objectives import OBJECTIVE_NAMES, OBJECTIVES
 from .race import RaceConfig
-from .registry import WORLD_REGISTRY
+from .registry import WORLD_REGISTRY, default_stack
 from .stack import StackConfig
 
 __all__ = ["OBJECTIVE_NAMES", "REWARD_MODES", "WORLD_NAMES", "RewardWeights", "EnvConfig", "apply_overrides"]
@@ -116,8 +116,10 @@ class EnvConfig:
     that compare infos exactly (Gymnasium's ``check_env``, PettingZoo's seed test) fail with them."""
     race: RaceConfig = nested(RaceConfig)
     """The world: time step, duration, start distribution, vehicle, opponents."""
-    stack: StackConfig = nested(StackConfig)
-    """The controller (:class:`~sofar_env.configs.stack.StackConfig`): speed factor, MIQP, MPC settings."""
+    stack: StackConfig = nested(StackConfig, factory=default_stack)
+    """The controller (:class:`~sofar_env.configs.stack.StackConfig`): speed factor, MIQP, MPC settings. Default:
+    the default controller, preset ``"sofar"`` (:func:`~sofar_env.configs.registry.default_stack`), which is not
+    ``StackConfig()`` (that is version 1, ``"sofar-1"``, without the stall fixes)."""
 
     def __post_init__(self) -> None:
         """Check every field's domain (:mod:`sofar_env.domains`), then that the MPC's control interval is the

@@ -18,7 +18,7 @@ reproduces:
 * the *world* ``scenario="paper"`` (the default, the ``SOfAR-<Circuit>-v0`` ids): the paper's race, a
   kinematic plant, perfect sensing, opponents on fixed offsets at a fixed pace ratio;
 * the *controller preset* ``stack="paper"``: the paper's Algorithm 1 as written, every addition of the
-  project off (the default controller is ``"sofar"``);
+  project off (the default controller is ``"sofar"``, now ``"sofar-4"``);
 * the *observation layout* ``observation="paper"``: the paper's 12 observation values (the default of the
   paper world; the interactive worlds default to ``"extended"``).
 
@@ -38,8 +38,8 @@ from typing import Any, NamedTuple
 from .refnum import ReferenceNumerics
 from .stack import StackConfig
 
-__all__ = ["Entry", "World", "STACK_PRESET_REGISTRY", "WORLD_REGISTRY", "OBSERVATION_LAYOUTS", "NameView",
-           "register_stack_preset", "stack_preset", "world", "world_overrides"]
+__all__ = ["Entry", "World", "DEFAULT_STACK_PRESET", "STACK_PRESET_REGISTRY", "WORLD_REGISTRY", "OBSERVATION_LAYOUTS",
+           "NameView", "default_stack", "register_stack_preset", "stack_preset", "world", "world_overrides"]
 
 
 class Entry(NamedTuple):
@@ -132,10 +132,27 @@ def _track_rows(rows: str) -> StackConfig:
     return dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, track_rows=rows))
 
 
+def _sofar_4() -> StackConfig:
+    return dataclasses.replace(StackConfig(), restart_lateral_weight=15.0, follow_creep_speed=2.0,
+                               slow_rows_speed=10.0, slow_rows_exit_speed=12.0, slow_rows_curved=True)
+
+
+DEFAULT_STACK_PRESET = "sofar-4"
+"""The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
+run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
+longer match their rows until they are re-made (``tests/eval/test_manifests.py``)."""
+
 STACK_PRESET_REGISTRY: dict[str, Entry] = {
-    "sofar": Entry(StackConfig(), """The default controller of every environment: :class:`StackConfig` as it is, the
-paper's Algorithm 1 plus the project's additions (pass or follow, pace-ratio and lateral prediction,
-footprint-aware edges, consistent clearances; :mod:`sofar_env.stack`)."""),
+    "sofar": Entry(_sofar_4(), """The default controller of every environment, whichever version is current:
+now ``"sofar-4"`` (:data:`DEFAULT_STACK_PRESET`), the same value and config hash. Scripts that mean "the
+project's controller" name it; a result row records its config hash, so rows of two versions are never mixed
+under this name. A fixed version is named by its number (``"sofar-1"``, ``"sofar-4"``)."""),
+    "sofar-1": Entry(StackConfig(), """The default controller until ``"sofar-4"`` replaced it (version 1, called
+``"sofar"`` in the tables made with it): :class:`StackConfig` as it is, the paper's Algorithm 1 plus the
+project's additions (pass or follow, pace-ratio and lateral prediction, footprint-aware edges, consistent
+clearances; :mod:`sofar_env.stack`), without the stall fixes. It stalls: a car standing at an angle near an edge
+can be left with no plan that moves forward (``docs/decisions/stall-fixes.md``). Kept so that every table made
+with it re-makes from its manifest."""),
     "paper": Entry(_paper(), """The paper's Algorithm 1 as written (the *controller* meaning of "paper"), every
 addition off:
 
@@ -146,14 +163,14 @@ addition off:
 * ``footprint_edges=False``: the planners' edges are those at the predicted reference point;
 * ``miqp.closing_decel=0``: the MIQP's side windows are the plain ``|gap| < safe_lon`` of the paper's eq. (8).
 
-Where the paper leaves a choice open, ``"sofar"`` and ``"paper"`` make the same one (MIQP every second step over
+Where the paper leaves a choice open, ``"sofar-1"`` and ``"paper"`` make the same one (MIQP every second step over
 76 nodes 0.15 s apart, ``safe_lon`` 8 m, ``safe_lat`` 3.75 m, switching cost 500, clusters of 10 m; one SQP
 real-time iteration per step with the DCBF at every stage; soft constraints with L1 + L2 slack; the
 velocity-aware barrier ellipse). Episodes, the plant and the opponents are the world's."""),
-    "sofar-ends": Entry(_track_rows("ends"), """``"sofar"`` with the MPC bounding both ends of the car in its QP
+    "sofar-ends": Entry(_track_rows("ends"), """``"sofar-1"`` with the MPC bounding both ends of the car in its QP
 (``mpc.track_rows = "ends"``) instead of tightening its edges by the heading error of the previous plan, a
 tightening frozen over the horizon that can leave a car standing at an angle near an edge with no plan that
-moves forward (a *stall*). A candidate fix of the stalls, measured against ``"sofar"`` in the results."""),
+moves forward (a *stall*). A candidate fix of the stalls, measured against ``"sofar-1"`` in the results."""),
     "sofar-recover": Entry(_track_rows("recoverable"), """``"sofar-ends"`` with room kept for turning back
 (``mpc.track_rows = "recoverable"``): the front end's rows bound the largest offset it reaches while the car
 turns back to the track's direction at full lock (:mod:`sofar_env.control.mpc.ends`), so a car never stands
@@ -166,21 +183,21 @@ under a free speed reference (until 3 m/s) the MPC tracks the lateral reference 
 does not brake a car turned more than 0.3 rad to the track below 2 m/s until it is turned less than 0.2 rad
 (``follow_creep_speed`` 2). The stall fixes of ``docs/decisions/stall-fixes.md``."""),
     "sofar-3": Entry(dataclasses.replace(StackConfig(), restart_lateral_weight=15.0, follow_creep_speed=2.0,
-                                         slow_rows_speed=10.0, slow_rows_exit_speed=12.0), """``"sofar"`` plus the
+                                         slow_rows_speed=10.0, slow_rows_exit_speed=12.0), """``"sofar-1"`` plus the
 stall fixes of ``"sofar-2"`` with the ends bounded only at low speed; superseded as the candidate by ``"sofar-4"``.
 Below 10 m/s (until 12 m/s) a second MPC bounds both ends of the car with room kept for turning back
 (``slow_rows_speed``: ``"sofar-recover"``'s rows, which in the dynamic world also raise collisions at racing
 speed), with the restart mode and the turned-car creep of ``"sofar-2"``. The stall fixes of
 ``docs/decisions/stall-fixes.md``."""),
-    "sofar-4": Entry(dataclasses.replace(StackConfig(), restart_lateral_weight=15.0, follow_creep_speed=2.0,
-                                         slow_rows_speed=10.0, slow_rows_exit_speed=12.0, slow_rows_curved=True),
-                     """``"sofar-3"`` with the slow end rows counting the track's curvature in the room kept for
-turning back (``slow_rows_curved``: in a corner a car turned towards the outside edge needs more room to turn
-back, since the track turns away while it does); candidate default, not yet default. The stall fixes of
-``docs/decisions/stall-fixes.md``."""),
+    "sofar-4": Entry(_sofar_4(), """The default controller (version 4, also named ``"sofar"``): ``"sofar-3"``
+with the slow end rows counting the track's curvature in the room kept for turning back (``slow_rows_curved``:
+in a corner a car turned towards the outside edge needs more room to turn back, since the track turns away
+while it does). Against ``"sofar-1"``: below 10 m/s (until 12 m/s) a second MPC bounds both ends of the car
+with room kept for turning back, a car below 1 m/s restarts with a tenth of the lateral weight, and a follow
+decision lets a turned car creep. The stall fixes of ``docs/decisions/stall-fixes.md``."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
-                        """``"sofar"`` with the MPC's QP condensed onto its inputs and solved by DAQP
+                        """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP
 (``mpc.qp_solver = "daqp"``: one QP solver for both layers) instead of PIQP: the same problem on another
 floating-point path, for the comparison of the two backends on the same episodes. Not a default."""),
     "reference-numerics": Entry(_reference_numerics(True), """A **bug-compatible** controller, never a default:
@@ -194,6 +211,12 @@ defect removed, the phantom opponents (slots without an opponent on the target l
 experiment that attributes a difference to the phantoms."""),
 }
 """The controller presets: name -> Entry(StackConfig, doc), in the order of ``STACK_PRESETS``."""
+
+
+def default_stack() -> StackConfig:
+    """The default controller: the value of preset ``"sofar"`` (= :data:`DEFAULT_STACK_PRESET`), which every
+    environment without a ``stack`` key runs."""
+    return STACK_PRESET_REGISTRY["sofar"].value
 
 
 def register_stack_preset(name: str, value: StackConfig, doc: str) -> None:

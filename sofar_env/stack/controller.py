@@ -4,7 +4,8 @@ One step: the opponents relative to the ego (:mod:`~sofar_env.stack.prediction`)
 ``miqp_interval``-th step the passing-side plan or a follow plan
 (:mod:`~sofar_env.stack.follow`), the MPC's per-stage references and track bounds
 (:mod:`~sofar_env.stack.edges`), and the MPC-DCBF solve with the caller's ``gamma``. Two switches of
-:class:`~sofar_env.configs.stack.StackConfig`, off by default, change how a slow car is driven: the
+:class:`~sofar_env.configs.stack.StackConfig`, off in ``StackConfig()`` and on in the default controller
+(preset ``"sofar"``, what ``config=None`` gives), change how a slow car is driven: the
 *restart mode* (``restart_lateral_weight``: a second MPC with a lower lateral-tracking weight solves the
 steps of a restart from standstill) and the *turned-car creep* (``follow_creep_speed``: a follow cap that
 does not stop a car turned to the track).
@@ -25,6 +26,7 @@ from ..control.mpc import MPCDCBF, MPCResult, MPCStageData
 from ..control.mpc.ends import EndOffsets
 from ..planning.miqp import PassingSidePlanner, PlanResult
 from ..vehicle import AV21, VehicleParams
+from ..configs.registry import default_stack
 from .config import StackConfig
 from .edges import TrackEdges
 from .follow import PassOrFollow
@@ -67,7 +69,7 @@ class OvertakingStack:
 
     def __init__(self, track, config: StackConfig | None = None, vehicle: VehicleParams = AV21):
         self.track = track
-        self.config = config or StackConfig()
+        self.config = config or default_stack()
         self.vehicle = vehicle
         cfg = self.config
         if cfg.reference_numerics is None:

@@ -16,7 +16,8 @@ import pytest
 import sofar_env
 from sofar_env.config import make_env_config
 from sofar_env.configs import registry
-from sofar_env.configs.registry import STACK_PRESET_REGISTRY, WORLD_REGISTRY, Entry, register_stack_preset
+from sofar_env.configs.registry import (STACK_PRESET_REGISTRY, WORLD_REGISTRY, Entry, default_stack,
+                                        register_stack_preset)
 from sofar_env.configs.resolve import multi_car_overrides, resolve_env_config
 from sofar_env.multi_agent import SOfARParallelEnv
 from sofar_env.scenarios import SCENARIOS, scenario_overrides
@@ -41,7 +42,7 @@ def test_the_config_layer_imports_no_solver():
 
 
 def test_presets_and_worlds_are_documented_registry_entries():
-    assert STACK_PRESETS == tuple(STACK_PRESET_REGISTRY) == ("sofar", "paper", "sofar-ends", "sofar-recover",
+    assert STACK_PRESETS == tuple(STACK_PRESET_REGISTRY) == ("sofar", "sofar-1", "paper", "sofar-ends", "sofar-recover",
                                                             "sofar-2", "sofar-3", "sofar-4", "sofar-daqp",
                                                             "reference-numerics", "reference-numerics-no-phantoms")
     assert SCENARIOS == tuple(WORLD_REGISTRY) == ("paper", "interactive", "dynamic")
@@ -57,7 +58,7 @@ def test_presets_and_worlds_are_documented_registry_entries():
     assert "world" in WORLD_REGISTRY["paper"].doc and "controller" in STACK_PRESET_REGISTRY["paper"].doc
     assert "observation" in registry.OBSERVATION_LAYOUTS["paper"]
     assert all(word in registry.__doc__ for word in ('*world*', '*controller preset*', '*observation layout*'))
-    with pytest.raises(ValueError, match="valid presets: sofar, paper"):
+    with pytest.raises(ValueError, match="valid presets: sofar, sofar-1, paper"):
         stack_preset("bogus")
 
 
@@ -121,13 +122,13 @@ def test_multi_car_defaults_are_a_layer_below_the_users_keys():
     # the race fields the layer reads are the user's too; a field that is off adds nothing
     off = resolve_env_config(None, {"race": {"side_lock": 0.0, "lateral_rates": "all", "mpc_restart_slack": np.inf,
                                              "heading_extent": 0.0}}, multi_car=True)
-    assert off.stack == StackConfig()
+    assert off.stack == default_stack()
     assert multi_car_overrides(off.race) == {"race": {"opponents": {"n_opponents": 0}}, "stack": {}}
     # with a preset, the layer applies on top of it, the preset's own settings elsewhere kept
     paper = resolve_env_config(None, {"stack": "paper", "scenario": "dynamic"}, multi_car=True)
     assert paper.stack.follow is False and paper.stack.speed_factor == 0.7 and paper.stack.miqp.alongside_gap == 6.0
     # single-car configurations never get it
-    assert make_env_config().stack == StackConfig()
+    assert make_env_config().stack == default_stack()
 
 
 def test_the_pettingzoo_env_runs_the_resolved_config_and_the_core_rewrites_nothing():
@@ -146,7 +147,7 @@ def test_the_pettingzoo_env_runs_the_resolved_config_and_the_core_rewrites_nothi
     core = ControlledRace(make_env_config(), n_cars=3)
     with mock.patch.object(stack_module, "OvertakingStack", lambda track, c, vehicle=None: seen.append(c) or c):
         core._make_stacks(None)
-    assert seen == [StackConfig()] * 3
+    assert seen == [default_stack()] * 3
     # the rewards and the observation measure the barrier without the multi-car widening, as before
     assert env.core.measured_barrier.heading_extent == 0.0
     assert SOfARParallelEnv(n_agents=2).core.measured_barrier.heading_extent == 0.0

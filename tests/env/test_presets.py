@@ -36,9 +36,13 @@ def test_paper_preset_never_follows_where_the_default_stack_does():
     assert counters["paper"]["follow_steps"] == 0
 
 
-@pytest.mark.parametrize("stack, scenario, name", [("sofar", "paper", "pasta_lagunaseca.json"),
+@pytest.mark.parametrize("stack, scenario, name", [("sofar-1", "paper", "pasta_lagunaseca.json"),
                                                    ("paper", "paper", "pasta_lagunaseca_paper.json"),
-                                                   ("sofar", "interactive", "pasta_lagunaseca_interactive.json")])
+                                                   ("sofar-1", "interactive", "pasta_lagunaseca_interactive.json"),
+                                                   ("sofar", "paper", "pasta_lagunaseca_sofar4.json"),
+                                                   ("sofar-4", "paper", "pasta_lagunaseca_sofar4.json"),
+                                                   ("sofar-4", "interactive",
+                                                    "pasta_lagunaseca_interactive_sofar4.json")])
 def test_shipped_policies_load_by_name(stack, scenario, name):
     import gymnasium as gym
 
@@ -51,6 +55,19 @@ def test_shipped_policies_load_by_name(stack, scenario, name):
     gamma = float(np.asarray(policy(obs)).reshape(-1)[0])
     assert 0.05 <= gamma <= 1.0
     env.close()
+
+
+def test_the_default_controller_has_its_own_policies():
+    """"sofar" looks up the default's version; a preset without a trained policy gets none."""
+    for scenario in ("paper", "interactive"):
+        assert default_policy_path(stack="sofar", scenario=scenario) == default_policy_path(stack="sofar-4",
+                                                                                          scenario=scenario)
+        assert default_policy_path(stack="sofar", scenario=scenario) != default_policy_path(stack="sofar-1",
+                                                                                          scenario=scenario)
+    with pytest.raises(ValueError, match="no shipped PASTA policy"):
+        default_policy_path(stack="sofar-3")
+    with pytest.raises(ValueError, match="no shipped PASTA policy"):
+        default_policy_path(stack="sofar", scenario="dynamic")
 
 
 def test_no_shipped_policy_for_an_unknown_combination():

@@ -1,5 +1,10 @@
 """Every preset, world and multi-car race resolves to the values it had before the configuration layer was
-rebuilt (the snapshot in ``data/resolved_configs.json``, written by :mod:`.resolved_configs`)."""
+rebuilt (the snapshot in ``data/resolved_configs.json``, written by :mod:`.resolved_configs`).
+
+The snapshot was re-written once on purpose, when the default moved to ``"sofar-4"``: every entry of
+``"sofar"`` and of the default (``env_config``, the multi-car cases) gained the four stall-fix fields and nothing
+else, each ``"sofar-1"`` entry equals the former ``"sofar"`` one and each new ``"sofar"`` entry the former
+``"sofar-4"`` one, in every world, single-car and multi-car."""
 
 from __future__ import annotations
 

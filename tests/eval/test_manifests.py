@@ -16,9 +16,10 @@ from .episode_csv import FIRST_FORMAT
 
 ROOT = Path(__file__).resolve().parents[2]
 MANIFESTS = mf.manifest_paths(ROOT / "experiments")
-BACKFILLED = ("table1", "paper_stack_table1", "paper_stack_seed21", "paper_stack_seed42", "table2",
-              "interactive_table1", "interactive_dense_table2", "interactive_dense_seed21", "interactive_dense_seed42",
-              "dynamic_table1", "dynamic_seed21", "multi_agent", "multi_agent_seed21", "interactive_dense_pareto",
+BACKFILLED = ("table1_sofar_1", "paper_stack_table1", "paper_stack_seed21", "paper_stack_seed42", "table2_sofar_1",
+              "interactive_table1_sofar_1", "interactive_dense_table2_sofar_1", "interactive_dense_seed21",
+              "interactive_dense_seed42", "dynamic_table1_sofar_1", "dynamic_seed21", "multi_agent_sofar_1",
+              "multi_agent_seed21", "interactive_dense_pareto",
               "interactive_dense_pareto_seed42", "interactive_dense_budget_pareto",
               "interactive_dense_budget_pareto_seed42", "reference_numerics_interventions",
               "end_rows_interventions_recover_gamma05", "end_rows_interventions_recover", "end_rows_interventions_ends",
@@ -122,7 +123,7 @@ def test_first_format_rows_read_and_refuse_a_backfill(tmp_path: Path) -> None:
     copy.write_text(FIRST_FORMAT)
     rows = mf.raw_rows(copy)
     assert len(rows) == 2 and {(r["stack"], r["scenario"], r["stalled"], r["config_hash"]) for r in rows} == {
-        ("sofar", "paper", "", "")}
+        ("sofar-1", "paper", "", "")}  # made by the default of its time, version 1
     with pytest.raises(ValueError, match="no stack column"):
         mf.backfill_hash(copy, m.config_hash)
 
@@ -148,6 +149,11 @@ def test_run_writes_manifest_json_and_rows_with_the_hash(tmp_path: Path) -> None
     assert record["config_hash"] == [m.config_hash] and record["manifest"] == "tiny"
     assert record["commit"] and record["wall_time_s"] >= 0 and "cpu" in record["machine"]
     assert m.config_hash in read_config_json(tmp_path / "out")
+    assert record["earlier_runs"] == []
+    # a resumed run of the same hash keeps the runs it continued
+    mf.run_manifest(m, ROOT, workers=1, out=tmp_path / "out", progress=False)
+    again = json.loads((tmp_path / "out" / "tiny.manifest.json").read_text())
+    assert again["earlier_runs"] == [{k: record[k] for k in ("commit", "wall_time_s", "finished_at")}]
     with pytest.raises(ValueError, match="unknown keys"):
         (tmp_path / "bad.toml").write_text('kind = "table1"\nout = "x"\nepisode = 1\n')
         mf.load_manifest(tmp_path / "bad.toml")

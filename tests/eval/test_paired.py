@@ -114,9 +114,9 @@ def test_one_strategy_of_two_stacks_is_compared_by_stack_label():
     assert rows[0]["strategy"] == "gamma=0.05"  # the input is not changed
     c = ev.paired_comparison(labelled, "sofar-recover:gamma=0.05", "sofar:gamma=0.05")
     assert (c.n, c.a_only, c.b_only) == (4, 2, 0)
-    # an empty stack column is the default preset
+    # an empty stack column is the default of the time such files were written, version 1
     plain = ev.label_by_stack({"S": [{**rows[0], "stack": ""}]})
-    assert plain["S"][0]["strategy"] == "sofar:gamma=0.05"
+    assert plain["S"][0]["strategy"] == "sofar-1:gamma=0.05"
 
 
 def test_cli_by_stack_pools_one_csv_per_preset(tmp_path, capsys):

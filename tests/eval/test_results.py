@@ -68,10 +68,11 @@ def test_older_format_is_read_and_migrated_on_append(tmp_path):
         header = next(csv.reader(f))
     assert header == list(ev.EPISODE_COLUMNS)
     rows = ev.read_episode_csv(path)
-    # rows of older files stand for the sofar controller and the default opponent count
-    assert [(r["stack"], r["n_opponents"]) for r in rows] == [("sofar", ""), ("sofar", "3")]
+    # rows of older files stand for the default of their time, "sofar-1", and the default opponent count;
+    # the appended row keeps the name it was run with
+    assert [(r["stack"], r["n_opponents"]) for r in rows] == [("sofar-1", ""), ("sofar", "3")]
     # the old row has no configuration hash: it resumes only a task without one, never a hashed task
-    assert [_row_key(r) for r in rows] == [_task(pinned_hash="").key, _task(n_opponents=3).key]
+    assert [_row_key(r) for r in rows] == [_task(pinned_hash="", stack="sofar-1").key, _task(n_opponents=3).key]
     assert _row_key(rows[0]) != _task().key
 
 
@@ -118,8 +119,8 @@ def test_older_format_rows_resume_before_any_append(tmp_path):
         w.writeheader()
         w.writerow({k: int(v) if isinstance(v, bool) else v for k, v in old.items()})
     rows = ev.read_episode_csv(path)
-    assert len(rows) == 1 and rows[0]["stack"] == "sofar"
-    assert _row_key(rows[0]) == _task(pinned_hash="").key  # read as written, hash "" (none)
+    assert len(rows) == 1 and rows[0]["stack"] == "sofar-1"  # the default of its time
+    assert _row_key(rows[0]) == _task(pinned_hash="", stack="sofar-1").key  # read as written, hash "" (none)
 
 
 def _old_format_file(path, rows) -> None:

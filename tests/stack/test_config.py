@@ -6,6 +6,8 @@ import dataclasses
 
 import pytest
 
+from sofar_env.configs import EnvConfig
+from sofar_env.configs.registry import DEFAULT_STACK_PRESET, default_stack
 from sofar_env.stack import STACK_PRESETS, StackConfig, stack_preset
 
 
@@ -33,14 +35,24 @@ def test_the_miqp_side_windows_use_the_barrier_braking_distance():
 
 
 def test_sofar_preset_is_the_default():
-    assert STACK_PRESETS == ("sofar", "paper", "sofar-ends", "sofar-recover", "sofar-2", "sofar-3", "sofar-4",
-                             "sofar-daqp", "reference-numerics", "reference-numerics-no-phantoms")
-    assert stack_preset("sofar") == StackConfig()
-    assert stack_preset(" SoFAR ") == StackConfig()
+    assert STACK_PRESETS == ("sofar", "sofar-1", "paper", "sofar-ends", "sofar-recover", "sofar-2", "sofar-3",
+                             "sofar-4", "sofar-daqp", "reference-numerics", "reference-numerics-no-phantoms")
+    assert DEFAULT_STACK_PRESET == "sofar-4"
+    assert stack_preset("sofar") == stack_preset(DEFAULT_STACK_PRESET) == default_stack() == EnvConfig().stack
+    assert stack_preset(" SoFAR ") == stack_preset("sofar")
+    assert stack_preset("sofar-1") == StackConfig()  # version 1: the default before the stall fixes
+
+
+def test_the_default_differs_from_version_1_exactly_by_the_stall_fixes():
+    new, old = stack_preset("sofar"), stack_preset("sofar-1")
+    changed = {f.name: getattr(new, f.name) for f in dataclasses.fields(StackConfig)
+               if getattr(new, f.name) != getattr(old, f.name)}
+    assert changed == {"restart_lateral_weight": 15.0, "follow_creep_speed": 2.0, "slow_rows_speed": 10.0,
+                       "slow_rows_curved": True}  # slow_rows_exit_speed 12 is StackConfig's own, inert while off
 
 
 def test_paper_preset_switches_off_exactly_the_additions():
-    sofar, paper = stack_preset("sofar"), stack_preset("paper")
+    sofar, paper = stack_preset("sofar-1"), stack_preset("paper")
     changed = {f.name for f in dataclasses.fields(StackConfig) if getattr(sofar, f.name) != getattr(paper, f.name)}
     assert changed == {"follow", "parked_pass", "pace_prediction", "lateral_prediction", "footprint_edges", "miqp"}
     assert not paper.follow and not paper.pace_prediction and not paper.footprint_edges
@@ -50,5 +62,5 @@ def test_paper_preset_switches_off_exactly_the_additions():
 
 @pytest.mark.parametrize("name", ["Paper2026", "", None, 3])
 def test_unknown_presets_list_the_valid_ones(name):
-    with pytest.raises(ValueError, match="valid presets: sofar, paper"):
+    with pytest.raises(ValueError, match="valid presets: sofar, sofar-1, paper"):
         stack_preset(name)

@@ -174,7 +174,8 @@ def test_the_end_row_presets_give_the_mpc_edges_without_the_frozen_heading_swing
 
     track = tracks["LagunaSeca"]
     race = empty_race(track)
-    default, ends = OvertakingStack(track), OvertakingStack(track, stack_preset(preset))
+    # the end-row presets are version 1 ("sofar-1") with other track rows
+    default, ends = OvertakingStack(track, stack_preset("sofar-1")), OvertakingStack(track, stack_preset(preset))
     assert ends.config.mpc.track_rows == rows and default.config.mpc.track_rows == "reference"
     assert dataclasses.replace(ends.config, mpc=default.config.mpc) == default.config  # nothing else differs
     for stack in (default, ends):
