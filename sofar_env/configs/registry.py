@@ -142,11 +142,12 @@ DEFAULT_STACK_PRESET = "sofar-4"
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
 longer match their rows until they are re-made (``tests/eval/test_manifests.py``)."""
 
-STACK_PRESET_REGISTRY: dict[str, Entry] = {
-    "sofar": Entry(_sofar_4(), """The default controller of every environment, whichever version is current:
+_DEFAULT_DOC = """The default controller of every environment, whichever version is current:
 now ``"sofar-4"`` (:data:`DEFAULT_STACK_PRESET`), the same value and config hash. Scripts that mean "the
 project's controller" name it; a result row records its config hash, so rows of two versions are never mixed
-under this name. A fixed version is named by its number (``"sofar-1"``, ``"sofar-4"``)."""),
+under this name. A fixed version is named by its number (``"sofar-1"``, ``"sofar-4"``)."""
+
+STACK_PRESET_REGISTRY: dict[str, Entry] = {
     "sofar-1": Entry(StackConfig(), """The default controller until ``"sofar-4"`` replaced it (version 1, called
 ``"sofar"`` in the tables made with it): :class:`StackConfig` as it is, the paper's Algorithm 1 plus the
 project's additions (pass or follow, pace-ratio and lateral prediction, footprint-aware edges, consistent
@@ -211,6 +212,8 @@ defect removed, the phantom opponents (slots without an opponent on the target l
 experiment that attributes a difference to the phantoms."""),
 }
 """The controller presets: name -> Entry(StackConfig, doc), in the order of ``STACK_PRESETS``."""
+STACK_PRESET_REGISTRY = {"sofar": Entry(STACK_PRESET_REGISTRY[DEFAULT_STACK_PRESET].value, _DEFAULT_DOC),
+                         **STACK_PRESET_REGISTRY}  # "sofar" first: the default's value, derived from its version
 
 
 def default_stack() -> StackConfig:
