@@ -15,6 +15,14 @@ whose preference input works chooses a lower gamma as the safety weight grows. W
 ``respond`` reads a trained checkpoint on real states: it drives seeded episodes of a world at fixed
 gammas, records the observations, and reports the policy's deterministic gamma per preference over them
 (mean, 10th and 90th percentile).
+
+``push`` collects rollouts of a checkpoint in its training world (preferences drawn as in training) and
+reports, per safety-weight bin, which objective pushes the mean gamma up or down and how hard
+(:mod:`sofar_agents.evaluation.objective_push`). The rollouts are the ones training would have collected
+next (the checkpoint's random state and seeds), so a rerun gives the same table:
+
+    python eval/pasta_preference.py push --policy runs/morl/pasta_final.json --scenario interactive \
+        --opponents 8 --rollouts 6
 """
 
 from __future__ import annotations
@@ -115,6 +123,40 @@ def respond(args: argparse.Namespace) -> None:
         sys.stdout.write(f"| {w:g} | {m:.3f} | {lo:.3f} | {hi:.3f} |\n")
 
 
+def push(args: argparse.Namespace) -> None:
+    import functools
+
+    import gymnasium as gym
+    import torch
+
+    from sofar_agents.evaluation.objective_push import objective_push, pool_bins, push_table
+    from sofar_agents.pasta import PASTA
+    from sofar_agents.pasta.rollout import RolloutCollector, make_training_env
+
+    torch.set_num_threads(1)
+    agent = PASTA.load(args.policy)
+    kwargs: dict = {"scenario": args.scenario}
+    if args.opponents is not None:
+        kwargs["n_opponents"] = args.opponents
+    fns = [functools.partial(make_training_env, args.env_id, kwargs, args.rho_min, args.rho_max)
+           for _ in range(args.n_envs)]
+    venv = gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
+    collector = RolloutCollector()
+    runs = []
+    try:
+        for i in range(args.rollouts):
+            buffer = collector.collect(agent, venv, agent.config.n_steps)
+            runs.append(objective_push(agent, buffer))
+            ends = sum(bool(e.get("collision")) or bool(e.get("off_track")) for e in buffer.episodes)
+            logger.info("rollout %d of %d: %d episodes ended, %d by a collision or off-track", i + 1,
+                        args.rollouts, len(buffer.episodes), ends)
+    finally:
+        venv.close()
+    sys.stdout.write(f"{args.rollouts} rollouts of {args.n_envs} x {agent.config.n_steps} steps in {args.env_id} "
+                     f"({args.scenario}), policy {args.policy}\n\n"
+                     + push_table(pool_bins(runs), agent.objective_names))
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -139,13 +181,22 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     rs.add_argument("--safety-weights", nargs="+", type=float_in(0.0, 0.9),
                     default=[0.1, 0.2, 0.3, 0.45, 0.6, 0.75, 0.9],
                     help="safety weights in [0, 0.9]; overtakes get 0.9 minus each (default 0.1 0.2 0.3 0.45 0.6 0.75 0.9)")
+    pu = sub.add_parser("push", help="which objective pushes a checkpoint's gamma which way, per preference")
+    pu.add_argument("--policy", required=True, help="PASTA checkpoint (.json)")
+    pu.add_argument("--env-id", default="SOfAR-LagunaSeca-v0")
+    pu.add_argument("--scenario", default="interactive")
+    pu.add_argument("--opponents", type=nonneg_int, default=None)
+    pu.add_argument("--rho-min", type=float_in(0.0, 1.0), default=0.1)
+    pu.add_argument("--rho-max", type=float_in(0.0, 1.0), default=0.8)
+    pu.add_argument("--n-envs", type=positive_int, default=2, help="environments per rollout (default 2)")
+    pu.add_argument("--rollouts", type=positive_int, default=6, help="rollouts (default 6)")
     return p.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     args = parse_args(argv)
-    probe(args) if args.command == "probe" else respond(args)
+    {"probe": probe, "respond": respond, "push": push}[args.command](args)
 
 
 if __name__ == "__main__":

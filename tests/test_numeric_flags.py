@@ -119,6 +119,8 @@ USAGE_ERRORS = [  # (script, argv, the flag named in the message)
     ("eval/pasta_preference.py", ["probe", "--steps", "0"], "--steps"),
     ("eval/pasta_preference.py", ["respond", "--policy", "x", "--gammas", "0.01"], "--gammas"),
     ("eval/pasta_preference.py", ["respond", "--policy", "x", "--safety-weights", "0.95"], "--safety-weights"),
+    ("eval/pasta_preference.py", ["push", "--policy", "x", "--rollouts", "0"], "--rollouts"),
+    ("eval/pasta_preference.py", ["push", "--policy", "x", "--rho-max", "1.5"], "--rho-max"),
 ]
 
 

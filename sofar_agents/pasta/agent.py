@@ -80,6 +80,10 @@ class PASTA:
             raise ValueError(f"invalid action bounds {self.action_low}, {self.action_high}")
         self.act_dim = self.action_low.shape[0]
         self.preference = self._check_preference(preference)
+        if self.config.preference_sampling == "trade-off" and (
+                self.n_objectives < 2 or self.preference[0] + self.preference[1] <= 0.0):
+            raise ValueError("preference_sampling 'trade-off' needs two objectives whose preference weights "
+                             f"do not both vanish, got {self.preference.tolist()}")
         names = objective_names if objective_names is not None else [f"objective_{j}" for j in range(n_objectives)]
         self.objective_names = tuple(str(n) for n in names)
         if len(self.objective_names) != self.n_objectives:
@@ -139,6 +143,12 @@ class PASTA:
         """Preferences of ``n`` new training episodes, ``(n, K)`` float32 (see ``config.preference_sampling``)."""
         if self.config.preference_sampling == "fixed":
             return np.tile(self.preference, (n, 1)).astype(np.float32)
+        if self.config.preference_sampling == "trade-off":
+            out = np.tile(self.preference, (n, 1))
+            share = out[:, 0] + out[:, 1]
+            u = self.rng.uniform(0.0, 1.0, size=n)
+            out[:, 0], out[:, 1] = u * share, (1.0 - u) * share
+            return out.astype(np.float32)
         conc = self.config.dirichlet_concentration * self.n_objectives * np.maximum(self.preference, 1e-3)
         return self.rng.dirichlet(conc, size=n).astype(np.float32)
 

@@ -13,7 +13,7 @@ from typing import Annotated, Any
 
 from sofar_agents.cli_types import float_in, nonneg_float, nonneg_int, positive_float, positive_int
 
-__all__ = ["SQUASHINGS", "PASTAConfig"]
+__all__ = ["PREFERENCE_SAMPLINGS", "SQUASHINGS", "PASTAConfig"]
 
 _UNIT = float_in(0.0, 1.0)
 _DISCOUNT = float_in(0.0, 1.0, low_open=True)
@@ -22,6 +22,8 @@ _KAPPA = float_in(0.0, 1.0, high_open=True)
 
 SQUASHINGS = ("sigmoid", "clip")
 """Names of the action squashings (``PASTAConfig.action_squashing``, the checkpoint JSON)."""
+PREFERENCE_SAMPLINGS = ("dirichlet", "fixed", "trade-off")
+"""Names of the training preference distributions (``PASTAConfig.preference_sampling``)."""
 
 
 @dataclass(frozen=True)
@@ -135,7 +137,14 @@ class PASTAConfig:
     known-good fixed gamma; ``None`` starts at the middle of the action range."""
     preference_sampling: str = "dirichlet"
     """``"dirichlet"``: draw a preference w per episode from a Dirichlet whose mean is
-    the agent's preference; ``"fixed"``: always use the agent's preference."""
+    the agent's preference; ``"fixed"``: always use the agent's preference; ``"trade-off"``:
+    the first two objectives split what the agent's preference leaves them,
+    ``w_0 = u (w_0 + w_1)``, ``w_1 = (1 - u) (w_0 + w_1)`` with ``u`` uniform on [0, 1], and
+    the other objectives keep their weights. In SOfAR this is the safety-against-overtakes
+    path that ``eval/pareto.py`` sweeps (with a preference of ``0.5 0.4 0.1/3 0.1/3 0.1/3``,
+    exactly that path), drawn uniformly, ends included: a Dirichlet around the reference
+    preference puts about 3 % of its draws beyond a safety weight of 0.8
+    (docs/decisions/pasta-temperature.md)."""
     preference_interval: Annotated[int, nonneg_int] = 0
     """Draw a new preference every this many steps of an episode (0: once per episode, as the reference).
     The switch is a segment boundary for the advantages: the segment's returns bootstrap from the value
@@ -161,9 +170,9 @@ class PASTAConfig:
             raise ValueError(f"scalarization must be 'stch' or 'linear', got {self.scalarization!r}")
         if self.action_squashing not in SQUASHINGS:
             raise ValueError(f"action_squashing must be one of {SQUASHINGS}, got {self.action_squashing!r}")
-        if self.preference_sampling not in ("dirichlet", "fixed"):
+        if self.preference_sampling not in PREFERENCE_SAMPLINGS:
             raise ValueError(
-                f"preference_sampling must be 'dirichlet' or 'fixed', got {self.preference_sampling!r}"
+                f"preference_sampling must be one of {PREFERENCE_SAMPLINGS}, got {self.preference_sampling!r}"
             )
         if not 0.5 <= self.utopia_quantile <= 1.0:
             raise ValueError(f"utopia_quantile must lie in [0.5, 1], got {self.utopia_quantile}")

@@ -74,6 +74,24 @@ def test_sample_preferences() -> None:
     np.testing.assert_allclose(fixed.sample_preferences(3), np.full((3, 5), 0.2))
 
 
+def test_trade_off_sampling_draws_the_safety_overtakes_path_uniformly() -> None:
+    cfg = PASTAConfig(hidden_sizes=(8,), critic_head_hidden=0, preference_sampling="trade-off")
+    rest = 0.1 / 3
+    agent = PASTA(12, 5, [0.05], [1.0], cfg, preference=[0.5, 0.4, rest, rest, rest], seed=0)
+    w = agent.sample_preferences(4000).astype(np.float64)
+    np.testing.assert_allclose(w[:, 2:], rest, atol=1e-6)  # the other objectives keep their weights
+    np.testing.assert_allclose(w[:, 0] + w[:, 1], 0.9, atol=1e-6)  # the first two split what is left
+    counts, _ = np.histogram(w[:, 0], bins=9, range=(0.0, 0.9))
+    assert counts.min() > 0.8 * 4000 / 9  # uniform, ends included (a Dirichlet starves them)
+    assert w[:, 0].min() < 0.01 and w[:, 0].max() > 0.89
+
+
+def test_trade_off_sampling_needs_weight_on_the_first_two_objectives() -> None:
+    cfg = PASTAConfig(hidden_sizes=(8,), critic_head_hidden=0, preference_sampling="trade-off")
+    with pytest.raises(ValueError, match="trade-off"):
+        PASTA(12, 5, [0.05], [1.0], cfg, preference=[0, 0, 1, 1, 1], seed=0)
+
+
 def test_reconfigure_keeps_mu_and_refuses_shape_changes() -> None:
     agent = PASTA(12, 5, [0.05], [1.0], PASTAConfig(hidden_sizes=(8,), critic_head_hidden=0), seed=0)
     agent.mu_controller.mu = 3.0
