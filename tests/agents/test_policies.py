@@ -130,15 +130,17 @@ def test_every_named_policy_ships_and_loads_by_name():
         named_policy_path("morl")
 
 
-def test_the_shipped_morl_policy_lowers_gamma_as_safety_weighs_more():
+@pytest.mark.parametrize("name", ["morl-dynamic", "morl-dynamic-sofar-4", "morl-interactive-sofar-4"])
+def test_the_shipped_morl_policies_lower_gamma_as_safety_weighs_more(name):
     """The documented direction of the preference input, on fixed states: the mean gamma over a set of
-    observations falls as the safety weight grows (overtakes weight 0.9 minus it)."""
+    observations falls as the safety weight grows (overtakes weight 0.9 minus it), and by a margin."""
     from sofar_agents.evaluation.preference_probe import safety_preferences
 
-    policy = load_policy("morl-dynamic")
+    policy = load_policy(name)
     obs = np.random.default_rng(0).uniform(-0.5, 0.5, (200, policy.obs_dim)).astype(np.float32)
     means = []
-    for w in safety_preferences([0.1, 0.5, 0.9]):
+    for w in safety_preferences([0.1, 0.3, 0.5, 0.7, 0.9]):
         policy.set_preference(w)
         means.append(float(np.mean([policy(o)[0] for o in obs])))
-    assert means[0] > means[1] > means[2], means
+    assert all(a >= b for a, b in zip(means, means[1:])), means  # the bound 0.05 may be reached early
+    assert means[0] - means[-1] > 0.05, means
