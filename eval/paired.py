@@ -8,6 +8,7 @@
     python eval/paired.py results/interactive_dense/end_rows/*/table1_episodes.csv --by-stack \
         --a sofar-recover:gamma=0.05 --b sofar:gamma=0.05
     python eval/paired.py --before-after results/sofar-1/table1/table1_episodes.csv results/table1_episodes.csv
+    python eval/paired.py --pareto results/dynamic/morl_sofar4/pareto_episodes.csv --out results/dynamic/morl_sofar4/paired.md
 
 Each CSV is one seed set (from `eval/table.py`); the sets are pooled with their episodes kept apart.
 Strategy names are those of the CSV's `strategy` column (`adaptive`, `gamma=0.05`, ...). Without
@@ -21,6 +22,11 @@ is run. The logic is in sofar_agents.evaluation.paired.
 With `--before-after BEFORE AFTER` the two CSVs are one seed set run by two controllers: per strategy and for
 all fixed gammas together, success with the paired test and collisions, off-tracks, stalls and overtakes per
 hour, each as before -> after (sofar_agents.evaluation.before_after).
+
+With `--pareto CSV` (one `pareto_episodes.csv` of `eval/pareto.py`) every point that is not a fixed gamma (a
+policy at each preference, an SB3 policy) is compared with the fixed gamma nearest to its mean gamma and with the
+best fixed gamma: success by the exact McNemar test, overtakes per hour by the Wilcoxon signed-rank test
+(sofar_agents.evaluation.pareto_paired).
 """
 
 from __future__ import annotations
@@ -43,6 +49,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "controller presets run on the same episodes")
     p.add_argument("--before-after", action="store_true",
                    help="compare two CSVs of the same episodes run by two controllers, on every outcome")
+    p.add_argument("--pareto", action="store_true",
+                   help="one pareto_episodes.csv: each policy point against the nearest and the best fixed gamma")
     p.add_argument("--out", default=None, help="also write the Markdown table to this file")
     return p.parse_args(argv)
 
@@ -51,6 +59,8 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     if args.before_after:
         return _before_after(args)
+    if args.pareto:
+        return _pareto(args)
     try:
         sets = ev.read_seed_sets(args.csv)
         if args.by_stack:  # one set: the presets' CSVs hold the same episodes, matched by their seeds
@@ -60,6 +70,24 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     text = f"Paired comparisons over {', '.join(sets)}:\n\n" + ev.format_paired(rows)
+    print(text, end="")
+    if args.out:
+        ev.write_markdown(args.out, text)
+    return 0
+
+
+def _pareto(args: argparse.Namespace) -> int:
+    from sofar_agents.evaluation.pareto_paired import format_pareto_paired
+
+    if len(args.csv) != 1:
+        print(f"error: --pareto takes one pareto_episodes.csv, got {len(args.csv)}", file=sys.stderr)
+        return 2
+    try:
+        ((name, rows),) = ev.read_seed_sets(args.csv).items()
+        text = f"Paired comparisons of the points of {name} with the fixed gammas:\n\n" + format_pareto_paired(rows, name)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     print(text, end="")
     if args.out:
         ev.write_markdown(args.out, text)

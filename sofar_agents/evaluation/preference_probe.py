@@ -135,6 +135,13 @@ temperature, ``mu_max = 10``, that it was trained with."""
 MID_START: dict[str, Any] = {"initial_action": 0.5, "log_std_init": -1.2}
 """Start in the middle of the gamma range with a spread of 0.3 (instead of 0.08 and 0.1)."""
 
+CAUTIOUS_START: dict[str, Any] = {"initial_action": 0.15, "log_std_init": -1.2}
+"""Start near the cautious end of the gamma range, at 0.15, with a spread of 0.3."""
+
+TRADE_OFF: dict[str, Any] = {"preference_sampling": "trade-off", "preference": (0.5, 0.4) + (OTHER_WEIGHT / 3,) * 3}
+"""Preferences drawn uniformly along the safety-overtakes path that :func:`safety_preferences` reads (the
+preference the path starts from is the run's preference)."""
+
 PROBE_VARIANTS: dict[str, dict[str, Any]] = {
     "shipped": {},
     "linear": {"scalarization": "linear"},
@@ -148,9 +155,13 @@ PROBE_VARIANTS: dict[str, dict[str, Any]] = {
     "mu in [0.05, 0.3] (the default), mid start": {"mu_max": 0.3, **MID_START},
     "mu decay over 20 %, mid start": {"mu_decay_fraction": 0.2, **MID_START},
     "mu decay over 20 %, no boost, mid start": {"mu_decay_fraction": 0.2, "conflict_boost": False, **MID_START},
+    "mu in [0.05, 0.3], cautious start": {"mu_max": 0.3, **CAUTIOUS_START},
+    "mu in [0.05, 0.3], mid start, trade-off sampling": {"mu_max": 0.3, **MID_START, **TRADE_OFF},
+    "mu in [0.05, 0.3], cautious start, trade-off sampling": {"mu_max": 0.3, **CAUTIOUS_START, **TRADE_OFF},
 }
 """Named departures from :data:`SHIPPED_RECIPE`, one factor (or one pair) at a time. ``mu_decay_fraction``
-sets ``mu_decay_steps`` to that share of the run's steps (otherwise the whole run, as ``train/pasta.py``)."""
+sets ``mu_decay_steps`` to that share of the run's steps (otherwise the whole run, as ``train/pasta.py``);
+``preference`` replaces the reference preference the run starts from."""
 
 PROBE_SAFETY_WEIGHTS = (0.1, 0.3, 0.5, 0.7, 0.9)
 
@@ -190,11 +201,12 @@ def run_probe(variant: str, seed: int, steps: int, n_envs: int = 2) -> ProbeResu
         raise KeyError(f"unknown probe variant {variant!r}; variants: {', '.join(PROBE_VARIANTS)}")
     settings = {**SHIPPED_RECIPE, **PROBE_VARIANTS[variant]}
     fraction = settings.pop("mu_decay_fraction", 1.0)
+    preference = settings.pop("preference", REFERENCE_PREFERENCE)
     settings["mu_decay_steps"] = max(1, int(round(fraction * steps)))
     config = dataclasses.replace(PASTAConfig(), **settings)
     vec_env = gym.vector.SyncVectorEnv([TradeoffEnv for _ in range(n_envs)],
                                        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
-    agent = PASTA(4, 5, [0.05], [1.0], config, preference=REFERENCE_PREFERENCE, seed=seed)
+    agent = PASTA(4, 5, [0.05], [1.0], config, preference=preference, seed=seed)
     last: dict[str, Any] = {}
 
     def keep(_agent: Any, stats: dict[str, Any]) -> None:
