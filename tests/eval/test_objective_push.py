@@ -72,3 +72,29 @@ def test_a_multi_dimensional_action_is_refused() -> None:
     agent = PASTA(3, 2, [0.05, 0.05], [1.0, 1.0], PASTAConfig(hidden_sizes=(8,), critic_head_hidden=0), seed=0)
     with pytest.raises(ValueError, match="one-dimensional"):
         objective_push(agent, None)
+
+
+def test_the_push_script_runs_on_a_racing_world(tmp_path, capsys):
+    """Smoke: a freshly initialised PASTA with short rollouts, one rollout of the paper world's Laguna Seca."""
+    import importlib.util
+    from pathlib import Path
+
+    import gymnasium as gym
+
+    import sofar_env  # noqa: F401  (registers the ids)
+
+    env = gym.make("SOfAR-LagunaSeca-v0", reward_mode="vector")
+    obs_dim, k = env.observation_space.shape[0], env.unwrapped.reward_space.shape[0]
+    env.close()
+    cfg = PASTAConfig(hidden_sizes=(8,), critic_head_hidden=0, n_steps=24, batch_size=24, action_squashing="clip",
+                      initial_action=0.3, preference_interval=8)
+    agent = PASTA(obs_dim, k, [0.05], [1.0], cfg, seed=0,
+                  objective_names=["safety", "overtakes", "progress", "barrier_margin", "gamma_smoothness"])
+    ckpt = agent.save(tmp_path / "tiny.json")
+    spec = importlib.util.spec_from_file_location("pasta_preference_script",
+                                                  Path(__file__).parents[2] / "eval" / "pasta_preference.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    mod.main(["push", "--policy", str(ckpt), "--scenario", "paper", "--n-envs", "1", "--rollouts", "1"])
+    out = capsys.readouterr().out
+    assert "1 rollouts of 1 x 24 steps" in out and "safety: alpha, push" in out and "total push" in out
