@@ -8,7 +8,8 @@
     python eval/paired.py results/interactive_dense/end_rows/*/table1_episodes.csv --by-stack \
         --a sofar-recover:gamma=0.05 --b sofar:gamma=0.05
     python eval/paired.py --before-after results/sofar-1/table1/table1_episodes.csv results/table1_episodes.csv
-    python eval/paired.py --pareto results/dynamic/morl_sofar4/pareto_episodes.csv --out results/dynamic/morl_sofar4/paired.md
+    python eval/paired.py --pareto results/dynamic/morl_sofar4/pareto_episodes.csv --b gamma=0.50 \
+        --out results/dynamic/morl_sofar4/paired.md
 
 Each CSV is one seed set (from `eval/table.py`); the sets are pooled with their episodes kept apart.
 Strategy names are those of the CSV's `strategy` column (`adaptive`, `gamma=0.05`, ...). Without
@@ -25,8 +26,8 @@ hour, each as before -> after (sofar_agents.evaluation.before_after).
 
 With `--pareto CSV` (one `pareto_episodes.csv` of `eval/pareto.py`) every point that is not a fixed gamma (a
 policy at each preference, an SB3 policy) is compared with the fixed gamma nearest to its mean gamma and with the
-best fixed gamma: success by the exact McNemar test, overtakes per hour by the Wilcoxon signed-rank test
-(sofar_agents.evaluation.pareto_paired).
+best fixed gamma (and with the strategies of `--b`, if given): success by the exact McNemar test, overtakes per
+hour by the Wilcoxon signed-rank test (sofar_agents.evaluation.pareto_paired).
 """
 
 from __future__ import annotations
@@ -84,7 +85,7 @@ def _pareto(args: argparse.Namespace) -> int:
         return 2
     try:
         ((name, rows),) = ev.read_seed_sets(args.csv).items()
-        text = f"Paired comparisons of the points of {name} with the fixed gammas:\n\n" + format_pareto_paired(rows, name)
+        text = f"Paired comparisons of the points of {name} with the fixed gammas:\n\n" + format_pareto_paired(rows, name, args.b or ())
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

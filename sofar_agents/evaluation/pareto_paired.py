@@ -60,17 +60,21 @@ def rate_comparison(rows: Sequence[Mapping[str, Any]], a: str, b: str) -> RateCo
                           float(np.mean([rb[k] for k in keys])), float(np.median(d)), p)
 
 
-def pareto_pairs(rows: Sequence[Mapping[str, Any]]) -> list[tuple[str, float, list[str]]]:
-    """``(point, its mean gamma, [nearest fixed gamma, best fixed gamma])`` for every non-fixed strategy.
+def pareto_pairs(rows: Sequence[Mapping[str, Any]], extra: Sequence[str] = ()) -> list[tuple[str, float, list[str]]]:
+    """``(point, its mean gamma, [nearest fixed gamma, best fixed gamma, *extra])`` for every non-fixed strategy.
 
     Fixed strategies are those named ``gamma=<value>``; the best is the one with the highest success
-    (the first listed among ties); the nearest is by ``|value - mean gamma of the point's episodes|``.
-    ``ValueError`` when ``rows`` hold no fixed gamma.
+    (the first listed among ties); the nearest is by ``|value - mean gamma of the point's episodes|``;
+    ``extra`` names more strategies every point is compared with (each listed once). ``ValueError`` when
+    ``rows`` hold no fixed gamma or an ``extra`` strategy is not in them.
     """
     names = list(dict.fromkeys(str(r["strategy"]) for r in rows))
     fixed = [s for s in names if s.startswith("gamma=")]
     if not fixed:
         raise ValueError("the rows hold no fixed gamma (strategy gamma=<value>) to compare with")
+    missing = [e for e in extra if e not in names]
+    if missing:
+        raise ValueError(f"no episodes of {missing}; the rows have {names}")
     success = {s: np.mean([str(r["success"]).lower() in ("true", "1") for r in rows if r["strategy"] == s])
                for s in fixed}
     best = max(fixed, key=lambda s: success[s])
@@ -80,23 +84,23 @@ def pareto_pairs(rows: Sequence[Mapping[str, Any]]) -> list[tuple[str, float, li
             continue
         mean_gamma = float(np.mean([float(r["mean_gamma"]) for r in rows if r["strategy"] == s]))
         nearest = min(fixed, key=lambda g: abs(float(g.split("=", 1)[1]) - mean_gamma))
-        out.append((s, mean_gamma, [nearest] + ([best] if best != nearest else [])))
+        out.append((s, mean_gamma, list(dict.fromkeys([nearest, best, *[e for e in extra if e != s]]))))
     return out
 
 
-def compare_points(rows: Sequence[Mapping[str, Any]], set_name: str = "set"
+def compare_points(rows: Sequence[Mapping[str, Any]], set_name: str = "set", extra: Sequence[str] = ()
                    ) -> tuple[list[tuple[str, float, list[str]]], list[PairedComparison], list[RateComparison]]:
     """The pairs of :func:`pareto_pairs` with their success and overtaking-rate comparisons."""
-    pairs = pareto_pairs(rows)
+    pairs = pareto_pairs(rows, extra)
     sets = {set_name: list(rows)}
     success = [paired_comparison(sets, s, g) for s, _, gs in pairs for g in gs]
     rates = [rate_comparison(rows, s, g) for s, _, gs in pairs for g in gs]
     return pairs, success, rates
 
 
-def format_pareto_paired(rows: Sequence[Mapping[str, Any]], set_name: str = "set") -> str:
+def format_pareto_paired(rows: Sequence[Mapping[str, Any]], set_name: str = "set", extra: Sequence[str] = ()) -> str:
     """Markdown: the points' mean gammas, the success tests, then the overtaking-rate tests."""
-    pairs, success, rates = compare_points(rows, set_name)
+    pairs, success, rates = compare_points(rows, set_name, extra)
     lines = ["| point | mean gamma | compared with |", "|---|---:|---|"]
     lines += [f"| {s} | {g:.3f} | {', '.join(gs)} |" for s, g, gs in pairs]
     text = "\n".join(lines) + "\n\n**Success** (exact McNemar):\n\n" + format_paired(success)

@@ -38,6 +38,14 @@ def test_success_and_overtaking_rate_are_paired_by_episode():
     assert same.median_difference == 0.0 and same.p_value == 1.0
 
 
+def test_extra_strategies_are_compared_with_every_point_once():
+    pairs = pareto_pairs(_rows(), extra=["gamma=0.50", "pasta w=0.9"])
+    assert pairs[0][2] == ["gamma=0.05", "gamma=0.50"]  # a point is not compared with itself
+    assert pairs[1][2] == ["gamma=0.50", "gamma=0.05", "pasta w=0.9"]
+    with pytest.raises(ValueError, match="no episodes of"):
+        pareto_pairs(_rows(), extra=["gamma=0.70"])
+
+
 def test_rows_without_a_fixed_gamma_are_refused():
     with pytest.raises(ValueError, match="no fixed gamma"):
         pareto_pairs([r for r in _rows() if not r["strategy"].startswith("gamma=")])
