@@ -143,7 +143,7 @@ class PASTAConfig:
     the other objectives keep their weights. In SOfAR this is the safety-against-overtakes
     path that ``eval/pareto.py`` sweeps (with a preference of ``0.5 0.4 0.1/3 0.1/3 0.1/3``,
     exactly that path), drawn uniformly, ends included: a Dirichlet around the reference
-    preference puts about one draw in 30 beyond a safety weight of 0.8
+    preference puts about one draw in 13 beyond a safety weight of 0.8 and one in 60 beyond 0.9
     (docs/decisions/pasta-temperature.md)."""
     preference_interval: Annotated[int, nonneg_int] = 0
     """Draw a new preference every this many steps of an episode (0: once per episode, as the reference).
