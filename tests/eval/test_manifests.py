@@ -31,7 +31,11 @@ BACKFILLED = ("table1_sofar_1", "paper_stack_table1", "paper_stack_seed21", "pap
 UNHASHED: dict[str, str] = {"paper_stack_avx2": "recorded on another CPU (AMD EPYC, AVX2): its rows re-make there only"}
 """Committed tables that keep rows without a hash, and why (``experiments/README.md``): every other table with a
 manifest carries its manifest's hash."""
-EXTRA_STRATEGIES: dict[str, set[str]] = {"interactive_dense_morl_pareto": {"PPO (SB3)"}}
+EXTRA_STRATEGIES: dict[str, set[str]] = {
+    name: {"PPO (SB3)"} for name in ("interactive_dense_morl_pareto", "interactive_dense_morl_pareto_seed10300",
+                                     "dynamic_morl_pareto_seed10300", "dynamic_morl_pareto_seed10500",
+                                     "interactive_dense_morl_pareto_seed10500")
+}
 """Rows of a pareto file that are not its manifest's episodes (same configuration hash; the SB3 zip that made them is
 not committed), documented in the manifest."""
 
