@@ -58,61 +58,43 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.before_after:
-        return _before_after(args)
-    if args.pareto:
-        return _pareto(args)
+    mode = _before_after if args.before_after else _pareto if args.pareto else _paired
     try:
-        sets = ev.read_seed_sets(args.csv)
-        if args.by_stack:  # one set: the presets' CSVs hold the same episodes, matched by their seeds
-            sets = ev.label_by_stack({" + ".join(sets): [r for rows in sets.values() for r in rows]})
-        rows = ev.compare_to(sets, args.a, args.b)
+        text = mode(args)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    text = f"Paired comparisons over {', '.join(sets)}:\n\n" + ev.format_paired(rows)
     print(text, end="")
     if args.out:
         ev.write_markdown(args.out, text)
     return 0
 
 
-def _pareto(args: argparse.Namespace) -> int:
+def _paired(args: argparse.Namespace) -> str:
+    sets = ev.read_seed_sets(args.csv)
+    if args.by_stack:  # one set: the presets' CSVs hold the same episodes, matched by their seeds
+        sets = ev.label_by_stack({" + ".join(sets): [r for rows in sets.values() for r in rows]})
+    rows = ev.compare_to(sets, args.a, args.b)
+    return f"Paired comparisons over {', '.join(sets)}:\n\n" + ev.format_paired(rows)
+
+
+def _pareto(args: argparse.Namespace) -> str:
     from sofar_agents.evaluation.pareto_paired import format_pareto_paired
 
     if len(args.csv) != 1:
-        print(f"error: --pareto takes one pareto_episodes.csv, got {len(args.csv)}", file=sys.stderr)
-        return 2
-    try:
-        ((name, rows),) = ev.read_seed_sets(args.csv).items()
-        text = f"Paired comparisons of the points of {name} with the fixed gammas:\n\n" + format_pareto_paired(rows, name, args.b or ())
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    print(text, end="")
-    if args.out:
-        ev.write_markdown(args.out, text)
-    return 0
+        raise ValueError(f"--pareto takes one pareto_episodes.csv, got {len(args.csv)}")
+    ((name, rows),) = ev.read_seed_sets(args.csv).items()
+    return (f"Paired comparisons of the points of {name} with the fixed gammas:\n\n"
+            + format_pareto_paired(rows, name, args.b or ()))
 
 
-def _before_after(args: argparse.Namespace) -> int:
+def _before_after(args: argparse.Namespace) -> str:
     from sofar_agents.evaluation.before_after import before_after, format_before_after
 
     if len(args.csv) != 2:
-        print(f"error: --before-after takes two CSVs (before, after), got {len(args.csv)}", file=sys.stderr)
-        return 2
-    try:
-        sets = ev.read_seed_sets(args.csv)
-        (b_name, before), (a_name, after) = sets.items()
-        lines = before_after(before, after)
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    text = f"Before: {b_name}; after: {a_name}.\n\n" + format_before_after(lines)
-    print(text, end="")
-    if args.out:
-        ev.write_markdown(args.out, text)
-    return 0
+        raise ValueError(f"--before-after takes two CSVs (before, after), got {len(args.csv)}")
+    (b_name, before), (a_name, after) = ev.read_seed_sets(args.csv).items()
+    return f"Before: {b_name}; after: {a_name}.\n\n" + format_before_after(before_after(before, after))
 
 
 if __name__ == "__main__":

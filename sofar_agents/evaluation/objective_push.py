@@ -8,7 +8,7 @@ gamma, and its size how hard, in the same units for every objective. Grouping th
 safety weight of the preference they were driven with shows whether the safety-first and the pace-first
 preferences are pulled apart, and by which objective.
 
-:func:`objective_push` computes the targets as :meth:`PASTA.update` does (return-scaled rewards, GAE,
+:func:`objective_push` computes the targets as :meth:`PASTA.update` does (:meth:`PASTA.advantages`,
 regret against the agent's utopia, smooth-Tchebycheff attention at the agent's mu), without moving the
 agent's utopia, mu or weights. The advantages are centred per objective (as a PPO minibatch is);
 the common scale of the minibatch normalisation is left out, since it does not change a sign or a ratio.
@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 
 from sofar_agents.pasta.attention import attention_weights, normalised_regret
-from sofar_agents.pasta.gae import compute_gae
 
 __all__ = ["SAFETY_BINS", "PushBin", "objective_push", "pool_bins", "push_table"]
 
@@ -61,12 +60,7 @@ def objective_push(agent: Any, buffer: Any, bins: Sequence[tuple[float, float]] 
     if agent.act_dim != 1:
         raise ValueError(f"objective_push needs a one-dimensional action, got {agent.act_dim}")
     cfg, k = agent.config, agent.n_objectives
-    scale = agent.return_scale()
-    rewards = buffer.rewards / scale
-    if cfg.reward_clip is not None:
-        rewards = np.clip(rewards, -cfg.reward_clip, cfg.reward_clip)
-    adv, ret = compute_gae(rewards, buffer.values, buffer.next_values, buffer.terminated, buffer.truncated,
-                           cfg.discount, cfg.gae_lambda)
+    adv, ret, scale = agent.advantages(buffer)
     b = buffer.obs.shape[0] * buffer.obs.shape[1]
     prefs = buffer.preferences.reshape(b, k).astype(np.float64)
     if cfg.scalarization == "linear":

@@ -233,6 +233,22 @@ class PASTA:
 
     # ----------------------------------------------------------------- update
 
+    def advantages(self, buffer: RolloutBuffer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per-objective GAE advantages and lambda-returns of ``buffer`` in normalised units, and the scale.
+
+        The rewards are divided by the current return scale (:meth:`return_scale`) and clipped to
+        ``config.reward_clip``. Returns ``(advantages, returns, scale)``, the first two ``(T, N, K)``.
+        Changes nothing in the agent.
+        """
+        cfg = self.config
+        scale = self.return_scale()
+        rewards = buffer.rewards / scale
+        if cfg.reward_clip is not None:
+            rewards = np.clip(rewards, -cfg.reward_clip, cfg.reward_clip)
+        adv, ret = compute_gae(rewards, buffer.values, buffer.next_values, buffer.terminated, buffer.truncated,
+                               cfg.discount, cfg.gae_lambda)
+        return adv, ret, scale
+
     def update(self, buffer: RolloutBuffer) -> dict[str, Any]:
         """One PASTA update (n_epochs of minibatch PPO) on a collected rollout.
 
@@ -245,12 +261,7 @@ class PASTA:
         t_start = time.perf_counter()
         cfg = self.config
         k = self.n_objectives
-        scale = self.return_scale()
-        rewards = buffer.rewards / scale
-        if cfg.reward_clip is not None:
-            rewards = np.clip(rewards, -cfg.reward_clip, cfg.reward_clip)
-        adv, ret = compute_gae(rewards, buffer.values, buffer.next_values, buffer.terminated, buffer.truncated,
-                               cfg.discount, cfg.gae_lambda)
+        adv, ret, scale = self.advantages(buffer)
 
         flat_ret = ret.reshape(-1, k)
         perf = flat_ret.mean(axis=0) * scale  # mean lambda-return, raw units
