@@ -3,8 +3,8 @@
 Run through ``python bench/bench_env.py --compare REV [--rounds 5] [other bench_env options]`` or
 ``python bench/bench_env.py --compare-stack JSON [--rounds 5] [...]``.
 
-With ``--compare REV`` the revision is exported (``git archive``) into a temporary directory; with
-``--compare-stack JSON`` both sides are the working tree, "old" with the controller of ``--stack`` and
+With ``--compare REV`` the revision is exported (``git archive``) into a temporary directory (``--new-stack
+PRESET``: the working tree's side runs that preset, the revision its default); with ``--compare-stack JSON`` both sides are the working tree, "old" with the controller of ``--stack`` and
 "new" with the controller overrides JSON (e.g. ``{"mpc": {"qp_solver": "daqp"}}``). Then ``--rounds``
 rounds alternate one timed pass of each side, the order flipping every round (old-new, new-old, ...),
 so that a drift of the host's speed (other tenants, thermal state) falls on both sides alike.
@@ -15,7 +15,8 @@ set to the side's tree. It makes the environment through the public constructor 
 revision accepts too, :func:`env_spec`) and imports nothing else of the package, so a revision from
 before any of the package's later modules runs unchanged; the pass checks which ``sofar_env`` it
 imported. It times each step with the wall clock and with the process's CPU time
-(``time.process_time``); with ``--vector N`` it also times an AsyncVectorEnv.
+(``time.process_time``), and digests every observation and reward; with ``--vector N`` it also times an
+AsyncVectorEnv. The report says whether all passes of both sides drove the same trajectory to the bit.
 
 Reported per side: the median CPU and wall time per step over the rounds (and steps/s) with their
 min-max spread; and the ratios new/old of the medians together with the median and range of the
@@ -113,7 +114,8 @@ def _side_summary(passes: list[dict]) -> dict:
            "steps_per_s": _summary([p["steps_per_s"] for p in passes]),
            "step_ms_median": _summary([p["step_ms"]["median"] for p in passes]),
            "episodes_ended": [p["episodes_ended"] for p in passes],
-           "reference_workload_ms": _summary([p["reference_workload_ms"]["after"] for p in passes])}
+           "reference_workload_ms": _summary([p["reference_workload_ms"]["after"] for p in passes]),
+           "trajectory_digests": sorted({p.get("trajectory_digest", "") for p in passes})}
     loads = [p["load_average_1min"]["after"] for p in passes]
     if all(v is not None for v in loads):
         out["load_average_1min"] = _summary(loads)
@@ -155,8 +157,18 @@ def _describe(old: dict, new: dict) -> str:
             f"new {new['cpu_ms_per_step']:.3f} / {new['wall_ms_per_step']:.3f} ms per step")
 
 
+def same_trajectories(old: list[dict], new: list[dict]) -> bool | None:
+    """Whether every pass of both sides drove the same trajectory (one :mod:`bench_pass` digest, the same on
+    both sides); None where a pass has no digest."""
+    digests = [p.get("trajectory_digest") for p in (*old, *new)]
+    if not digests or None in digests:
+        return None
+    return len(set(digests)) == 1
+
+
 def _finish(args: argparse.Namespace, result: dict, passes: dict[str, list]) -> dict:
     result.update({"ratio": ratios(passes["old"], passes["new"]),
+                   "same_trajectories": same_trajectories(passes["old"], passes["new"]),
                    # steps/s new/old, as before the CPU times were recorded
                    "ratio_of_medians": float(np.median([p["steps_per_s"] for p in passes["new"]])
                                              / np.median([p["steps_per_s"] for p in passes["old"]])),
@@ -183,15 +195,18 @@ def compare_revisions(args: argparse.Namespace) -> dict:
     head = _git(repo, "rev-parse", "HEAD")
     dirty = bool(_git(repo, "status", "--porcelain", "--untracked-files=no"))
     env_id, kwargs = env_spec(args)
+    new_kwargs = kwargs if args.new_stack is None else {**kwargs, "stack": args.new_stack}
 
     def run(side, tree, scratch, r):
         out = scratch / f"pass_{side}_{r}.json"
-        return run_pass(tree, pass_command(env_id, kwargs, args, out), out)
+        return run_pass(tree, pass_command(env_id, kwargs if side == "old" else new_kwargs, args, out), out)
 
     old_commit, passes = interleave(repo, args.compare, args.rounds, run, _describe)
     result = {**_header(args), "env_id": env_id, "kwargs": kwargs,
-              "old": {"rev": args.compare, "commit": old_commit, **_side_summary(passes["old"])},
-              "new": {"rev": "working tree", "commit": head, "dirty": dirty, **_side_summary(passes["new"])}}
+              **({"stack": f"{args.new_stack} (new side)"} if args.new_stack else {}),
+              "old": {"rev": args.compare, "commit": old_commit, "kwargs": kwargs, **_side_summary(passes["old"])},
+              "new": {"rev": "working tree", "commit": head, "dirty": dirty, "kwargs": new_kwargs,
+                      **_side_summary(passes["new"])}}
     return _finish(args, result, passes)
 
 
@@ -228,6 +243,12 @@ def _print(res: dict) -> None:
               f"[{side['cpu_ms_per_step']['min']:.3f}, {side['cpu_ms_per_step']['max']:.3f}], "
               f"{side['wall_ms_per_step']['median']:.3f} ms wall [{side['wall_ms_per_step']['min']:.3f}, "
               f"{side['wall_ms_per_step']['max']:.3f}] ({side['steps_per_s']['median']:.0f} env steps/s)")
+    if old.get("kwargs") != new.get("kwargs"):
+        print(f"  make kwargs: old {json.dumps(old.get('kwargs'))}, new {json.dumps(new.get('kwargs'))}")
+    same = res.get("same_trajectories")
+    print("  trajectories: " + {True: "identical to the bit on both sides in every pass (observations and rewards)",
+                                False: "differ (observations or rewards of some pass; or another observation layout)",
+                                None: "not compared (a pass without a digest)"}[same])
     for key, what in (("cpu_ms_per_step", "CPU time per step"), ("wall_ms_per_step", "wall time per step")):
         r = res["ratio"][key]
         pr = r["per_round"]

@@ -4,7 +4,8 @@ Usage::
 
     python bench/bench_env.py [--steps 1000] [--track LagunaSeca] [--rho 0.5] [--opponents 4]
                              [--gamma 0.5] [--seed 0] [--repeats 3] [--vector N] [--json PATH]
-                             [--scenario paper|interactive] [--compare REV | --compare-stack JSON [--rounds 5]]
+                             [--scenario paper|interactive]
+                             [--compare REV [--new-stack PRESET] | --compare-stack JSON] [--rounds 5]
 
 Two passes over the same seeded episodes:
 
@@ -31,7 +32,10 @@ tree alternate, each in a fresh subprocess (:mod:`bench_pass`) whose ``PYTHONPAT
 package and which makes the env through the public constructor only (``gymnasium.make`` of the
 registered id), so revisions from before this script's own imports run too; the medians and
 spreads of the CPU time (``time.process_time``) and the wall time per step, and their ratios,
-are reported. ``--compare-stack JSON`` runs the same A/B in the working tree between the default
+are reported, and whether both sides drove the same trajectory (a digest of every observation and
+reward). With ``--new-stack PRESET`` the working tree runs that controller preset and the revision its own
+default: ``--compare 2e40063 --new-stack sofar-1`` times the former default, the controller of that revision,
+on the same trajectory. ``--compare-stack JSON`` runs the same A/B in the working tree between the default
 controller and the controller overrides JSON (e.g. ``'{"mpc": {"qp_solver": "daqp"}}'``).
 
 The host's 1-minute load average and the time of a fixed reference workload
@@ -227,6 +231,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--compare", default=None, metavar="REV",
                         help="interleaved A/B against the git revision REV instead of a plain run: CPU and wall "
                              "time per step, each pass in a fresh subprocess (see bench/bench_compare.py)")
+    parser.add_argument("--new-stack", default=None, choices=STACK_PRESETS, metavar="PRESET",
+                        help="with --compare: the working tree's side runs this controller preset, the revision "
+                             "its own default (e.g. --compare 2e40063 --new-stack sofar-1: the former default, "
+                             "whose trajectories the report checks against the revision's)")
     parser.add_argument("--compare-stack", default=None, metavar="JSON",
                         help="interleaved A/B in the working tree instead of a plain run: the default controller "
                              "against these controller overrides, e.g. '{\"mpc\": {\"qp_solver\": \"daqp\"}}'")
@@ -244,6 +252,8 @@ def main(argv: list[str] | None = None) -> dict:
     args = parser.parse_args(argv)
     if args.compare is not None and args.compare_stack is not None:
         parser.error("--compare and --compare-stack are two modes: give one")
+    if args.new_stack is not None and args.compare is None:
+        parser.error("--new-stack is an option of --compare REV")
     if args.compare_stack is not None:
         try:
             stack = json.loads(args.compare_stack)

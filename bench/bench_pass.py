@@ -22,6 +22,7 @@ are recorded before and after the pass.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import os
@@ -66,23 +67,34 @@ def load_average() -> float | None:
 
 def timed_steps(env, steps: int, gamma: float, seed: int) -> dict:
     """Wall and CPU time of ``steps`` steps of ``env`` at constant ``gamma`` from ``reset(seed=seed)`` (resets
-    excluded; an episode that ends is reset with the next seed)."""
+    excluded; an episode that ends is reset with the next seed), and ``trajectory_digest``: the SHA-256 of
+    every step's observation and reward (float64 bytes) and of the reset observations, computed outside the
+    timed region. Two passes with the same digest drove the same trajectory to the bit (same observation
+    layout assumed: a revision with another layout gives another digest)."""
     action = np.array([gamma], np.float32)
-    env.reset(seed=seed)
+    digest = hashlib.sha256()
+
+    def record(obs, reward=None):
+        digest.update(np.asarray(obs, np.float64).tobytes())
+        if reward is not None:
+            digest.update(np.asarray(reward, np.float64).tobytes())
+
+    record(env.reset(seed=seed)[0])
     wall, cpu = np.empty(steps), np.empty(steps)
     mpc = []
     episodes = 0
     perf, proc = time.perf_counter, time.process_time
     for i in range(steps):
         c0, t0 = proc(), perf()
-        _, _, terminated, truncated, info = env.step(action)
+        obs, reward, terminated, truncated, info = env.step(action)
         t1, c1 = perf(), proc()
         wall[i], cpu[i] = t1 - t0, c1 - c0
+        record(obs, reward)
         if "mpc_time_ms" in info:
             mpc.append(info["mpc_time_ms"])
         if terminated or truncated:
             episodes += 1
-            env.reset(seed=seed + episodes)
+            record(env.reset(seed=seed + episodes)[0])
     return {
         "steps": steps, "episodes_ended": episodes,
         "wall_s": float(wall.sum()), "cpu_s": float(cpu.sum()),
@@ -91,6 +103,7 @@ def timed_steps(env, steps: int, gamma: float, seed: int) -> dict:
         "step_ms": {"median": 1e3 * float(np.median(wall)), "p95": 1e3 * float(np.percentile(wall, 95)),
                     "mean": 1e3 * float(wall.mean())},
         "mpc_median_ms": float(np.median(mpc)) if mpc else None,
+        "trajectory_digest": digest.hexdigest(),
     }
 
 

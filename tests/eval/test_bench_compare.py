@@ -87,6 +87,8 @@ def test_compare_table_reports_cpu_and_wall_time_ratios(capsys):
     ["--compare-stack", "[1]"],                                        # not an object
     ["--compare-stack", "{mpc"],                                       # not JSON
     ["--compare-stack", '{"mpc": {"qp_solver": "daqp"}}', "--stack", "paper"],  # overrides of the default only
+    ["--new-stack", "sofar-1"],                                       # an option of --compare
+    ["--compare", "HEAD", "--new-stack", "no-such-preset"],           # not a preset
 ])
 def test_compare_stack_rejects_bad_arguments(argv):
     proc = subprocess.run([sys.executable, str(ROOT / "bench" / "bench_env.py"), *argv],
@@ -94,13 +96,37 @@ def test_compare_stack_rejects_bad_arguments(argv):
     assert proc.returncode == 2 and "--compare" in proc.stderr
 
 
+def test_compare_new_stack_changes_the_working_tree_side_only():
+    bench_env = _bench_module("bench_env")
+    args = bench_env.build_parser().parse_args(["--compare", "2e40063", "--new-stack", "sofar-1"])
+    assert args.new_stack == "sofar-1" and args.stack == "sofar"
+    # the revision's side keeps the keys every revision accepts (env_spec); the preset goes to the new side
+    assert "stack" not in _bench_module("bench_compare").env_spec(args)[1]
+
+
+def test_same_trajectories_needs_one_digest_on_both_sides():
+    same = _bench_module("bench_compare").same_trajectories
+    a, b = {"trajectory_digest": "a"}, {"trajectory_digest": "b"}
+    assert same([a, a], [a]) is True
+    assert same([a, a], [b]) is False
+    assert same([a, b], [a]) is False   # a side that is not reproducible is not "identical" either
+    assert same([a], [{}]) is None       # a pass of a script without digests
+
+
 def test_a_pass_times_cpu_and_wall_time_of_the_package_it_imports(tmp_path):
-    out = tmp_path / "pass.json"
-    subprocess.run([sys.executable, str(ROOT / "bench" / "bench_pass.py"), "--kwargs",
-                    '{"n_opponents": 1, "timing_info": false}', "--steps", "5", "--warm-up", "1", "--json", str(out)],
-                   check=True, capture_output=True, text=True, timeout=300, cwd=str(tmp_path))
-    res = json.loads(out.read_text())
+    def run(name, gamma):
+        out = tmp_path / name
+        subprocess.run([sys.executable, str(ROOT / "bench" / "bench_pass.py"), "--kwargs",
+                        '{"n_opponents": 1, "timing_info": false}', "--steps", "5", "--warm-up", "1",
+                        "--gamma", gamma, "--json", str(out)],
+                       check=True, capture_output=True, text=True, timeout=300, cwd=str(tmp_path))
+        return json.loads(out.read_text())
+
+    res = run("pass.json", "0.5")
     assert res["steps"] == 5 and res["env_id"] == "SOfAR-LagunaSeca-v0"
     assert res["cpu_ms_per_step"] > 0 and res["wall_ms_per_step"] > 0
     assert res["cpu_s"] == pytest.approx(5e-3 * res["cpu_ms_per_step"])
     assert Path(res["package"]) == ROOT / "sofar_env"
+    # the digest of the trajectory: the same seeded pass gives the same one, another action another
+    assert run("again.json", "0.5")["trajectory_digest"] == res["trajectory_digest"]
+    assert run("other.json", "0.05")["trajectory_digest"] != res["trajectory_digest"]
