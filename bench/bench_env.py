@@ -20,7 +20,8 @@ Two passes over the same seeded episodes:
    components it calls. The timers cost ~0.5 us per call. Inside these, the compiled kernels are
    timed as well (not part of the exclusive sum): the QP solver of the MPC (PIQP set-up, update
    and solve, with their Python call), its generated-C linearisation, and DAQP's branch and
-   bound in the MIQP; what is left is Python (and numpy calls on small arrays).
+   bound in the MIQP (with its data and incumbent where that is one compiled call, DAQP's C API called
+   from a kernel; else ``daqp.solve``); what is left is Python (and numpy calls on small arrays).
 
 With ``--vector N`` a third pass times a gymnasium ``AsyncVectorEnv`` of N worker
 processes (the set-up ``train/pasta.py`` uses: each worker pinned to a CPU of its own, unless
@@ -147,14 +148,17 @@ def _instrument_kernels(env: SOfARRaceEnv, kernels: ComponentTimer):
 
     lin = env.stack.mpc._lin
     lin._eval = kernels.wrap(lin._eval, COMPILED[1])
-    piqp_call, daqp_module = backends._solve_piqp, solvers.daqp
+    piqp_call, daqp_module, bnb_kernel = backends._solve_piqp, solvers.daqp, solvers._bnb_solve
     backends._solve_piqp = kernels.wrap(piqp_call, COMPILED[0])
+    # the branch and bound: one compiled call (DAQP's C API from a kernel) or daqp.solve from Python
+    solvers._bnb_solve = kernels.wrap(bnb_kernel, COMPILED[2])
     if daqp_module is not None:
         solvers.daqp = _TimedModule(daqp_module, kernels.wrap(daqp_module.solve, COMPILED[2]))
 
     def undo() -> None:
         backends._solve_piqp = piqp_call
         solvers.daqp = daqp_module
+        solvers._bnb_solve = bnb_kernel
 
     return undo
 
