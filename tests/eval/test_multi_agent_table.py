@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from sofar_agents.evaluation.manifest_spec import load_manifest
 from sofar_agents.evaluation.multi_agent import read_race_csv, run_multi_agent_table
 from sofar_agents.evaluation.protocol import Strategy
 
@@ -59,7 +60,8 @@ def test_the_committed_multi_agent_run_reads_fully():
     root = Path(__file__).resolve().parents[2] / "results" / "multi_agent"
     rows = read_race_csv(root / "multi_agent_races.csv")
     assert len(rows) == 256 and len({r.key for r in rows}) == 256  # 4 strategies x 4 circuits x 16 races
-    self_play = Strategy.adaptive(root / "selfplay_lagunaseca.json", name="self-play")
+    manifest = load_manifest(root.parents[1] / "experiments" / "multi_agent.toml")
+    self_play = Strategy.adaptive(root.parents[1] / manifest.self_play, name="self-play")  # the policy it names
     assert {r.policy_id for r in rows if r.strategy == "self-play"} == {self_play.policy_id}
 
 
