@@ -107,29 +107,34 @@ class Sensor:
         gain = math.sqrt(max(1.0 - self.phi * self.phi, 0.0))
         new = _empty_tracks(m, int(cfg.latency_steps) + 1)
         out = np.empty((m, 4))
-        _measure_rows(np.ascontiguousarray(rows), np.array(ids, dtype=np.int64), fresh, *self._tracks,
-                      cfg.sigma_s, cfg.sigma_n, cfg.sigma_v, self.length, self.phi, gain, self.dt, cfg.jump_distance,
-                      cfg.tracker_alpha, cfg.tracker_beta, bool(cfg.latency_compensation), *new, out)
+        _measure_rows(np.ascontiguousarray(rows), np.array(ids, dtype=np.int64), fresh, self._tracks,
+                      (cfg.sigma_s, cfg.sigma_n, cfg.sigma_v, self.phi, gain),
+                      (self.length, self.dt, cfg.jump_distance, cfg.tracker_alpha, cfg.tracker_beta,
+                       bool(cfg.latency_compensation)), new, out)
         self._tracks = new
         return out
 
 
 def _empty_tracks(m: int, depth: int) -> tuple:
-    """Track state of ``m`` identities with delay lines of ``depth`` entries, in the argument order of
-    :func:`_measure_rows`: identity, noise (3), delay line (depth, 3), its length and its oldest entry, whether
+    """Track state of ``m`` identities with delay lines of ``depth`` entries, the bundle of :func:`_measure_rows`
+    (``old``, ``new``): identity, noise (3), delay line (depth, 3), its length and its oldest entry, whether
     the tracker has started, its offset and rate estimates, the last true arc length."""
     return (np.zeros(m, dtype=np.int64), np.zeros((m, 3)), np.zeros((m, depth, 3)), np.zeros(m, dtype=np.int64),
             np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.bool_), np.zeros(m), np.zeros(m), np.zeros(m))
 
 
 @kernel
-def _measure_rows(rows, ids, fresh, old_ids, old_noise, old_delay, old_count, old_head, old_started, old_n_hat,
-                  old_rate, old_last_s, sigma_s, sigma_n, sigma_v, length, phi, gain, dt, jump_distance, alpha, beta,
-                  compensate, ids_out, noise, delay, count, head, started, n_hat, n_dot_hat, last_s, out):
+def _measure_rows(rows, ids, fresh, old, noise_model, tracker, new, out):
     """One measurement of the rows ``(s, n, v)`` of the identities ``ids`` (module docstring): the tracks of the
-    previous call (``old_*``, :func:`_empty_tracks`) carried over by identity, restarted for a new identity or
-    after a jump; writes the tracks of this call and the sensed rows ``out`` (M, 4). ``fresh`` (M, 3): the
-    standard normal draws. The operations of the Python-float form it replaced, in its order."""
+    previous call (``old``, a bundle of :func:`_empty_tracks`) carried over by identity, restarted for a new
+    identity or after a jump; writes the tracks of this call (``new``, the same bundle) and the sensed rows ``out``
+    (M, 4). ``fresh`` (M, 3): the standard normal draws; ``noise_model``: ``(sigma_s, sigma_n, sigma_v, phi,
+    gain)``; ``tracker``: ``(length, dt, jump_distance, alpha, beta, compensate)``. The operations of the
+    Python-float form it replaced, in its order."""
+    old_ids, old_noise, old_delay, old_count, old_head, old_started, old_n_hat, old_rate, old_last_s = old
+    sigma_s, sigma_n, sigma_v, phi, gain = noise_model
+    length, dt, jump_distance, alpha, beta, compensate = tracker
+    ids_out, noise, delay, count, head, started, n_hat, n_dot_hat, last_s = new
     depth = delay.shape[1]
     sig = (sigma_s, sigma_n, sigma_v)
     L = length

@@ -187,14 +187,14 @@ class Opponents:
         ep.lifts.advance(t + dt)
         gap = np.asarray(track.gap(self.s[None, :], self.s[:, None]), float).reshape(m, m)  # [i, j] = s_j - s_i
         pace_cfg = cfg.pace
-        knots, soft_lo, soft_hi, _, _, length = self._band.envelope_data()
         s_new, v_new = np.empty(m), np.empty(m)
         # along the track: nominal pace, then the traffic rules (following, passing, yielding)
-        _advance_along(self.s, self.n, self.v, gap, self._squeezed, ep.pace, ep.lifts.start, float(t), float(dt),
-                       pace_cfg.lift_duration, pace_cfg.lift_ramp, pace_cfg.lift_depth, *self._speed_table,
-                       cfg.traffic.follow_gap, self.vehicle.width + cfg.traffic.band_margin,
-                       self.vehicle.length + cfg.defence.alongside_margin, knots, soft_lo, soft_hi, length,
-                       s_new, v_new)
+        _advance_along((self.s, self.n, self.v, gap, self._squeezed), float(t), float(dt),
+                       (ep.pace, ep.lifts.start, pace_cfg.lift_duration, pace_cfg.lift_ramp, pace_cfg.lift_depth,
+                        *self._speed_table),
+                       (cfg.traffic.follow_gap, self.vehicle.width + cfg.traffic.band_margin,
+                        self.vehicle.length + cfg.defence.alongside_margin),
+                       self._band.envelope_data(), (s_new, v_new))
         # across the track
         n_new, n_dot_new, clamps, self._squeezed = steer(dt, ego, (self.s, self.n, self.n_dot, self.v), gap, s_new,
                                                          v_new, ep, self._band, cfg, self.vehicle)
@@ -316,14 +316,20 @@ def _unwrap_gaps(s, ego_s, rel, was_ahead, length, threshold, new, passed):
 
 
 @kernel
-def _advance_along(s, n, v, gap, squeezed, pace, lift_start, t, dt, lift_duration, lift_ramp, lift_depth, knots, table,
-                   follow, band_width, alongside, soft_knots, soft_lo, soft_hi, length, s_new, v_new):
-    """Into ``s_new``, ``v_new``: the along-track step of an interactive field. Each car drives its pace times its
-    lift factor (:func:`~.pace.lift_factor_at` at ``t - lift_start``) times the speed profile ``table`` for
-    ``dt`` [s] by the midpoint rule; the traffic rules then limit the advances
-    (:func:`~.traffic.limit_advances_at`); the new speed is the pace at the new arc length, at most the
-    advance over ``dt`` for a limited car. The track's scalar interpolation and wrap (``Track.speed``,
-    ``Track.wrap`` at a float)."""
+def _advance_along(field, t, dt, pace_model, traffic, band_envelope, out):
+    """Into ``out = (s_new, v_new)``: the along-track step of an interactive field (``field``: ``(s, n, v, gap,
+    squeezed)``) from ``t`` over ``dt`` [s]. Each car drives its pace times its lift factor
+    (:func:`~.pace.lift_factor_at` at ``t - lift_start``) times the speed profile for ``dt`` by the midpoint rule
+    (``pace_model``: ``(pace, lift_start, lift_duration, lift_ramp, lift_depth, knots, table)``); the traffic rules
+    then limit the advances (:func:`~.traffic.limit_advances_at`; ``traffic``: ``(follow, band_width,
+    alongside)``; ``band_envelope``: :meth:`~.lateral.EdgeBand.envelope_data`); the new speed is the pace at the
+    new arc length, at most the advance over ``dt`` for a limited car. The track's scalar interpolation and wrap
+    (``Track.speed``, ``Track.wrap`` at a float)."""
+    s, n, v, gap, squeezed = field
+    pace, lift_start, lift_duration, lift_ramp, lift_depth, knots, table = pace_model
+    follow, band_width, alongside = traffic
+    soft_knots, soft_lo, soft_hi, _, _, length = band_envelope
+    s_new, v_new = out
     m = s.shape[0]
     ds = np.empty(m)
     for i in range(m):

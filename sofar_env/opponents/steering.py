@@ -73,34 +73,47 @@ def steer(dt: float, ego, state: tuple, gap: np.ndarray, s_new, v_new,
         egos = egos.reshape(-1, 3)
     defence, lines, traffic, dcfg = episode.defence, episode.lines, cfg.traffic, cfg.defence
     n_out, nd_out, squeezed = np.empty(m), np.empty(m), np.zeros(m, dtype=np.bool_)
-    clamps = _steer(
-        float(dt), s, n, n_dot, v, np.ascontiguousarray(gap, dtype=float), np.asarray(s_new, dtype=float),
-        np.asarray(v_new, dtype=float), egos,
-        defence.aggressiveness, defence.approach, defence.used, defence.mode, defence.target, defence.moves,
-        vehicle.length + dcfg.alongside_margin, dcfg.min_gap, dcfg.max_gap, dcfg.release, dcfg.min_closing,
-        dcfg.trigger, dcfg.guard_time, dcfg.lateral_speed, dcfg.lateral_accel,
-        bool(lines.active), lines.offsets, lines.a1, lines.a2, lines.w1, lines.w2, lines.p1, lines.p2,
-        cfg.lines.lateral_speed, cfg.lines.lateral_accel,
-        traffic.side_window, vehicle.width + traffic.band_margin, vehicle.width + HARD_GAP,
-        vehicle.width + dcfg.clearance,
-        *band.envelope_data(), *band.hard_data(),
-        n_out, nd_out, squeezed)
+    field = (s, n, n_dot, v, np.ascontiguousarray(gap, dtype=float), np.asarray(s_new, dtype=float),
+             np.asarray(v_new, dtype=float))
+    defence_state = (defence.aggressiveness, defence.approach, defence.used, defence.mode, defence.target,
+                     defence.moves)
+    defence_rules = (vehicle.length + dcfg.alongside_margin, dcfg.min_gap, dcfg.max_gap, dcfg.release,
+                     dcfg.min_closing, dcfg.trigger, dcfg.guard_time, dcfg.lateral_speed, dcfg.lateral_accel)
+    line_data = (bool(lines.active), lines.offsets, lines.a1, lines.a2, lines.w1, lines.w2, lines.p1, lines.p2,
+                 cfg.lines.lateral_speed, cfg.lines.lateral_accel)
+    spacing = (traffic.side_window, vehicle.width + traffic.band_margin, vehicle.width + HARD_GAP,
+               vehicle.width + dcfg.clearance)
+    clamps = _steer(float(dt), field, egos, defence_state, defence_rules, line_data, spacing, band.envelope_data(),
+                    band.hard_data(), (n_out, nd_out, squeezed))
     return n_out, nd_out, int(clamps), squeezed
 
 
 @kernel
-def _steer(dt, s, n, n_dot, v, gap, s_new, v_new, egos,
-           aggressiveness, approach, used, mode, d_target, moves, along, min_gap, max_gap, release, min_closing,
-           trigger, guard_time, d_lateral_speed, d_lateral_accel,
-           lines_active, offsets, a1, a2, w1, w2, p1, p2, l_lateral_speed, l_lateral_accel,
-           side_window, sep_soft, sep_hard, sep_ego,
-           soft_knots, soft_lo, soft_hi, lookahead, lookahead_time, length,
-           half_width, half_length, half_length_sq, knots, wl, wr, hard_length, kappa_knots, kappa,
-           n_out, nd_out, squeezed):
+def _steer(dt, field, egos, defence_state, defence_rules, line_data, spacing, band_envelope, band_hard, out):
     """:func:`steer` on arrays (its steps 1-4 in the module docstring, in the order and with the operations of
-    the Python form it replaced; ``min``/``max`` as Python's). ``egos`` (E, 3) rows ``(s, n, v)``; the
-    defence arrays change in place; writes ``n_out``, ``nd_out``, ``squeezed``; returns the clamps. The band's
-    data: :meth:`EdgeBand.envelope_data` then :meth:`EdgeBand.hard_data` (both end with the track length)."""
+    the Python form it replaced; ``min``/``max`` as Python's). The inputs come in bundles, one per concept:
+
+    * ``field``: the start-of-step ``(s, n, n_dot, v)``, ``gap`` and the new ``(s_new, v_new)``;
+    * ``egos`` (E, 3) rows ``(s, n, v)``;
+    * ``defence_state``: :class:`~.defence.Defence`'s arrays ``(aggressiveness, approach, used, mode, target,
+      moves)``, changed in place; ``defence_rules``: ``(alongside, min_gap, max_gap, release, min_closing,
+      trigger, guard_time, lateral_speed, lateral_accel)``;
+    * ``line_data``: ``(active, offsets, a1, a2, w1, w2, p1, p2, lateral_speed, lateral_accel)`` of the lines;
+    * ``spacing``: ``(side_window, soft separation, hard separation, separation from an ego)``;
+    * ``band_envelope``, ``band_hard``: :meth:`EdgeBand.envelope_data` and :meth:`EdgeBand.hard_data` (both end
+      with the track length);
+    * ``out``: ``(n_out, nd_out, squeezed)``, written.
+
+    Returns the clamps."""
+    s, n, n_dot, v, gap, s_new, v_new = field
+    aggressiveness, approach, used, mode, d_target, moves = defence_state
+    (along, min_gap, max_gap, release, min_closing, trigger, guard_time, d_lateral_speed,
+     d_lateral_accel) = defence_rules
+    lines_active, offsets, a1, a2, w1, w2, p1, p2, l_lateral_speed, l_lateral_accel = line_data
+    side_window, sep_soft, sep_hard, sep_ego = spacing
+    soft_knots, soft_lo, soft_hi, lookahead, lookahead_time, length = band_envelope
+    half_width, half_length, half_length_sq, knots, wl, wr, hard_length, kappa_knots, kappa = band_hard
+    n_out, nd_out, squeezed = out
     m = s.shape[0]
     n_egos = egos.shape[0]
     # the cars beside each one: within side_window (hard), or about to be within BRAKE_LEAD (soft)

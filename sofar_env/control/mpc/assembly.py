@@ -38,17 +38,29 @@ def _finite(x):
 
 
 @kernel
-def assemble(xbar, ubar, n_ref, v_ref, w7, box_lo, box_hi, use_dist, box_dist,
-             flat, a_src, a_fac, a_out, g_src, g_slot, g_gam, g_fac, act, gamma, g_out,
-             f, alat, h, lat, row_lat, lat_acc_max, trk, row_trk, trk_lo, trk_hi, row_cbf,
-             c_buf, b_buf, hl_buf, hu_buf, xl_buf, xu_buf, lo_out, hi_out):
-    """Fill the QP buffers (module docstring); returns the status.
+def assemble(point, refs, w7, box, lin, a_map, g_map, barrier, rows, buffers, box_out):
+    """Fill the QP buffers (module docstring); returns the status. The inputs, one bundle per concept:
 
-    Shapes: ``xbar`` (N+1, 5), ``ubar`` (N, 2), ``n_ref``/``v_ref`` (N,) (stages 1..N), ``w7``,
-    ``box_lo``, ``box_hi``, ``box_dist`` (7,), ``f`` (N+1, 5), ``alat`` (N+1,), ``h`` (N+1, slots),
-    ``act`` (m,) slots, ``trk_lo``/``trk_hi`` (N,); buffers (N, nb), (N, 5), (N, nr) as in
-    :class:`~.layout.QPStructure`; ``lo_out``/``hi_out`` (N, 7) receive the full box on the blocks.
+    * ``point``: ``(xbar (N+1, 5), ubar (N, 2))``; ``refs``: ``(n_ref, v_ref)`` (N,) (stages 1..N); ``w7`` (7,);
+    * ``box``: ``(box_lo, box_hi, use_dist, box_dist)`` (the arrays (7,));
+    * ``lin``: the linearisation ``(flat, f (N+1, 5), alat (N+1,), h (N+1, slots))``;
+    * ``a_map``: ``(a_src, a_fac, a_out)``, the values of ``A`` from ``flat``; ``g_map``: ``(g_src, g_slot,
+      g_gam, g_fac, g_out)``, those of ``G``; ``barrier``: ``(act (m,) slots, gamma)``;
+    * ``rows``: ``(lat, row_lat, lat_acc_max, trk, row_trk, trk_lo, trk_hi, row_cbf)``, the rows that the QP
+      has and where, the track rows' bounds (N,);
+    * ``buffers``: ``(c_buf, b_buf, hl_buf, hu_buf, xl_buf, xu_buf)``, (N, nb), (N, 5), (N, nr) as in
+      :class:`~.layout.QPStructure`; ``box_out``: ``(lo_out, hi_out)`` (N, 7) receive the full box on the blocks.
     """
+    xbar, ubar = point
+    n_ref, v_ref = refs
+    box_lo, box_hi, use_dist, box_dist = box
+    flat, f, alat, h = lin
+    a_src, a_fac, a_out = a_map
+    g_src, g_slot, g_gam, g_fac, g_out = g_map
+    act, gamma = barrier
+    lat, row_lat, lat_acc_max, trk, row_trk, trk_lo, trk_hi, row_cbf = rows
+    c_buf, b_buf, hl_buf, hu_buf, xl_buf, xu_buf = buffers
+    lo_out, hi_out = box_out
     n = ubar.shape[0]
     m = act.shape[0]
     omg = 1.0 - gamma

@@ -58,18 +58,26 @@ _CONTRACT = {1: "dx_{k+1} with a factor other than 1", 2: "a soft row pair", 3: 
 
 
 @kernel
-def _condense(ad, g_data, g_ind, g_ptr, c, b, hl, hu, xl, xu, p, u_cols, x_cols, var_cols, kind, idx, hard_rows,
-              soft_cols, soft_up, soft_lo, row_out, row_lo, sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs):
+def _condense(ad, g_csr, qp, p, layout, out):
     """The condensed QP (module docstring) into the output arrays (``amat``, ``lo_rows``, ``go``, ``rho``, ``w``
     prefilled by the caller); returns 0, or the contract the data break: 1 (a dx_{k+1} factor other than 1),
     2 (a soft pair: signs, infinite sides or rows differ), 3 (a single soft row's other side is finite),
     4 (a soft slack's bounds are not [0, inf)).
 
+    The inputs, one bundle per concept: ``ad`` the equality rows (dense); ``g_csr`` ``(data, indices, indptr)``
+    of G; ``qp`` the sparse QP's vectors ``(c, b, hl, hu, xl, xu)``; ``p`` the cost's diagonal; ``layout`` the
+    pattern's index arrays ``(u_cols, x_cols, var_cols, kind, idx, hard_rows, soft_cols, soft_up, soft_lo,
+    row_out, row_lo)``; ``out`` ``(sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs)``, written.
+
     ``sol`` (5N, 2N + 1): ``dx = sol[:, :2N] du + sol[:, 2N]``, by block forward substitution through the
-    equality rows ``ad`` (dense), whose dx_k entries sit in the block below the diagonal. ``kind``/``idx`` per
+    equality rows ``ad``, whose dx_k entries sit in the block below the diagonal. ``kind``/``idx`` per
     column of z: 0 an input (its index), 1 a state (its row of ``sol``), 2 an explicit slack (its variable),
     3 a soft slack. ``row_out``/``row_lo`` per row of G: its row of ``amat`` (or -1) and, for the lower row of
     a soft pair, its row of ``lo_rows`` (checked equal to the upper one's)."""
+    g_data, g_ind, g_ptr = g_csr
+    c, b, hl, hu, xl, xu = qp
+    u_cols, x_cols, var_cols, kind, idx, hard_rows, soft_cols, soft_up, soft_lo, row_out, row_lo = layout
+    sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs = out
     nu = len(u_cols)
     nx = len(x_cols)
     nv = hess.shape[0]
@@ -230,7 +238,6 @@ class CondensedDAQP:
         bounds first, then the rows on dx, the hard rows and the soft rows; ``rho``, ``w`` the soft weights of
         every constraint; ``sol``, ``go``, ``gabs`` what maps the solution back (:meth:`solve`). Raises
         ValueError for data outside the contract (:func:`_condense`)."""
-        c, b, hl, hu, xl, xu = data
         nu, nv, nx = len(self.u_cols), self.nv, len(self.x_cols)
         n_rows = len(self.sense) - nv
         out = (np.empty((nx, nu + 1)), np.empty((nv, nv)), np.empty(nv), np.zeros((n_rows, nv)),
@@ -238,10 +245,9 @@ class CondensedDAQP:
                np.full(nv + n_rows, 1e-6), np.zeros(nv + n_rows), np.empty(len(self.soft_cols)))
         sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs = out
         g = qs.G
-        status = _condense(qs.A.toarray(), g.data, g.indices, g.indptr, c, b, hl, hu, xl, xu, self.p, self.u_cols,
-                           self.x_cols, self.var_cols, self.kind, self.idx, self.hard_rows, self.soft_cols,
-                           self.soft_up, self.soft_lo, self.row_out, self.row_lo, sol, hess, f, amat, lo_rows, go,
-                           bu, bl, rho, w, gabs)
+        layout = (self.u_cols, self.x_cols, self.var_cols, self.kind, self.idx, self.hard_rows, self.soft_cols,
+                  self.soft_up, self.soft_lo, self.row_out, self.row_lo)
+        status = _condense(qs.A.toarray(), (g.data, g.indices, g.indptr), tuple(data), self.p, layout, out)
         if status:
             raise ValueError(f"QP data outside the condensing contract ({_CONTRACT[status]})")
         sx = sol[:, :nu]

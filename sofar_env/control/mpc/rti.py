@@ -382,12 +382,12 @@ class MPCDCBF:
         if self._box_lo is None:
             self._box_lo, self._box_hi = np.empty((n, N_FIXED)), np.empty((n, N_FIXED))
         status = assemble(
-            xbar, ubar, arrays[1, 1:], arrays[2, 1:], qs.w7, self._box[0], self._box[1], box_dist is not None,
-            _BOX_DROP_DISTANCE if box_dist is None else box_dist,
-            lin.flat, qs.a_src, qs.a_fac, qs.A.data, qs.g_src, qs.g_slot, qs.g_gam, qs.g_fac, self._act,
-            float(gamma), qs.G.data, lin.f, lin.alat, lin.h,
-            qs.lat, qs.row_lat, self.vehicle.lat_acc_max, qs.trk, qs.row_trk, self._trk_lo, self._trk_hi, qs.row_cbf,
-            qs.c_buf, qs.b_buf, qs.hl_buf, qs.hu_buf, qs.xl_buf, qs.xu_buf, self._box_lo, self._box_hi)
+            (xbar, ubar), (arrays[1, 1:], arrays[2, 1:]), qs.w7,
+            (self._box[0], self._box[1], box_dist is not None, _BOX_DROP_DISTANCE if box_dist is None else box_dist),
+            (lin.flat, lin.f, lin.alat, lin.h), (qs.a_src, qs.a_fac, qs.A.data),
+            (qs.g_src, qs.g_slot, qs.g_gam, qs.g_fac, qs.G.data), (self._act, float(gamma)),
+            (qs.lat, qs.row_lat, self.vehicle.lat_acc_max, qs.trk, qs.row_trk, self._trk_lo, self._trk_hi, qs.row_cbf),
+            (qs.c_buf, qs.b_buf, qs.hl_buf, qs.hu_buf, qs.xl_buf, qs.xu_buf), (self._box_lo, self._box_hi))
         if qs.ends:
             qs.fill_ends(xbar[1:, 2], self._trk_lo, self._trk_hi, arrays[0, 1:])
         return qs.data(), status

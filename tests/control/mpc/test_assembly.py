@@ -59,11 +59,12 @@ def numpy_form(qs, lin, xbar, ubar, arrays, gamma, box, act, trk_lo, trk_hi, box
 def run_kernel(qs, lin, xbar, ubar, arrays, gamma, box, act, trk_lo, trk_hi, box_dist, lat_acc_max):
     n = ubar.shape[0]
     lo_out, hi_out = np.empty((n, N_FIXED)), np.empty((n, N_FIXED))
-    status = assemble(xbar, ubar, arrays[1, 1:], arrays[2, 1:], qs.w7, box[0], box[1], box_dist is not None,
-                      BOX_DIST if box_dist is None else box_dist, lin.flat, qs.a_src, qs.a_fac, qs.A.data,
-                      qs.g_src, qs.g_slot, qs.g_gam, qs.g_fac, act, gamma, qs.G.data, lin.f, lin.alat, lin.h,
-                      qs.lat, qs.row_lat, lat_acc_max, qs.trk, qs.row_trk, trk_lo, trk_hi, qs.row_cbf,
-                      qs.c_buf, qs.b_buf, qs.hl_buf, qs.hu_buf, qs.xl_buf, qs.xu_buf, lo_out, hi_out)
+    status = assemble((xbar, ubar), (arrays[1, 1:], arrays[2, 1:]), qs.w7,
+                      (box[0], box[1], box_dist is not None, BOX_DIST if box_dist is None else box_dist),
+                      (lin.flat, lin.f, lin.alat, lin.h), (qs.a_src, qs.a_fac, qs.A.data),
+                      (qs.g_src, qs.g_slot, qs.g_gam, qs.g_fac, qs.G.data), (act, gamma),
+                      (qs.lat, qs.row_lat, lat_acc_max, qs.trk, qs.row_trk, trk_lo, trk_hi, qs.row_cbf),
+                      (qs.c_buf, qs.b_buf, qs.hl_buf, qs.hu_buf, qs.xl_buf, qs.xu_buf), (lo_out, hi_out))
     return status, (qs.c_buf, qs.b_buf, qs.hl_buf, qs.hu_buf, qs.xl_buf, qs.xu_buf, qs.A.data, qs.G.data,
                     lo_out, hi_out)
 
