@@ -17,6 +17,11 @@ Kernels written for this must avoid what differs between numpy and a loop: sums 
 more than two terms (numpy sums pairwise), matrix products (BLAS) and transcendental
 functions of arrays (numpy's SIMD versions); max, min, sqrt and the four operations are exact.
 
+A kernel with many inputs takes them in bundles, one tuple per concept (the field's state, the edge band, the
+QP's buffers, ...), unpacked in its first lines and documented in its docstring, so that adding a row or a
+behaviour changes one bundle rather than two long argument lists; tuples of arrays and scalars cost numba
+nothing at run time and change no bits.
+
 The first kernel a process compiles (rather than loads from the cache) logs one INFO line
 (logger ``sofar_env.compile``), so that the long first step of a fresh install is explained;
 ``python -m sofar_env.compile`` (:func:`sofar_env.compile.warm_up`) compiles ahead of time.
