@@ -4,8 +4,9 @@ Run through ``python bench/bench_env.py --compare REV [--rounds 5] [other bench_
 ``python bench/bench_env.py --compare-stack JSON [--rounds 5] [...]``.
 
 With ``--compare REV`` the revision is exported (``git archive``) into a temporary directory (``--new-stack
-PRESET``: the working tree's side runs that preset, the revision its default); with ``--compare-stack JSON`` both sides are the working tree, "old" with the controller of ``--stack`` and
-"new" with the controller overrides JSON (e.g. ``{"mpc": {"qp_solver": "daqp"}}``). Then ``--rounds``
+PRESET``: the working tree's side runs that preset, the revision its default); with ``--compare-stack JSON``
+both sides are the working tree, "old" with the controller of ``--stack`` and "new" with the controller
+overrides JSON (e.g. ``{"mpc": {"qp_solver": "daqp"}}``). Then ``--rounds``
 rounds alternate one timed pass of each side, the order flipping every round (old-new, new-old, ...),
 so that a drift of the host's speed (other tenants, thermal state) falls on both sides alike.
 
