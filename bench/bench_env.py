@@ -59,6 +59,7 @@ import numpy as np
 
 from bench_pass import load_average, reference_workload_ms, timed_async  # the sibling each timed pass runs
 from sofar_agents.cli_types import gamma_value, nonneg_float, nonneg_int, positive_int
+from sofar_agents.evaluation.files import write_json_atomic
 import sofar_env  # noqa: F401  (registers the ids)
 from sofar_env.env import SOfARRaceEnv
 from sofar_env.observation import observe
@@ -350,8 +351,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"  AsyncVectorEnv, {vec['workers']} workers ({pin}): {vec['steps_per_s']:.0f} env steps/s in total "
               f"({vec['vector_steps']} vector steps, {vec['episodes_ended']} episodes ended)")
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(result, fh, indent=2)
+        write_json_atomic(args.json, result, trailing_newline=False, indent=2)
     return result
 
 

@@ -25,12 +25,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 
 import numpy as np
 
 from sofar_agents.cli_types import nonneg_float, nonneg_int, positive_int
+from sofar_agents.evaluation.files import write_json_atomic
 from sofar_env.planning import MIQPConfig, PassingSidePlanner
 
 TRACK_WIDTH = 12.0   # m
@@ -206,8 +206,7 @@ def bench_from_env(args) -> int:
     print(f"total time without / with the incumbent: {ratio:.2f}x; identical to the bit: "
           f"{len(problems) - differ}/{len(problems)}")
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
-            json.dump(report, fh, indent=2)
+        write_json_atomic(args.json, report, trailing_newline=False, indent=2)
     return 1 if differ else 0
 
 
@@ -277,8 +276,7 @@ def main(argv=None) -> int:
           f"{len(bnb) - len(obj_mismatch)}/{len(bnb)}, failures: {failures}, "
           f"plans using slack: {report['with_slack']}, binaries: {report['binaries_histogram']}")
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
-            json.dump(report, fh, indent=2)
+        write_json_atomic(args.json, report, trailing_newline=False, indent=2)
     if side_mismatch or obj_mismatch or failures or not_identical:
         print(f"MISMATCH: sides {side_mismatch[:10]}, objective {obj_mismatch[:10]}, with and without the "
               f"incumbent {not_identical[:10]}", file=sys.stderr)

@@ -24,7 +24,6 @@ SQP iterations, failures, the smallest barrier value and the number of collision
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time
@@ -33,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sofar_agents.cli_types import gamma_value, nonneg_int, positive_int
+from sofar_agents.evaluation.files import write_json_atomic
 from sofar_env.control import MPCConfig, MPCDCBF, MPCStageData, barrier
 from sofar_env.vehicle import AV21, frenet_rhs, rk4_step
 
@@ -177,8 +177,8 @@ def main(argv: list[str] | None = None) -> int:
     results = run(args.steps, args.gamma, args.seed)
     sys.stdout.write(format_table(results, args.steps))
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump({"steps": args.steps, "gamma": args.gamma, "seed": args.seed, "results": results}, fh, indent=2)
+        report = {"steps": args.steps, "gamma": args.gamma, "seed": args.seed, "results": results}
+        write_json_atomic(args.json, report, trailing_newline=False, indent=2)
     return 0
 
 

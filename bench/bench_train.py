@@ -41,7 +41,6 @@ one env, so its run differs).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -53,6 +52,7 @@ import numpy as np
 from bench_compare import _git, _summary, interleave
 
 from sofar_agents.cli_types import int_at_least, positive_int
+from sofar_agents.evaluation.files import write_json_atomic
 from sofar_env.scenarios import SCENARIOS
 
 _HERE = Path(__file__).resolve().parent
@@ -213,16 +213,14 @@ def main(argv: list[str] | None = None) -> dict:
             parser.error("--backend goes with --compare; with --backends every named set-up runs")
         result = compare_backends(args.backends, args.rounds, args.scenario, args.multi_agent)
         if args.json:
-            with open(args.json, "w") as fh:
-                json.dump(result, fh, indent=2)
+            write_json_atomic(args.json, result, trailing_newline=False, indent=2)
         return result
     if args.scenario is not None and args.backend is None:
         parser.error("--scenario with --compare needs --backend (the short default command trains in its own world)")
     if args.backend is not None:
         result = compare_revision_backend(args.compare, args.backend, args.rounds, args.scenario)
         if args.json:
-            with open(args.json, "w") as fh:
-                json.dump(result, fh, indent=2)
+            write_json_atomic(args.json, result, trailing_newline=False, indent=2)
         return result
     repo = Path(_git(_HERE, "rev-parse", "--show-toplevel"))
     old_commit, walls = interleave(repo, args.compare, args.rounds,
@@ -242,8 +240,7 @@ def main(argv: list[str] | None = None) -> dict:
               f" = {result[side]['env_steps_per_s']['median']:.0f} env steps/s")
     print(f"  speed ratio new/old: {result['speed_ratio_of_medians']:.2f}x (medians of the wall times)")
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(result, fh, indent=2)
+        write_json_atomic(args.json, result, trailing_newline=False, indent=2)
     return result
 
 

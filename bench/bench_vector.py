@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import multiprocessing as mp
 import os
 import time
@@ -47,6 +46,7 @@ import gymnasium as gym
 import numpy as np
 
 from sofar_agents.cli_types import nonneg_int, positive_float, positive_int
+from sofar_agents.evaluation.files import write_json_atomic
 from sofar_env.vector import async_vector_env, worker_cpus
 
 N_OBS = 12
@@ -354,8 +354,7 @@ def main(argv: list[str] | None = None) -> dict:
               f" + {row['return_ms']:.3f}; worker step: mean {row['worker_step_ms']:.3f} "
               f"(CPU {row['worker_cpu_ms']:.3f}), slowest {row['slowest_worker_step_ms']:.3f}")
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(result, fh, indent=2)
+        write_json_atomic(args.json, result, trailing_newline=False, indent=2)
     return result
 
 

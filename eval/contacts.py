@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from sofar_agents.cli_types import nonneg_float
+from sofar_agents.evaluation.files import write_text_atomic
 from sofar_agents.evaluation.multi_agent import RaceResult, RaceTask, race_env, read_race_csv
 from sofar_agents.evaluation.protocol import Strategy
 from sofar_env.control.barrier import barrier
@@ -127,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     table = format_contacts([(r, first_contact(r, overrides)) for r in rows])
     print(table)
     if args.out:
-        Path(args.out).write_text(table + "\n")
+        write_text_atomic(args.out, table + "\n")
     return 0
 
 

@@ -28,6 +28,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from sofar_agents.evaluation.files import write_text_atomic
+
 ROOT = Path(__file__).resolve().parents[1]
 logger = logging.getLogger("first_ten_minutes")
 
@@ -202,11 +204,11 @@ def main(argv: list[str] | None = None) -> Path:
     when = datetime.date.today().isoformat()
     table = render(rows, machine(), (before, after), snippet, when, ratio)
     out = ROOT / args.out
-    out.write_text("# The first ten minutes\n\n" + table, encoding="utf-8")
+    write_text_atomic(out, "# The first ten minutes\n\n" + table)
     logger.info("wrote %s", out)
     if not args.no_readme:
         readme = ROOT / "README.md"
-        readme.write_text(update_readme(readme.read_text(encoding="utf-8"), table), encoding="utf-8")
+        write_text_atomic(readme, update_readme(readme.read_text(encoding="utf-8"), table))
         logger.info("updated the table in %s", readme)
     return out
 

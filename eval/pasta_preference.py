@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from sofar_agents.cli_types import float_in, gamma_value, nonneg_int, positive_int
+from sofar_agents.evaluation.files import write_text_atomic
 from sofar_agents.evaluation.preference_probe import (
     PROBE_SAFETY_WEIGHTS,
     PROBE_VARIANTS,
@@ -46,12 +47,6 @@ from sofar_agents.evaluation.preference_probe import (
 )
 
 logger = logging.getLogger("pasta_preference")
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def probe(args: argparse.Namespace) -> None:
@@ -77,7 +72,7 @@ def probe(args: argparse.Namespace) -> None:
                          "wall_time_s": round(res.wall_time, 1)})
             logger.info("%s seed %d: mean gamma %s (spread %.3f), mu %.3f", variant, seed,
                         rows[-1]["mean_gamma"], res.response.spread, res.final_mu)
-            _atomic_write(store, json.dumps({"safety_weights": list(PROBE_SAFETY_WEIGHTS), "runs": rows}, indent=1))
+            write_text_atomic(store, json.dumps({"safety_weights": list(PROBE_SAFETY_WEIGHTS), "runs": rows}, indent=1))
     lines = ["# Does the preference move the gamma? PASTA on the trade-off environment", "",
              "Mean deterministic gamma over 11 traffic densities at each safety weight (overtakes 0.9 minus it); "
              "spread = largest minus smallest mean. Command: `python eval/pasta_preference.py probe` (see "
@@ -91,7 +86,7 @@ def probe(args: argparse.Namespace) -> None:
                      + " | ".join(f"{g:.3f}" for g in r["mean_gamma"])
                      + f" | {r['spread']:.3f} | {'yes' if r['monotone'] else 'no'} | {r['final_mu']:.2f} "
                        f"| {r['wall_time_s']:.0f} |")
-    _atomic_write(out / "probe.md", "\n".join(lines) + "\n")
+    write_text_atomic(out / "probe.md", "\n".join(lines) + "\n")
     sys.stdout.write("\n".join(lines) + "\n")
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import csv
 import gzip
+import io
 import logging
 import sys
 import time
@@ -31,6 +32,7 @@ from sofar_agents import evaluation as ev
 from sofar_agents.cli_types import gamma_value, nonneg_float, nonneg_int, positive_int
 from sofar_agents.evaluation import stall_rows as sr
 from sofar_agents.evaluation import stalls as st
+from sofar_agents.evaluation.files import write_text_atomic
 from sofar_agents.evaluation.protocol import exact_text
 
 logger = logging.getLogger("stalls")
@@ -192,10 +194,11 @@ def reclassify(out: Path) -> list[dict]:
         if row["outcome"] == "stalled" and key in records:
             row["cls"], evidence = st.classify(records[key])
             row.update({c: evidence[c] for c in sr.REPORT_COLUMNS if c in evidence})
-    with open(out / "stalls.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(sr.REPORT_COLUMNS), lineterminator="\n", extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(sr.REPORT_COLUMNS), lineterminator="\n", extrasaction="ignore")
+    w.writeheader()
+    w.writerows(rows)
+    write_text_atomic(out / "stalls.csv", buf.getvalue())
     return rows
 
 

@@ -21,12 +21,12 @@ from __future__ import annotations
 import json
 import logging
 import os
-import tempfile
 from collections.abc import Callable, Iterable, Mapping
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from sofar_agents.evaluation.files import write_json_atomic
 from sofar_env.config_hash import EXCLUDED, canonical_config, config_hash, hash_of_canonical
 
 __all__ = ["CONFIG_JSON", "episode_env_mapping", "episode_config", "episode_config_hash", "race_config",
@@ -112,16 +112,7 @@ def write_config_json(folder: str | os.PathLike, configs: Iterable[Any]) -> Path
     added = {h: tree for h, tree in new.items() if h not in have}
     if not added:
         return path
-    text = json.dumps({"excluded": list(EXCLUDED), "configs": {**have, **added}}, indent=1, sort_keys=True) + "\n"
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+    write_json_atomic(path, {"excluded": list(EXCLUDED), "configs": {**have, **added}}, indent=1, sort_keys=True)
     logger.info("%s: recorded the configuration of %s", path, ", ".join(sorted(added)))
     return path
 

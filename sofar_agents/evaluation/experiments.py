@@ -18,6 +18,7 @@ from typing import Any
 from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, RHOS, TRACKS, Strategy, _fmt_float,
                                               miqp_ablation_tasks, table1_tasks)
 from sofar_agents.evaluation.configs import episode_config, write_config_json
+from sofar_agents.evaluation.files import write_text_atomic
 from sofar_agents.evaluation.results import read_episode_csv, rows_of_other_configs, select_rows
 from sofar_agents.evaluation.sweep import SweepStats, run_sweep
 from sofar_agents.evaluation.tables import format_table1, format_table2, paper_comparison
@@ -105,7 +106,7 @@ def _write_report(parts: list[str], tasks, rows, stats, csv_path: Path, md_path:
                      "to finish them.")
     parts.append("\n" + _stats_text(stats))
     md = "\n".join(parts) + "\n"
-    md_path.write_text(md)
+    write_text_atomic(md_path, md)
     return TableReport(md, stats, csv_path, md_path, rows)
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import importlib.metadata
-import json
 import math
 import os
 import platform
@@ -16,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from sofar_agents.evaluation.episode import _info_scalar, make_env
+from sofar_agents.evaluation.files import write_json_atomic
 from sofar_agents.evaluation.protocol import _limit_torch_threads, resolve_policy_path
 
 PAPER_LATENCY_MS = {"mpc_ms": (1.60, 0.34), "miqp_ms": (5.49, 1.73), "rl_ms": (0.82, 0.12)}
@@ -176,6 +176,4 @@ def format_latency(report: Mapping[str, Any]) -> str:
 
 
 def write_json(path: str | os.PathLike, data: Mapping[str, Any]) -> None:
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(data, indent=2, default=lambda o: o.item() if hasattr(o, "item") else str(o)) + "\n")
+    write_json_atomic(path, data, indent=2, default=lambda o: o.item() if hasattr(o, "item") else str(o))

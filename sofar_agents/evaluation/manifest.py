@@ -27,7 +27,6 @@ import os
 import platform
 import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -36,6 +35,7 @@ from typing import Any
 
 from sofar_agents.evaluation import manifest_replays as replays
 from sofar_agents.evaluation.configs import row_hash, write_config_json
+from sofar_agents.evaluation.files import write_json_atomic, write_text_atomic
 from sofar_agents.evaluation.manifest_spec import KINDS, Manifest, load_manifest, manifest_paths
 from sofar_agents.evaluation.results import EPISODE_COLUMNS, LEGACY_STACK, read_csv_rows
 
@@ -136,17 +136,6 @@ def record_path(m: Manifest, folder: str | os.PathLike) -> Path:
     return Path(folder) / f"{m.name}.manifest.json"
 
 
-def _write_json_atomically(path: Path, data: dict[str, Any]) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=1, sort_keys=True)
-            f.write("\n")
-        os.replace(tmp, path)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
-
-
 def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = None,
                  out: str | os.PathLike | None = None, progress: bool = True, tasks_filter=None) -> Any:
     """Run ``m`` into ``root/m.out`` (or ``out``), resuming from its CSV, and write :func:`record_path` and the
@@ -196,7 +185,7 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
                           "cpu": _cpu()},
               "wall_time_s": round(time.perf_counter() - t0, 3), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
     record["earlier_runs"] = _earlier_runs(record_path(m, folder), m.config_hash)
-    _write_json_atomically(record_path(m, folder), record)
+    write_json_atomic(record_path(m, folder), record, indent=1, sort_keys=True)
     return report
 
 
@@ -351,20 +340,8 @@ def restamp_hash(path: str | os.PathLike, old: str, new: str) -> int:
             fields[at] = new
             changed += 1
         out.append(",".join(fields) + line[len(body):])
-    _replace_text(p, "".join(out))
+    write_text_atomic(p, "".join(out))
     return changed
-
-
-def _replace_text(p: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(text.encode("utf-8"))
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, p)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
 
 
 def backfill_hash(path: str | os.PathLike, config_hash: str, last: bool = False) -> int:
@@ -391,5 +368,5 @@ def backfill_hash(path: str | os.PathLike, config_hash: str, last: bool = False)
             raise ValueError(f"{p}: line {i + 1} is incomplete; not rewritten")
         fields.insert(at, "config_hash" if i == 0 else config_hash)
         out.append(",".join(fields) + end)
-    _replace_text(p, "".join(out))
+    write_text_atomic(p, "".join(out))
     return len(lines) - 1

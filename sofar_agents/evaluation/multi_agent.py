@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from sofar_agents.evaluation.files import write_text_atomic
 from sofar_agents.evaluation.protocol import DEFAULT_DURATION, TRACKS, Strategy, _fmt_float, episode_seed, exact_text
 from sofar_agents.evaluation.results import read_csv_rows
 from sofar_agents.executor import Job, RunStats, execute
@@ -275,7 +276,7 @@ def _append(path: Path, result: RaceResult) -> None:
     if not new:
         text = path.read_text()
         if not text.endswith("\n"):  # drop a torn last line
-            path.write_text(text[: text.rfind("\n") + 1])
+            write_text_atomic(path, text[: text.rfind("\n") + 1])
         if text.split("\n", 1)[0].split(",") != list(RACE_COLUMNS):  # an older layout: rewrite in this one
             rows, new, mode = read_race_csv(path) + rows, True, "w"
     buf = io.StringIO()
@@ -415,5 +416,5 @@ def run_multi_agent_table(strategies: Sequence[Strategy], out_dir: str | os.Path
               f"worker{'' if n_workers == 1 else 's'} in {elapsed:.0f} s."]
     md = "\n".join(parts) + "\n"
     md_path = out / f"{prefix}.md"
-    md_path.write_text(md)
+    write_text_atomic(md_path, md)
     return MultiAgentReport(md, csv_path, md_path, rows, ran, stats.skipped, elapsed, missing, len(tasks), stats)

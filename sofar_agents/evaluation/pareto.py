@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from sofar_agents.evaluation.configs import episode_config, write_config_json
+from sofar_agents.evaluation.files import write_json_atomic, write_text_atomic
 from sofar_agents.evaluation.protocol import DEFAULT_DURATION, RHOS, TRACKS, Strategy, _fmt_float, table1_tasks
 from sofar_agents.evaluation.results import read_episode_csv, select_rows
 from sofar_agents.evaluation.sweep import SweepStats, run_sweep
@@ -252,8 +253,8 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
         md += f"\n**Incomplete:** {len(tasks) - len(rows)} of {len(tasks)} episodes are missing; rerun to finish.\n"
     paths = {"csv": csv_path, "markdown": out / f"{prefix}.md", "json": out / f"{prefix}.json",
              "png": out / f"{prefix}.png"}
-    paths["markdown"].write_text(md)
-    paths["json"].write_text(json.dumps({"settings": settings, "hypervolume": hv, "reference_point": REFERENCE_POINT,
-                                         "points": [p.__dict__ for p in points]}, indent=2))
+    write_text_atomic(paths["markdown"], md)
+    write_json_atomic(paths["json"], {"settings": settings, "hypervolume": hv, "reference_point": REFERENCE_POINT,
+                                      "points": [p.__dict__ for p in points]}, trailing_newline=False, indent=2)
     plot_fronts(points, paths["png"], title=f"{scenario} world, {stack} controller")
     return ParetoReport(points, hv, md, stats, paths)

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from sofar_agents.evaluation.files import write_text_atomic
 from sofar_agents.evaluation.protocol import DEFAULT_DURATION, LEGACY_STACK, EpisodeTask, _key, exact_text
 
 logger = logging.getLogger(__name__)
@@ -206,11 +207,8 @@ def read_seed_sets(paths: Sequence[str | os.PathLike]) -> dict[str, list[dict[st
 
 
 def write_markdown(path: str | os.PathLike, text: str) -> Path:
-    """Write a Markdown report to ``path``, creating its folder; returns the path."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(text)
-    return p
+    """Write a Markdown report to ``path`` atomically, creating its folder; returns the path."""
+    return write_text_atomic(path, text)
 
 
 _ADDED_COLUMNS = {"stack": LEGACY_STACK, "n_opponents": "", "scenario": "paper", "stalled": "", "config_hash": ""}
