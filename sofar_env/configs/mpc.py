@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..domains import check_fields, choice, flag, integer, nested, real, reals, text
+from ..domains import check_fields, choice, flag, integer, nested, neutral, real, reals, text
 from ..errors import ConfigError
 
 __all__ = ["BarrierParams", "MPCConfig", "TRACK_ROWS"]
@@ -98,6 +98,12 @@ class MPCConfig:
     """QP backend: "piqp" (sparse interior point, accurate, the default), "daqp" (the same QP condensed onto
     the 2 N input steps, slacks as soft rows with their own weights, DAQP's dense active set; agrees with
     PIQP to PIQP's tolerance) or "osqp" (less accurate, comparison only)."""
+    qp_fallback: str = neutral(choice("off", ("off", "daqp")))
+    """A second backend for the QPs the first one fails on: "off" (the default: a failed QP makes the MPC fall
+    back to the shifted previous plan or a brake) or "daqp" (the same QP solved by the condensed DAQP backend;
+    only where ``qp_solver`` is another backend). Counted in ``MPCDCBF.n_qp_fallbacks``. PIQP can fail on a
+    feasible QP far outside its soft track rows, e.g. a start from rest deep inside the track margin. Decision:
+    ``docs/decisions/qp-backend.md``."""
     compile: bool = flag(True)
     """Compile the CasADi stage function to C (cached on disk); falls back to CasADi evaluation."""
     cache_dir: str | None = text(None, optional="the default cache")

@@ -137,6 +137,11 @@ def _sofar_4() -> StackConfig:
                                slow_rows_speed=10.0, slow_rows_exit_speed=12.0, slow_rows_curved=True)
 
 
+def _sofar_5() -> StackConfig:
+    base = _sofar_4()
+    return dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, qp_fallback="daqp"))
+
+
 DEFAULT_STACK_PRESET = "sofar-4"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
@@ -196,6 +201,10 @@ in a corner a car turned towards the outside edge needs more room to turn back, 
 while it does). Against ``"sofar-1"``: below 10 m/s (until 12 m/s) a second MPC bounds both ends of the car
 with room kept for turning back, a car below 1 m/s restarts with a tenth of the lateral weight, and a follow
 decision lets a turned car creep. The stall fixes of ``docs/decisions/stall-fixes.md``."""),
+    "sofar-5": Entry(_sofar_5(), """A candidate default, not the default: ``"sofar-4"`` with DAQP solving the QPs
+PIQP fails on (``mpc.qp_fallback = "daqp"``, every MPC of the stack). PIQP can fail on a feasible QP far outside
+its soft track rows, such as a start from rest deep inside the dynamic world's 2.2 m track margin, and a failed
+QP makes the MPC brake. Measured against ``"sofar-4"`` in ``docs/decisions/qp-backend.md``."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

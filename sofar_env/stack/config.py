@@ -17,7 +17,7 @@ __all__ = ["StackConfig", "STACK_PRESETS", "stack_preset"]
 STACK_PRESETS = NameView(STACK_PRESET_REGISTRY)
 """Names accepted by :func:`stack_preset` (and by the environments' ``stack=`` key), in registration order:
 ``"sofar"`` (the default, now ``"sofar-4"``), ``"sofar-1"``, ``"paper"``, ``"sofar-ends"``, ``"sofar-recover"``,
-``"sofar-2"``, ``"sofar-3"``, ``"sofar-4"``, ``"sofar-daqp"``, ``"reference-numerics"``,
+``"sofar-2"``, ``"sofar-3"``, ``"sofar-4"``, ``"sofar-5"``, ``"sofar-daqp"``, ``"reference-numerics"``,
 ``"reference-numerics-no-phantoms"``. A live view of the registry that compares equal to the tuple of these
 names."""
 

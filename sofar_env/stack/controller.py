@@ -118,12 +118,13 @@ class OvertakingStack:
         self._last_pred: np.ndarray | None = None  # previous MPC prediction (for the heading error)
         self.counters = {"steps": 0, "mpc_failures": 0, "miqp_failures": 0, "miqp_solves": 0,
                          "follow_steps": 0, "parked_checks": 0, "parked_passes": 0, "mpc_restarts": 0,
-                         "mpc_restarts_taken": 0, "slow_restarts": 0, "creep_steps": 0, "slow_rows_steps": 0}
+                         "mpc_restarts_taken": 0, "slow_restarts": 0, "creep_steps": 0, "slow_rows_steps": 0,
+                         "qp_fallbacks": 0}
         """Episode counters: control steps, MPC / MIQP failures, MIQP solves, steps in follow mode,
         MIQP calls that tried / took a pass of near-stationary opponents (:mod:`~sofar_env.stack.follow`),
         MPC restarts from a cold guess tried / kept (``mpc.restart_slack``), restart modes entered
         (``restart_lateral_weight``), steps with the creep floor on the follow cap (``follow_creep_speed``), steps
-        under the slow end rows (``slow_rows_speed``)."""
+        under the slow end rows (``slow_rows_speed``), QPs solved by the fallback backend (``mpc.qp_fallback``)."""
 
     @property
     def mpcs(self) -> tuple:
@@ -241,6 +242,7 @@ class OvertakingStack:
         result = self._solve_mpc(np.array([0.0, n, e, v, delta]), stage, opp_mpc, gamma)
         if not result.success:
             self.counters["mpc_failures"] += 1
+        self.counters["qp_fallbacks"] += result.qp_fallbacks
         self.counters["mpc_restarts"] = self.mpc.n_restarts
         self.counters["mpc_restarts_taken"] = self.mpc.n_restarts_taken
         self._last_pred = result.x_pred if result.status == "solved" else None

@@ -4,7 +4,8 @@ rebuilt (the snapshot in ``data/resolved_configs.json``, written by :mod:`.resol
 The snapshot was re-written once on purpose, when the default moved to ``"sofar-4"``: every entry of
 ``"sofar"`` and of the default (``env_config``, the multi-car cases) gained the four stall-fix fields and nothing
 else, each ``"sofar-1"`` entry equals the former ``"sofar"`` one and each new ``"sofar"`` entry the former
-``"sofar-4"`` one, in every world, single-car and multi-car."""
+``"sofar-4"`` one, in every world, single-car and multi-car. A new preset adds its entries (``"sofar-5"``: 7, every
+other entry unchanged)."""
 
 from __future__ import annotations
 

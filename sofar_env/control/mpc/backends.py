@@ -34,14 +34,28 @@ from .assembly import all_finite
 from .layout import QPStructure
 from .types import MPCConfig
 
-__all__ = ["solve_qp", "dcbf_margin"]
+__all__ = ["solve_qp", "dcbf_margin", "FALLBACK_SOLVED"]
+
+FALLBACK_SOLVED = "solved by the fallback backend"
+"""The message of a QP that the first backend failed on and ``MPCConfig.qp_fallback`` solved."""
 
 
 def solve_qp(qs: QPStructure, data: tuple, cfg: MPCConfig) -> tuple[np.ndarray | None, int, str]:
     """Solve the QP in ``qs`` (matrices) and ``data`` (c, b, h_l, h_u, x_l, x_u).
 
-    Returns ``(z or None, iterations, message)``.
+    Returns ``(z or None, iterations, message)``. Where the backend fails and ``cfg.qp_fallback`` names another
+    one, that one solves the same QP (message :data:`FALLBACK_SOLVED` when it succeeds; the iterations are
+    both backends').
     """
+    z, iters, message = _solve_once(qs, data, cfg)
+    if z is None and cfg.qp_fallback != "off" and cfg.qp_fallback != qs.backend:
+        z, more, second = _solve_fallback(qs, data)
+        return z, iters + more, (FALLBACK_SOLVED if z is not None else f"{message}; the fallback: {second}")
+    return z, iters, message
+
+
+def _solve_once(qs: QPStructure, data: tuple, cfg: MPCConfig) -> tuple[np.ndarray | None, int, str]:
+    """The QP by the structure's own backend (:func:`solve_qp` without the fallback)."""
     try:
         if qs.backend == "piqp":
             z, iters, status = _solve_piqp(qs, data, cfg)
@@ -63,10 +77,30 @@ def solve_qp(qs: QPStructure, data: tuple, cfg: MPCConfig) -> tuple[np.ndarray |
     return z, iters, "solved"
 
 
+def _solve_fallback(qs: QPStructure, data: tuple) -> tuple[np.ndarray | None, int, str]:
+    """The QP by the condensed DAQP backend (``MPCConfig.qp_fallback``), its model kept in ``qs.fallback``."""
+    try:
+        if qs.fallback is None:
+            from .condensed import CondensedDAQP
+
+            qs.fallback = CondensedDAQP(qs)
+        z, iters, status = qs.fallback.solve(qs, data)
+    except (RuntimeError, ValueError, ArithmeticError) as exc:
+        qs.fallback = None
+        return None, 0, f"daqp raised {exc}"
+    if z is None:
+        qs.fallback = None
+        return None, iters, status
+    if not all_finite(z):
+        return None, iters, "daqp returned non-finite values"
+    return z, iters, "solved"
+
+
 def dcbf_margin(qs: QPStructure, z: np.ndarray, hu: np.ndarray) -> np.ndarray:
-    """``h_u - G z`` of the DCBF rows at the solution ``z`` (for PIQP: as PIQP computed it)."""
+    """``h_u - G z`` of the DCBF rows at the solution ``z`` (for PIQP: as PIQP computed it, unless the fallback
+    backend solved this QP, after which the structure has no PIQP solver)."""
     rows = qs.cbf_rows
-    if qs.backend == "piqp":
+    if qs.backend == "piqp" and qs.solver is not None:
         return qs.solver.result.s_u[rows]
     return hu[rows] - (qs.G @ z)[rows]
 

@@ -259,6 +259,9 @@ class QPStructure:
         self.solver_updates = 0
         """PIQP: the updates of its solver since its set-up."""
         self.osqp_mat: Any = None
+        self.fallback: Any = None
+        """The condensed DAQP model of ``MPCConfig.qp_fallback``, set up on the first QP the backend fails on;
+        never copied or pickled (a copy sets it up afresh)."""
 
     def drop_solver(self) -> None:
         """Forget the solver: the next solve sets one up afresh on its own data."""
@@ -269,7 +272,7 @@ class QPStructure:
     def __getstate__(self) -> dict:
         """Everything but the solver (a C handle; see ``solver_setup``)."""
         state = self.__dict__.copy()
-        state["solver"] = None
+        state["solver"] = state["fallback"] = None
         if self.backend != "piqp":
             state["solver_setup"] = state["osqp_mat"] = None
         return state

@@ -69,7 +69,7 @@ from ...vehicle import AV21, VehicleParams
 from ..barrier import barrier_table
 from ..codegen import CodegenInfo
 from .assembly import STATUS_INCONSISTENT, STATUS_NONFINITE, all_finite, assemble, track_rows, violated_rows
-from .backends import dcbf_margin, solve_qp
+from .backends import FALLBACK_SOLVED, dcbf_margin, solve_qp
 from .ends import EndOffsets
 from .layout import N_FIXED, QPStructure
 from .linearisation import StageLinearisation
@@ -140,6 +140,8 @@ class MPCDCBF:
         """Restarts from a cold guess since construction or the last reset() (``restart_slack``)."""
         self.n_restarts_taken = 0
         """Restarts whose solution was kept, since construction or the last reset()."""
+        self.n_qp_fallbacks = 0
+        """QPs the backend failed on and ``qp_fallback`` solved, since construction (not zeroed by reset())."""
         self.reset()
 
     # ---------------------------------------------------------------- warm start
@@ -239,6 +241,7 @@ class MPCDCBF:
         qp_iters = 0
         sqp_iters = 0
         qp_time = 0.0
+        fallbacks = self.n_qp_fallbacks
         z = None
         message = ""
         while True:
@@ -300,7 +303,8 @@ class MPCDCBF:
         return MPCResult(u=self._clip_input(ubar[0]), x_pred=x_pred, u_pred=u_pred, status=STATUS_SOLVED,
                          success=True, slack=slack, barrier_min=barrier_min,
                          solve_time=time.perf_counter() - t_start, qp_iterations=qp_iters,
-                         sqp_iterations=sqp_iters, barrier_slack_first=first, n_opponents=m, qp_time=qp_time)
+                         sqp_iterations=sqp_iters, barrier_slack_first=first, n_opponents=m, qp_time=qp_time,
+                         qp_fallbacks=self.n_qp_fallbacks - fallbacks)
 
     def _fallback(self, x0, message, t_start, qp_iters, sqp_iters, barrier_min, m) -> MPCResult:
         cfg = self.config
@@ -398,7 +402,9 @@ class MPCDCBF:
             return None, 0, "non-finite QP data"
         if status == STATUS_INCONSISTENT:
             return None, 0, "inconsistent hard bounds"
-        return solve_qp(qs, data, self.config)
+        z, iters, message = solve_qp(qs, data, self.config)
+        self.n_qp_fallbacks += message == FALLBACK_SOLVED
+        return z, iters, message
 
     # ---------------------------------------------------------------- IPOPT reference
 

@@ -74,6 +74,8 @@ class MPCResult:
     """Number of opponents with DCBF rows in the QP."""
     qp_time: float = 0.0
     """Wall-clock time spent inside the QP solver (PIQP/OSQP set-up, update and solve) [s]."""
+    qp_fallbacks: int = 0
+    """QPs of this solve that the backend failed on and ``MPCConfig.qp_fallback`` solved."""
 
 
 def validate_arguments(x0, stage, opponents, gamma, horizon: int):
