@@ -22,6 +22,11 @@ the next call sets the solver up afresh. A copied structure (no solver, but the 
 original's set-up in ``QPStructure.solver_setup`` and its number of updates in ``solver_updates``)
 gets a PIQP instance set up on those data, updated as often without data and then to the current
 data: the state of the original's, to the bit (:class:`~.layout.QPStructure`).
+
+With ``MPCConfig.qp_fallback = "daqp"`` a QP the backend fails on is solved once more by the condensed DAQP
+backend (its model kept in ``QPStructure.fallback``, set up on the first such QP, not carried by a copy); the
+message :data:`FALLBACK_SOLVED` tells the caller, which counts it. PIQP can fail on a feasible QP far outside its
+soft track rows (``docs/decisions/qp-backend.md``).
 """
 
 from __future__ import annotations
