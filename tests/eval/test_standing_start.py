@@ -75,13 +75,17 @@ def _near_the_edge(track) -> Placement:
     return found[0]
 
 
-def test_the_former_default_drives_off_from_rest_near_an_edge(laguna):
-    env = gym.make("SOfAR-LagunaSeca-v0", config={"stack": "sofar-1"})
+def _start_near_the_edge(track, stack: str) -> tuple:
+    """:func:`drive_off` of ``stack`` from :func:`_near_the_edge` (6 s at gamma 0.5, 5 m to count)."""
+    env = gym.make("SOfAR-LagunaSeca-v0", config={"stack": stack})
     try:
-        distance, speed, off, failures, ok = drive_off(env, _near_the_edge(laguna), 0.5, duration=6.0,
-                                                       min_distance=5.0)
+        return drive_off(env, _near_the_edge(track), 0.5, duration=6.0, min_distance=5.0)
     finally:
         env.close()
+
+
+def test_the_former_default_drives_off_from_rest_near_an_edge(laguna):
+    distance, speed, off, failures, ok = _start_near_the_edge(laguna, "sofar-1")
     assert ok and not off and distance > 10.0 and speed > 5.0 and failures == 0
 
 
@@ -89,12 +93,7 @@ def test_the_former_default_drives_off_from_rest_near_an_edge(laguna):
                    "from an edge, the slow end rows (violated from the start) make standing its optimum; "
                    "docs/decisions/stall-fixes.md, 'Standing starts near an edge'")
 def test_the_default_drives_off_from_rest_near_an_edge(laguna):
-    env = gym.make("SOfAR-LagunaSeca-v0", config={"stack": "sofar"})
-    try:
-        distance, speed, off, failures, ok = drive_off(env, _near_the_edge(laguna), 0.5, duration=6.0,
-                                                       min_distance=5.0)
-    finally:
-        env.close()
+    distance, speed, off, failures, ok = _start_near_the_edge(laguna, "sofar")
     assert ok and not off and distance > 10.0
 
 
