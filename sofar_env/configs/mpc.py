@@ -70,6 +70,15 @@ class MPCConfig:
     track_margin: float = real(1.2, ge=0.0, unit="m")
     """Distance kept between the car's reference point and each track edge [m]
     (half width 0.95 m + 0.25 m buffer)."""
+    track_buffer: float = neutral(real(0.0, ge=0.0, unit="m"))
+    """*Buffer slack* (0: off, the default; only with end rows, ``track_rows`` other than ``"reference"``). The
+    first ``track_buffer`` metres by which a track row is violated are paid for by a second slack of the stage,
+    weighted ``track_buffer_slack`` instead of ``track_slack``: with the buffer of ``track_margin`` (0.25 m
+    beyond the car's half width) as this band, a car that stands inside the buffer pays little to drive along
+    it and out, while the edge itself stays as expensive as without it [m], in [0, ``track_margin``). Decision:
+    ``docs/decisions/stall-fixes.md``."""
+    track_buffer_slack: tuple = neutral(reals((2e3, 2e4), size=2, ge=0.0))
+    """(L1, L2) weights of the buffer slack [1/m, 1/m^2] (only with ``track_buffer``)."""
     track_rows: str = choice("reference", TRACK_ROWS)
     """What the soft track constraints bound: ``"reference"``, the reference point's offset ``n`` (the
     paper's form; a caller may tighten the edges for the car's length, as the stack's footprint-aware
@@ -131,9 +140,16 @@ class MPCConfig:
 
     def __post_init__(self) -> None:
         check_fields(self, "stack.mpc")
-        for name in ("lat_acc_slack", "track_slack", "barrier_slack"):
+        for name in ("lat_acc_slack", "track_slack", "barrier_slack", "track_buffer_slack"):
             if not getattr(self, name)[1] > 0.0:
                 raise ConfigError(f"stack.mpc.{name} must be (L1 >= 0, L2 > 0), got {getattr(self, name)!r}")
+        if self.track_buffer > 0.0:
+            if self.track_rows == "reference":
+                raise ConfigError("stack.mpc.track_buffer needs end rows (stack.mpc.track_rows other than "
+                                  f"'reference'), got track_buffer = {self.track_buffer!r} with 'reference' rows")
+            if not self.track_buffer < self.track_margin:
+                raise ConfigError(f"stack.mpc.track_buffer must be < track_margin = {self.track_margin} [m], got "
+                                  f"{self.track_buffer!r}")
 
     @property
     def dt0(self) -> float:

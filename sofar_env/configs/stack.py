@@ -153,6 +153,14 @@ class StackConfig:
     """Whether the slow end rows (and the restart mode's) count the track's curvature in the room kept for turning
     back (``track_rows = "recoverable-curved"``: in a corner a car turned towards the outside edge needs more);
     only with ``slow_rows_speed``. Decision: ``docs/decisions/stall-fixes.md``."""
+    slow_rows_buffer_edge: float | None = neutral(real(None, ge=0.0, optional="off", unit="m"))
+    """The slow end rows' *buffer slack* (None: off, the default; only with ``slow_rows_speed``). The track margin
+    keeps the car's side ``mpc.track_margin - width / 2`` from each edge (0.25 m in the paper's worlds, 1.25 m in
+    the dynamic world); with this set, the end rows of the slow (and the restart mode's) MPC pay
+    ``mpc.track_buffer_slack`` instead of ``mpc.track_slack`` for a violation of the margin until the side comes
+    this close to the edge (``mpc.track_buffer`` of those MPCs; 0 where the margin leaves no such band), so that a
+    car standing inside the margin drives off along it instead of standing, while the last metres to the edge
+    stay as expensive as without it [m], >= 0. Decision: ``docs/decisions/stall-fixes.md``."""
     parked_follow_gap: float | None = neutral(real(None, ge=0.0, optional="follow_gap", unit="m"))
     """Arc-length distance kept behind a followed car slower than ``parked_speed`` [m] (None: ``follow_gap``,
     the default), so that the ego stops where it can still steer around a near-stationary car. Decision:
@@ -190,6 +198,9 @@ class StackConfig:
                 raise ConfigError(f"stack.slow_rows_speed must be >= restart_exit_speed = {self.restart_exit_speed} "
                                   f"[m/s] with the restart mode on (its MPC bounds the ends too), got "
                                   f"{self.slow_rows_speed!r}")
+        if self.slow_rows_buffer_edge is not None and self.slow_rows_speed is None:
+            raise ConfigError("stack.slow_rows_buffer_edge needs stack.slow_rows_speed (it is a property of the slow "
+                              "end rows), got slow_rows_speed = None")
         if self.slow_rows_curved and self.slow_rows_speed is None:
             raise ConfigError("stack.slow_rows_curved needs stack.slow_rows_speed (it is a property of the slow end "
                               "rows), got slow_rows_speed = None")

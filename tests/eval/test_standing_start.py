@@ -109,3 +109,9 @@ def test_the_report_counts_per_controller_and_clearance():
     assert "- `a` (1 of 1 with failed MPC solves): Monza s 10 n +1.00 (0.15 m) 0.0 m, 7 failed" in text
     assert "- `b`: none" in text
     assert ROW_COLUMNS[:2] == ("stack", "config_hash") and "drove_off" in ROW_COLUMNS
+
+
+def test_the_buffer_slack_candidate_drives_off_from_rest_near_an_edge(laguna):
+    """``"sofar-6"`` (the slow end rows' buffer slack) drives off from the scene where the default stands."""
+    distance, speed, off, failures, ok = _start_near_the_edge(laguna, "sofar-6")
+    assert ok and not off and distance > 10.0 and failures == 0

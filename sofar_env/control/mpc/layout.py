@@ -88,7 +88,9 @@ class QPStructure:
     """Fixed sparsity of the RTI QP with ``m`` opponent slots with rows, its buffers and its solver.
 
     Variables, stage-major: block k (k = 0..N-1) = [du_k (2), dx_{k+1} (5),
-    sigma_lat_{k+1} (if ``lat``), sigma_trk_{k+1} (if ``trk``), sigma_cbf_{k,0..m-1}].
+    sigma_lat_{k+1} (if ``lat``), sigma_trk_{k+1} (if ``trk``), sigma_buf_{k+1} (with end rows and
+    ``MPCConfig.track_buffer``: a second slack of the four end rows, bounded by the buffer's width and cheaper
+    than the track slack), sigma_cbf_{k,0..m-1}].
     Equality rows: ``dx_{k+1} - A_k dx_k - B_k du_k = f_k - xbar_{k+1}``.
     Rows of G, stage-major: [lat up, lat low] (if ``lat``), [trk up, trk low] (if ``trk``),
     cbf_0..m-1. A structure without the lateral-acceleration (or track) rows is used only
@@ -109,11 +111,15 @@ class QPStructure:
         self.end_offsets = end_offsets
         ends = trk and end_offsets is not None
         self.ends = ends
+        buf = ends and cfg.track_buffer > 0.0
+        self.buf = buf
         col = N_FIXED
         self.col_lat = col
         col += int(lat)
         self.col_trk = col
         col += int(trk)
+        self.col_buf = col
+        col += int(buf)
         self.col_cbf = col
         self.nb = nb = col + m
         self.nz = n_h * nb
@@ -177,10 +183,21 @@ class QPStructure:
                     rows.append(base + self.row_trk + r_off)
                     cols.append(ix + 2)  # e of x_{k+1}
                     src.append(np.full(n_h, lay.one))
+        buf_fac = []
+        if buf:  # the buffer slack relaxes the four end rows as the track slack does, by its own scale
+            first_buf = sum(len(r) for r in rows)
+            buf_scale = 1.0 / np.sqrt(cfg.track_buffer_slack[1])
+            for r_off, sgn in ((0, -1.0), (1, 1.0), (2, -1.0), (3, 1.0)):
+                rows.append(base + self.row_trk + r_off)
+                cols.append(iu + self.col_buf)
+                src.append(np.full(n_h, lay.one))
+                buf_fac.append(np.full(n_h, sgn * buf_scale))
         n_fixed = sum(len(r) for r in rows)
         slot = [np.full(n_fixed, m)]
         gam = [np.zeros(n_fixed)]
         fac = [np.ones(n_fixed)]
+        if buf:
+            fac[0][first_buf:first_buf + 4 * n_h] = np.concatenate(buf_fac)
         if m > 0:
             sn_v = np.array([0, 1, 3])
             # x_k part for k >= 1 (x_0 is fixed)
@@ -213,7 +230,7 @@ class QPStructure:
         g_gam = np.concatenate(gam)
         g_fac = np.concatenate(fac)
 
-        z1, z2 = slack_weights(cfg, lat, trk, m)
+        z1, z2 = slack_weights(cfg, lat, trk, m, buf)
         self.slack_scale = 1.0 / np.sqrt(z2)
         na, nbb = len(a_rows), len(b_rows)
         eq_src = np.concatenate([np.full(5 * n_h, lay.one),
@@ -232,6 +249,8 @@ class QPStructure:
         self.xl_buf = np.full((n_h, nb), -np.inf)
         self.xu_buf = np.full((n_h, nb), np.inf)
         self.xl_buf[:, N_FIXED:] = 0.0
+        if buf:  # the scaled buffer slack sigma~ = sigma sqrt(Z) is at most the buffer's width
+            self.xu_buf[:, self.col_buf] = cfg.track_buffer / self.slack_scale[self.col_buf - N_FIXED]
         self.b_buf = np.zeros((n_h, 5))
 
         # ---- CSC patterns; entry sources permuted to CSC data order

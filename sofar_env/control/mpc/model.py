@@ -154,11 +154,14 @@ def stage_reference(arrays: np.ndarray) -> np.ndarray:
     return ref
 
 
-def slack_weights(cfg: MPCConfig, lat: bool, trk: bool, m: int) -> tuple[np.ndarray, np.ndarray]:
+def slack_weights(cfg: MPCConfig, lat: bool, trk: bool, m: int, buf: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(L1, L2) weights of the slacks of a block, in the order lateral acceleration (if
-    ``lat``), track (if ``trk``), DCBF of each of the ``m`` opponent slots."""
-    z1 = [cfg.lat_acc_slack[0]] * int(lat) + [cfg.track_slack[0]] * int(trk) + [cfg.barrier_slack[0]] * m
-    z2 = [cfg.lat_acc_slack[1]] * int(lat) + [cfg.track_slack[1]] * int(trk) + [cfg.barrier_slack[1]] * m
+    ``lat``), track (if ``trk``), track buffer (if ``buf``, ``MPCConfig.track_buffer``), DCBF of each of the
+    ``m`` opponent slots."""
+    z1 = ([cfg.lat_acc_slack[0]] * int(lat) + [cfg.track_slack[0]] * int(trk) + [cfg.track_buffer_slack[0]] * int(buf)
+          + [cfg.barrier_slack[0]] * m)
+    z2 = ([cfg.lat_acc_slack[1]] * int(lat) + [cfg.track_slack[1]] * int(trk) + [cfg.track_buffer_slack[1]] * int(buf)
+          + [cfg.barrier_slack[1]] * m)
     return np.asarray(z1, dtype=float), np.asarray(z2, dtype=float)
 
 

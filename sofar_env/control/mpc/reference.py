@@ -70,7 +70,8 @@ class IpoptReference:
         p = self.vehicle
         n_h = cfg.horizon
         ms = self.slots
-        nb = N_FIXED + 2 + m
+        nbuf = _n_buffer(cfg)
+        nb = N_FIXED + 2 + nbuf + m
         w = ca.SX.sym("w", n_h * nb)
         x0 = ca.SX.sym("x0", 5)
         kappa = ca.SX.sym("kappa", n_h + 1)
@@ -81,7 +82,7 @@ class IpoptReference:
         gamma = ca.SX.sym("gamma")
         par = ca.vertcat(x0, kappa, ref, n_lo, n_hi, opp, gamma)
         weights = tracking_weights(cfg)
-        z1, z2 = slack_weights(cfg, True, True, m)
+        z1, z2 = slack_weights(cfg, True, True, m, bool(nbuf))
         ends = EndOffsets.for_rows(cfg.track_rows, p)
 
         blocks = [w[k * nb:(k + 1) * nb] for k in range(n_h)]
@@ -98,7 +99,7 @@ class IpoptReference:
             f_k, _, h_k = out[k]
             _, alat, h_next = out[k + 1]
             x = xs[k + 1]
-            sl, st = b[7], b[8]
+            sl, st = b[7], b[8] + (b[9] if nbuf else 0.0)  # track: its slack plus the buffer slack
             g.append(x - f_k)
             lbg += [0.0] * 5
             ubg += [0.0] * 5
@@ -117,11 +118,11 @@ class IpoptReference:
                 lbg += [-ca.inf, 0.0, -ca.inf, 0.0]
                 ubg += [0.0, ca.inf, 0.0, ca.inf]
             for i in range(m):
-                g.append((1.0 - gamma) * h_k[i] - h_next[i] - b[9 + i])
+                g.append((1.0 - gamma) * h_k[i] - h_next[i] - b[9 + nbuf + i])
                 lbg.append(-ca.inf)
                 ubg.append(0.0)
             cost += sum(weights[j] * (b[j] - ref[k * N_FIXED + j]) ** 2 for j in range(N_FIXED) if weights[j] != 0.0)
-            cost += sum(z1[j] * b[7 + j] + 0.5 * z2[j] * b[7 + j] ** 2 for j in range(2 + m))
+            cost += sum(z1[j] * b[7 + j] + 0.5 * z2[j] * b[7 + j] ** 2 for j in range(2 + nbuf + m))
         nlp = {"x": w, "p": par, "f": cost, "g": ca.vertcat(*g)}
         solver = ca.nlpsol(f"sofar_mpc_ipopt_{m}", "ipopt", nlp, _IPOPT_OPTIONS)
         return solver, np.array(lbg, dtype=float), np.array(ubg, dtype=float)
@@ -135,7 +136,8 @@ class IpoptReference:
         if m not in self._nlp:
             self._nlp[m] = self._build(m)
         solver, lbg, ubg = self._nlp[m]
-        nb = N_FIXED + 2 + m
+        nbuf = _n_buffer(self.config)
+        nb = N_FIXED + 2 + nbuf + m
         o = np.empty((n_h + 1, self.slots, OPPONENT_ROWS))
         o[:] = DUMMY_OPPONENT
         o[:, :m] = predict_opponents(sel, self._t)
@@ -146,6 +148,8 @@ class IpoptReference:
         ubx = np.full((n_h, nb), np.inf)
         lbx[:, :N_FIXED], ubx[:, :N_FIXED] = lo7, hi7
         lbx[:, N_FIXED:] = 0.0
+        if nbuf:
+            ubx[:, N_FIXED + 2] = self.config.track_buffer
         w0 = np.zeros((n_h, nb))
         w0[:, 0:2] = ubar
         w0[:, 2:7] = xbar[1:]
@@ -163,5 +167,10 @@ class IpoptReference:
             return ReferenceSolution(False, message, iters)
         zz = z.reshape(n_h, nb)
         return ReferenceSolution(True, message, iters, x=np.vstack([x0, zz[:, 2:7]]), u=zz[:, 0:2].copy(),
-                                 slack_lat_acc=zz[:, 7].copy(), slack_track=zz[:, 8].copy(),
-                                 slack_barrier=zz[:, 9:].copy())
+                                 slack_lat_acc=zz[:, 7].copy(), slack_track=zz[:, 8] + (zz[:, 9] if nbuf else 0.0),
+                                 slack_barrier=zz[:, 9 + nbuf:].copy())
+
+
+def _n_buffer(cfg: MPCConfig) -> int:
+    """1 where the track rows have the buffer slack (``MPCConfig.track_buffer``, end rows only), else 0."""
+    return int(cfg.track_buffer > 0.0 and cfg.track_rows != "reference")

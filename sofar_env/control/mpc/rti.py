@@ -289,7 +289,7 @@ class MPCDCBF:
         zz = z.reshape(self._n, qs.nb)
         slack = {
             "lat_acc": float(max(zz[:, qs.col_lat].max() * qs.slack_scale[0], 0.0)) if qs.lat else 0.0,
-            "track": float(max(zz[:, qs.col_trk].max() * qs.slack_scale[int(qs.lat)], 0.0)) if qs.trk else 0.0,
+            "track": float(max(_track_violation(qs, zz).max(), 0.0)) if qs.trk else 0.0,
             "barrier": 0.0,
         }
         first = 0.0
@@ -435,3 +435,11 @@ class MPCDCBF:
                          success=True, slack=slack, barrier_min=barrier_min,
                          solve_time=time.perf_counter() - t_start, qp_iterations=sol.iterations,
                          sqp_iterations=1, barrier_slack_first=first, n_opponents=m)
+
+
+def _track_violation(qs: QPStructure, zz: np.ndarray) -> np.ndarray:
+    """(N,) violation of the track rows per stage [m]: the track slack, plus the buffer slack where there is one."""
+    v = zz[:, qs.col_trk] * qs.slack_scale[int(qs.lat)]
+    if qs.buf:
+        v = v + zz[:, qs.col_buf] * qs.slack_scale[qs.col_buf - N_FIXED]
+    return v
