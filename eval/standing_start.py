@@ -13,8 +13,6 @@ controller, with the configuration hash of its environment), ``standing_start.md
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import logging
 import sys
 import time
@@ -22,8 +20,7 @@ from pathlib import Path
 
 from sofar_agents.cli_types import gamma_value, nonneg_float, positive_float, positive_int
 from sofar_agents.evaluation.configs import episode_config, write_config_json
-from sofar_agents.evaluation.files import write_text_atomic
-from sofar_agents.evaluation.standing_start import ROW_COLUMNS, format_probe, row_dict, run_probe
+from sofar_agents.evaluation.standing_start import run_probe, write_probe
 from sofar_env.constants import CIRCUITS
 from sofar_env.scenarios import SCENARIOS
 from sofar_env.stack.config import STACK_PRESETS
@@ -57,17 +54,11 @@ def main(argv=None) -> int:
     rows = run_probe(args.tracks, args.stacks, args.scenario, args.count, args.clearances, args.gamma,
                      args.duration, args.min_distance)
     wall = time.perf_counter() - t0
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, ROW_COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(row_dict(r) for r in rows)
-    write_text_atomic(out / "standing_start.csv", buf.getvalue())
     write_config_json(out, [episode_config(stack, args.scenario) for stack in args.stacks])
     command = "python eval/standing_start.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    text = (f"# Standing starts near an edge ({args.scenario} world, gamma {args.gamma:g}, {args.duration:g} s, "
-            f"drove off: {args.min_distance:g} m gained on the track)\n\n" + format_probe(rows)
-            + f"\n{len(rows)} runs in {wall:.0f} s in one process. Command: `{command}`\n")
-    write_text_atomic(out / "standing_start.md", text)
+    write_probe(out, rows, f"Standing starts near an edge ({args.scenario} world, gamma {args.gamma:g}, "
+                f"{args.duration:g} s, drove off: {args.min_distance:g} m gained on the track)",
+                f"{len(rows)} runs in {wall:.0f} s in one process. Command: `{command}`")
     logger.info("wrote %s and %s", out / "standing_start.csv", out / "standing_start.md")
     return 0
 

@@ -57,6 +57,10 @@ def row_id(m: Manifest, row: dict[str, str]) -> tuple:
         return row["track"], row["strategy"], row["seed"]
     if m.kind == "interventions":
         return replays.replay_row_id(row)
+    if m.kind == "standing-start":
+        from sofar_agents.evaluation.standing_start import probe_row_id
+
+        return probe_row_id(row)
     return row["track"], row["strategy"], row["rho"], row["seed"], row["use_miqp"]
 
 
@@ -68,8 +72,10 @@ def row_episode(m: Manifest, row: dict[str, str]) -> tuple:
 
 def row_length(m: Manifest, row: dict[str, str]) -> float:
     """How long a committed row's episode ran (steps; for a race the car-seconds driven over the possible; for a
-    replay its steps): :func:`rerun_rows` re-makes the shortest ones."""
-    return float(row["driven"] if m.kind == "multi-agent" else row["steps"])
+    replay its steps; for a standing start the distance it gained, so that the placements it stood at come
+    first): :func:`rerun_rows` re-makes the shortest ones."""
+    key = {"multi-agent": "driven", "standing-start": "distance"}.get(m.kind, "steps")
+    return float(row[key])
 
 
 def _race_tasks(m: Manifest, root: str | os.PathLike) -> list:
@@ -88,6 +94,8 @@ def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple]:
         return {(t.track, t.strategy.name, str(t.seed)) for t in _race_tasks(m, root)}
     if m.kind == "interventions":
         return {replays.task_episode(t) for t in replays.failed_tasks(m, root)}
+    if m.kind == "standing-start":
+        return _probe_ids(m)
     if m.kind == "pareto":
         tasks = replays.pareto_tasks(m, root)
         return {(t.track, t.strategy.name, exact_text(t.rho), str(t.seed), str(int(t.use_miqp))) for t in tasks}
@@ -101,6 +109,16 @@ def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple]:
     else:
         raise ValueError(f"unknown kind {m.kind!r}")
     return {(t.track, t.strategy.name, exact_text(t.rho), str(t.seed), str(int(t.use_miqp))) for t in tasks}
+
+
+def _probe_ids(m: Manifest) -> set[tuple]:
+    """The placements of a standing-start manifest, as its CSV names them."""
+    from sofar_agents.evaluation.standing_start import placements, probe_row_id
+    from sofar_env.tracks import Track
+
+    vehicle = m.config().race.vehicle
+    return {probe_row_id({"track": track, "s": p.s, "side": p.side, "clearance": p.clearance})
+            for track in m.tracks for p in placements(Track.load(track), m.count, m.clearances, vehicle)}
 
 
 def _git_commit(root: Path) -> str:
@@ -154,6 +172,10 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
         report = replays.run_interventions_manifest(m, root, folder, workers, progress, keep=tasks_filter)
     elif m.kind == "figures":
         report = replays.run_figures_manifest(m, root, folder, workers, progress, keep=tasks_filter)
+    elif m.kind == "standing-start":
+        from sofar_agents.evaluation.standing_start import run_probe_manifest
+
+        report = run_probe_manifest(m, folder, keep=tasks_filter)
     elif m.kind == "pareto" and tasks_filter is not None:
         report = replays.run_pareto_rows(m, root, folder, tasks_filter, workers)
     elif m.kind == "pareto":
@@ -250,7 +272,7 @@ _OLDER_RACE_COLUMNS = {"opponents": "0", "config_hash": ""}
 
 def raw_rows(path: str | os.PathLike, kind: str = "table1") -> list[dict[str, str]]:
     """The complete rows of an episode CSV (``kind`` ``"multi-agent"``: a race CSV; ``"interventions"``: an
-    ``interventions.csv``) as written (strings); the columns of an older format that the file lacks hold the
+    ``interventions.csv``; ``"standing-start"``: a probe's CSV) as written (strings); the columns of an older format that the file lacks hold the
     value its rows stand for (``config_hash`` "")."""
     if kind == "interventions":
         from sofar_agents.evaluation.interventions import _read_rows
@@ -261,6 +283,10 @@ def raw_rows(path: str | os.PathLike, kind: str = "table1") -> list[dict[str, st
 
         return read_csv_rows(path, RACE_COLUMNS, added=_OLDER_RACE_COLUMNS, may_be_empty=("policy_id", "config_hash"),
                              kind="per-race CSV")
+    if kind == "standing-start":
+        from sofar_agents.evaluation.standing_start import ROW_COLUMNS
+
+        return read_csv_rows(path, ROW_COLUMNS, kind="standing-start CSV")
     return read_csv_rows(path, EPISODE_COLUMNS, added=_OLDER_EPISODE_COLUMNS,
                          may_be_empty=("policy_id", "n_opponents", "stalled", "config_hash"))
 
@@ -298,6 +324,8 @@ def rerun_rows(m: Manifest, root: str | os.PathLike, rows: Sequence[dict[str, st
     elif m.kind == "interventions":
         run_manifest(m, root, workers=workers, out=out, progress=False,
                      tasks_filter=lambda task: replays.task_episode(task) in wanted)
+    elif m.kind == "standing-start":
+        run_manifest(m, root, out=out, progress=False, tasks_filter=lambda ident: ident in wanted)
     else:
         def keep(task) -> bool:
             from sofar_agents.evaluation.protocol import exact_text

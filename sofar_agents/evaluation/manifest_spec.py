@@ -9,9 +9,11 @@ with) and reads like the command line it replaces. Keys (:class:`Manifest`):
                    (:func:`~sofar_agents.evaluation.experiments.run_miqp_ablation`), ``"multi-agent"``
                    (:func:`~sofar_agents.evaluation.multi_agent.run_multi_agent_table`), ``"pareto"``
                    (:func:`~sofar_agents.evaluation.pareto.run_pareto`), ``"interventions"``
-                   (:func:`~sofar_agents.evaluation.interventions.replay_interventions`) or ``"figures"``
+                   (:func:`~sofar_agents.evaluation.interventions.replay_interventions`), ``"figures"``
                    (Fig. 5: :func:`~sofar_agents.evaluation.figures.record_figure_episodes`, then
-                   :func:`~sofar_agents.evaluation.figures.plot_gamma_figures`); required
+                   :func:`~sofar_agents.evaluation.figures.plot_gamma_figures`) or ``"standing-start"`` (the
+                   standing-start probe of one controller:
+                   :func:`~sofar_agents.evaluation.standing_start.run_probe_manifest`); required
 ``out``            the results folder, relative to the repository root; required
 ``stack``          controller preset (default ``"sofar"``); ``scenario``: world (default ``"paper"``)
 ``seed``           base seed of the paired episode seeds (default 0)
@@ -20,8 +22,9 @@ with) and reads like the command line it replaces. Keys (:class:`Manifest`):
 ``duration``       episode horizon [s] (default 200)
 ``tracks``,        circuits and pace ratios (defaults: the paper's; ``track``: table2's circuit, default
 ``rhos``           LagunaSeca)
-``gammas``         the fixed gammas (default: the paper's six; table2: [0.5]; figures: none); interventions: the gammas
-                   switched to inside the window (default [0.15, 0.3, 0.6])
+``gammas``         the fixed gammas (default: the paper's six; table2 and standing-start: [0.5], standing-start
+                   one only; figures: none); interventions: the gammas switched to inside the window (default
+                   [0.15, 0.3, 0.6])
 ``adaptive``       also the shipped PASTA policy of ``stack``/``scenario`` (default true); ``policy``: another
                    checkpoint, relative to the repository root
 ``safety_weights`` pareto: the policy's preferences (:func:`~sofar_agents.evaluation.pareto.preference_family`;
@@ -39,6 +42,10 @@ with) and reads like the command line it replaces. Keys (:class:`Manifest`):
 ``limit``          interventions: at most this many failed episodes per source CSV (default: all)
 ``prefix``         file prefix in ``out`` (default ``table1``, ``table2``, ``multi_agent``, ``pareto``; figures
                    write ``episodes.csv`` and ``trace.csv`` and take none)
+``count``,        standing-start: arc lengths per circuit (default 25) and the distances of the car's side from
+``clearances``     the edge [m] (default [0.5, 0.3, 0.15])
+``drive_time``,    standing-start: simulated seconds per placement (default 8) and the arc length a run must
+``min_distance``   gain to count as driving off [m] (default 5)
 ``description``    free text
 =================  ========================================================================================
 
@@ -50,6 +57,7 @@ episode of other settings is an error.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,7 +68,7 @@ from sofar_agents.evaluation.protocol import DEFAULT_DURATION, FIXED_GAMMAS, RHO
 
 __all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths"]
 
-KINDS = ("table1", "table2", "multi-agent", "pareto", "interventions", "figures")
+KINDS = ("table1", "table2", "multi-agent", "pareto", "interventions", "figures", "standing-start")
 """Command kinds a manifest may name."""
 DEFAULT_EPISODES = {"table1": 5, "pareto": 5, "figures": 3, "table2": 10, "multi-agent": 4}
 """Episodes per cell (races per circuit for multi-agent) of a manifest without ``episodes``, by kind."""
@@ -68,7 +76,7 @@ DEFAULT_SAFETY_WEIGHTS = (0.1, 0.3, 0.5, 0.7, 0.9)
 """Safety weights of a pareto manifest's preferences (those of ``eval/pareto.py``)."""
 DEFAULT_SWITCH_GAMMAS = (0.15, 0.3, 0.6)
 """Gammas inside the window of an interventions manifest (those of ``eval/interventions.py``)."""
-_TUPLES = ("tracks", "rhos", "gammas", "safety_weights", "sources", "windows")
+_TUPLES = ("tracks", "rhos", "gammas", "safety_weights", "sources", "windows", "clearances")
 
 
 def _toml_load(path: Path) -> dict[str, Any]:
@@ -114,6 +122,10 @@ class Manifest:
     placebo_lead: float = 20.0
     limit: int | None = None
     prefix: str | None = None
+    count: int = 25
+    clearances: tuple[float, ...] = (0.5, 0.3, 0.15)
+    drive_time: float = 8.0
+    min_distance: float = 5.0
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -121,8 +133,28 @@ class Manifest:
             raise ValueError(f"manifest {self.name}: kind {self.kind!r} is not one of {', '.join(KINDS)}")
         if (self.kind == "interventions") != bool(self.sources):
             raise ValueError(f"manifest {self.name}: sources is the (required) key of the interventions kind")
-        if self.kind == "figures" and self.prefix is not None:
-            raise ValueError(f"manifest {self.name}: a figures folder holds episodes.csv and trace.csv; no prefix")
+        if self.kind in ("figures", "standing-start") and self.prefix is not None:
+            raise ValueError(f"manifest {self.name}: a {self.kind} folder has fixed file names; no prefix")
+        if self.kind == "standing-start":
+            self._check_probe()
+
+    def _check_probe(self) -> None:
+        """The keys of a standing-start manifest."""
+        if self.gammas is not None and len(self.gammas) != 1:
+            raise ValueError(f"manifest {self.name}: a standing-start probe drives one fixed gamma, got {self.gammas}")
+        if self.duration != DEFAULT_DURATION:
+            raise ValueError(f"manifest {self.name}: duration is the environment's episode horizon, "
+                             f"{DEFAULT_DURATION:g} s in the probe; its run length is drive_time")
+        if not (isinstance(self.count, int) and self.count >= 1):
+            raise ValueError(f"manifest {self.name}: count must be an integer >= 1, got {self.count!r}")
+        for key in ("drive_time", "min_distance"):
+            value = getattr(self, key)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+                raise ValueError(f"manifest {self.name}: {key} must be a finite number > 0, got {value!r}")
+        if not self.clearances or not all(isinstance(c, (int, float)) and math.isfinite(c) and c >= 0.0
+                                          for c in self.clearances):
+            raise ValueError(f"manifest {self.name}: clearances must be finite numbers >= 0 [m], got "
+                             f"{self.clearances!r}")
 
     @property
     def episode_count(self) -> int:
@@ -138,6 +170,8 @@ class Manifest:
             return "interventions.csv"
         if self.kind == "figures":
             return "episodes.csv"
+        if self.kind == "standing-start":
+            return "standing_start.csv"
         return f"{self.prefix or self.kind}_episodes.csv"
 
     @property
@@ -170,6 +204,8 @@ class Manifest:
         gamma (the strategy of the replayed episodes). A missing policy raises ``FileNotFoundError``."""
         if self.kind == "interventions":
             return [Strategy.fixed(self.base_gamma)]
+        if self.kind == "standing-start":
+            return [Strategy.fixed((self.gammas or (0.5,))[0])]
         if self.kind == "pareto":
             from sofar_agents.evaluation.pareto import pareto_strategies, preference_family
 

@@ -16,14 +16,22 @@ settings with that preset) and the outcome. The environment is the registered on
 
 from __future__ import annotations
 
+import csv
+import io
 import math
-from collections.abc import Iterable, Sequence
+import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 __all__ = ["Placement", "StartRow", "placements", "place_at_rest", "drive_off", "run_probe", "format_probe",
-           "ROW_COLUMNS"]
+           "ROW_COLUMNS", "CSV_NAME", "write_probe", "probe_row_id", "run_probe_manifest"]
+
+CSV_NAME = "standing_start.csv"
+"""The probe's rows in its folder (its report: ``standing_start.md``)."""
 
 
 @dataclass(frozen=True)
@@ -132,8 +140,9 @@ def drive_off(env, placement: Placement, gamma: float, duration: float, min_dist
 
 def run_probe(tracks: Iterable[str], stacks: Iterable[str], scenario: str = "paper", count: int = 25,
               clearances: Sequence[float] = (0.5, 0.3, 0.15), gamma: float = 0.5, duration: float = 8.0,
-              min_distance: float = 5.0) -> list[StartRow]:
-    """Every placement of every circuit driven by every controller preset (module docstring)."""
+              min_distance: float = 5.0, keep: Callable[[str, Placement], bool] | None = None) -> list[StartRow]:
+    """Every placement of every circuit driven by every controller preset (module docstring); with ``keep``, only
+    the placements ``keep(circuit, placement)`` accepts (for re-making committed rows)."""
     import gymnasium as gym
 
     import sofar_env  # noqa: F401  (registers the ids)
@@ -148,6 +157,8 @@ def run_probe(tracks: Iterable[str], stacks: Iterable[str], scenario: str = "pap
                 u = env.unwrapped
                 h = config_hash(u.config)
                 for p in placements(u.track, count, clearances, u.race.config.vehicle):
+                    if keep is not None and not keep(track, p):
+                        continue
                     dist, speed, off, failures, ok = drive_off(env, p, gamma, duration, min_distance)
                     rows.append(StartRow(stack, h, scenario, track, p.s, p.n, p.side, p.clearance, dist, speed,
                                          off, failures, ok))
@@ -186,3 +197,41 @@ def format_probe(rows: Sequence[StartRow]) -> str:
 def row_dict(row: StartRow) -> dict:
     """The CSV row of ``row`` (:data:`ROW_COLUMNS`)."""
     return asdict(row)
+
+
+def write_probe(out: str | Path, rows: Sequence[StartRow], title: str, footer: str) -> str:
+    """Write ``rows`` to ``out/standing_start.csv`` and the report (``title``, :func:`format_probe`, ``footer``) to
+    ``out/standing_start.md``, each atomically; returns the report."""
+    from sofar_agents.evaluation.files import write_text_atomic
+
+    out = Path(out)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, ROW_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(row_dict(r) for r in rows)
+    write_text_atomic(out / CSV_NAME, buf.getvalue())
+    text = f"# {title}\n\n" + format_probe(rows) + f"\n{footer}\n"
+    write_text_atomic(out / "standing_start.md", text)
+    return text
+
+
+def probe_row_id(row: dict[str, Any]) -> tuple:
+    """What names a probe row as written in its CSV: ``(track, s, side, clearance)`` (strings)."""
+    return str(row["track"]), str(row["s"]), str(row["side"]), str(row["clearance"])
+
+
+def run_probe_manifest(m: Any, folder: str | Path, keep: Callable[[tuple], bool] | None = None) -> str:
+    """Run the manifest ``m`` of kind ``"standing-start"`` (one controller, ``m.stack``, in ``m.scenario``) into
+    ``folder``; with ``keep``, only the placements whose :func:`probe_row_id` it accepts. Returns the report.
+    The probe is deterministic and takes about a minute per controller: it is run whole, not resumed."""
+    (gamma,) = m.gammas or (0.5,)
+    filt = None if keep is None else (lambda track, p: keep(probe_row_id({"track": track, "s": p.s, "side": p.side,
+                                                                          "clearance": p.clearance})))
+    t0 = time.perf_counter()
+    rows = run_probe(m.tracks, [m.stack], m.scenario, m.count, m.clearances, gamma, m.drive_time, m.min_distance,
+                     keep=filt)
+    title = (f"Standing starts near an edge ({m.scenario} world, gamma {gamma:g}, {m.drive_time:g} s, drove off: "
+             f"{m.min_distance:g} m gained on the track)")
+    footer = (f"{len(rows)} runs in {time.perf_counter() - t0:.0f} s in one process. Command: "
+              f"`python eval/manifest.py run {m.name}`")
+    return write_probe(folder, rows, title, footer)
