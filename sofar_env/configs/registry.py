@@ -143,7 +143,7 @@ def _sofar_5() -> StackConfig:
 
 
 def _sofar_6() -> StackConfig:
-    return dataclasses.replace(_sofar_5(), slow_rows_buffer_edge=0.05)
+    return dataclasses.replace(_sofar_5(), restart_buffer_edge=0.05)
 
 
 DEFAULT_STACK_PRESET = "sofar-4"
@@ -209,11 +209,11 @@ decision lets a turned car creep. The stall fixes of ``docs/decisions/stall-fixe
 PIQP fails on (``mpc.qp_fallback = "daqp"``, every MPC of the stack). PIQP can fail on a feasible QP far outside
 its soft track rows, such as a start from rest deep inside the dynamic world's 2.2 m track margin, and a failed
 QP makes the MPC brake. Measured against ``"sofar-4"`` in ``docs/decisions/qp-backend.md``."""),
-    "sofar-6": Entry(_sofar_6(), """A candidate default, not the default: ``"sofar-5"`` with the slow end rows'
-buffer slack (``slow_rows_buffer_edge = 0.05``): below ``slow_rows_speed`` a violation of the track margin costs
-``mpc.track_buffer_slack`` instead of ``mpc.track_slack`` until the car's side comes within 0.05 m of the edge
-(0.2 m of the paper worlds' 0.25 m buffer), so that a car standing inside the margin drives off along it instead
-of standing (the standing-start defect of ``docs/decisions/stall-fixes.md``)."""),
+    "sofar-6": Entry(_sofar_6(), """A candidate default, not the default: ``"sofar-5"`` with the restart mode's
+buffer slack (``restart_buffer_edge = 0.05``): while the car restarts from below 1 m/s (until 3 m/s) a violation
+of the track margin costs ``mpc.track_buffer_slack`` instead of ``mpc.track_slack`` until the car's side comes
+within 0.05 m of the edge (0.2 m of the paper worlds' 0.25 m buffer), so that a car standing inside the margin
+drives off along it instead of standing (the standing-start defect of ``docs/decisions/stall-fixes.md``)."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

@@ -129,6 +129,15 @@ class StackConfig:
     """Speed below which the restart mode starts [m/s], > 0 (only with ``restart_lateral_weight``)."""
     restart_exit_speed: float = neutral(real(3.0, gt=0.0, unit="m/s"))
     """Speed at which the restart mode ends [m/s], >= ``restart_speed``."""
+    restart_buffer_edge: float | None = neutral(real(None, ge=0.0, optional="off", unit="m"))
+    """The restart mode's *buffer slack* (None: off, the default; only with the restart mode and end rows in its
+    MPC: ``slow_rows_speed``, or ``mpc.track_rows`` other than ``"reference"``). The track margin keeps the car's
+    side ``mpc.track_margin - width / 2`` from each edge (0.25 m in the paper's worlds, 1.25 m in the dynamic
+    world); with this set, the end rows of the restart mode's MPC pay ``mpc.track_buffer_slack`` instead of
+    ``mpc.track_slack`` for a violation of the margin until the side comes this close to the edge
+    (``mpc.track_buffer`` of that MPC; 0 where the margin leaves no such band), so that a car standing inside the
+    margin drives off along it instead of standing, while the last metres to the edge stay as expensive as
+    without it. Above ``restart_exit_speed`` nothing changes [m], >= 0. Decision: ``docs/decisions/stall-fixes.md``."""
     follow_creep_speed: float = neutral(real(0.0, ge=0.0, unit="m/s"))
     """*Turned-car creep* (0: off, the default). While a car is followed and the ego is turned to the track by
     more than ``follow_creep_angle``, and until it is turned by less than ``follow_creep_release``, the follow
@@ -153,14 +162,6 @@ class StackConfig:
     """Whether the slow end rows (and the restart mode's) count the track's curvature in the room kept for turning
     back (``track_rows = "recoverable-curved"``: in a corner a car turned towards the outside edge needs more);
     only with ``slow_rows_speed``. Decision: ``docs/decisions/stall-fixes.md``."""
-    slow_rows_buffer_edge: float | None = neutral(real(None, ge=0.0, optional="off", unit="m"))
-    """The slow end rows' *buffer slack* (None: off, the default; only with ``slow_rows_speed``). The track margin
-    keeps the car's side ``mpc.track_margin - width / 2`` from each edge (0.25 m in the paper's worlds, 1.25 m in
-    the dynamic world); with this set, the end rows of the slow (and the restart mode's) MPC pay
-    ``mpc.track_buffer_slack`` instead of ``mpc.track_slack`` for a violation of the margin until the side comes
-    this close to the edge (``mpc.track_buffer`` of those MPCs; 0 where the margin leaves no such band), so that a
-    car standing inside the margin drives off along it instead of standing, while the last metres to the edge
-    stay as expensive as without it [m], >= 0. Decision: ``docs/decisions/stall-fixes.md``."""
     parked_follow_gap: float | None = neutral(real(None, ge=0.0, optional="follow_gap", unit="m"))
     """Arc-length distance kept behind a followed car slower than ``parked_speed`` [m] (None: ``follow_gap``,
     the default), so that the ego stops where it can still steer around a near-stationary car. Decision:
@@ -198,9 +199,13 @@ class StackConfig:
                 raise ConfigError(f"stack.slow_rows_speed must be >= restart_exit_speed = {self.restart_exit_speed} "
                                   f"[m/s] with the restart mode on (its MPC bounds the ends too), got "
                                   f"{self.slow_rows_speed!r}")
-        if self.slow_rows_buffer_edge is not None and self.slow_rows_speed is None:
-            raise ConfigError("stack.slow_rows_buffer_edge needs stack.slow_rows_speed (it is a property of the slow "
-                              "end rows), got slow_rows_speed = None")
+        if self.restart_buffer_edge is not None:
+            if self.restart_lateral_weight is None:
+                raise ConfigError("stack.restart_buffer_edge needs the restart mode (stack.restart_lateral_weight), "
+                                  "got restart_lateral_weight = None")
+            if self.slow_rows_speed is None and self.mpc.track_rows == "reference":
+                raise ConfigError("stack.restart_buffer_edge needs end rows in the restart mode's MPC "
+                                  "(stack.slow_rows_speed, or stack.mpc.track_rows other than 'reference')")
         if self.slow_rows_curved and self.slow_rows_speed is None:
             raise ConfigError("stack.slow_rows_curved needs stack.slow_rows_speed (it is a property of the slow end "
                               "rows), got slow_rows_speed = None")

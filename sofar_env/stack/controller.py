@@ -87,15 +87,14 @@ class OvertakingStack:
         self._slow_mpc: MPCDCBF | None = None  # the slow end rows' MPC (slow_rows_speed)
         slow = cfg.slow_rows_speed is not None and cfg.reference_numerics is None
         slow_rows = "recoverable-curved" if cfg.slow_rows_curved else "recoverable"
-        buffer = _buffer_width(cfg, vehicle) if slow else 0.0
         if slow:
-            self._slow_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, track_rows=slow_rows, track_buffer=buffer), vehicle)
+            self._slow_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, track_rows=slow_rows), vehicle)
         self._restart_mpc: MPCDCBF | None = None  # the restart mode's MPC (restart_lateral_weight)
         if cfg.restart_lateral_weight is not None and cfg.reference_numerics is None:
             q = (cfg.mpc.q[0], float(cfg.restart_lateral_weight)) + tuple(cfg.mpc.q[2:])
             rows = slow_rows if slow else cfg.mpc.track_rows
-            self._restart_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, q=q, track_rows=rows, track_buffer=buffer),
-                                        vehicle)
+            self._restart_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, q=q, track_rows=rows,
+                                                            track_buffer=_buffer_width(cfg, vehicle)), vehicle)
             self._turn_back_angle = EndOffsets(vehicle, recoverable=True).e_star
         self._node_t = np.arange(cfg.miqp.nodes) * cfg.miqp.node_dt
         self._mpc_t = cfg.mpc.time_grid()
@@ -317,8 +316,8 @@ class OvertakingStack:
 
 
 def _buffer_width(cfg: StackConfig, vehicle: VehicleParams) -> float:
-    """``mpc.track_buffer`` of the slow end rows' MPCs [m]: the band of the track margin in which the car's side is
-    more than ``slow_rows_buffer_edge`` from the edge (0 with the option off or where the margin leaves none)."""
-    if cfg.slow_rows_buffer_edge is None:
+    """``mpc.track_buffer`` of the restart mode's MPC [m]: the band of the track margin in which the car's side is
+    more than ``restart_buffer_edge`` from the edge (0 with the option off or where the margin leaves none)."""
+    if cfg.restart_buffer_edge is None:
         return 0.0
-    return max(cfg.mpc.track_margin - 0.5 * vehicle.width - cfg.slow_rows_buffer_edge, 0.0)
+    return max(cfg.mpc.track_margin - 0.5 * vehicle.width - cfg.restart_buffer_edge, 0.0)

@@ -112,6 +112,6 @@ def test_the_report_counts_per_controller_and_clearance():
 
 
 def test_the_buffer_slack_candidate_drives_off_from_rest_near_an_edge(laguna):
-    """``"sofar-6"`` (the slow end rows' buffer slack) drives off from the scene where the default stands."""
+    """``"sofar-6"`` (the restart mode's buffer slack) drives off from the scene where the default stands."""
     distance, speed, off, failures, ok = _start_near_the_edge(laguna, "sofar-6")
     assert ok and not off and distance > 10.0 and failures == 0

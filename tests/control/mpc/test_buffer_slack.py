@@ -1,4 +1,4 @@
-"""The buffer slack of the end rows (``MPCConfig.track_buffer``, ``StackConfig.slow_rows_buffer_edge``): a second
+"""The buffer slack of the end rows (``MPCConfig.track_buffer``, ``StackConfig.restart_buffer_edge``): a second
 slack of the four end rows, bounded by the buffer's width and cheaper than the track slack. Off (0) it leaves the
 QP as it was; on, the RTI agrees with the IPOPT reference of the same problem on both QP backends, the cheap
 slack is used first, and the edge beyond it costs what it did."""
@@ -41,9 +41,10 @@ def test_bad_buffer_settings_are_refused(kwargs, match):
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    ({"slow_rows_buffer_edge": 0.05}, "slow_rows_speed"),
-    ({"slow_rows_buffer_edge": -0.05, "slow_rows_speed": 10.0}, "slow_rows_buffer_edge"),
-    ({"slow_rows_buffer_edge": math.nan, "slow_rows_speed": 10.0}, "slow_rows_buffer_edge"),
+    ({"restart_buffer_edge": 0.05}, "restart mode"),
+    ({"restart_buffer_edge": 0.05, "restart_lateral_weight": 15.0}, "end rows"),
+    ({"restart_buffer_edge": -0.05, "restart_lateral_weight": 15.0, "slow_rows_speed": 10.0}, "restart_buffer_edge"),
+    ({"restart_buffer_edge": math.nan, "restart_lateral_weight": 15.0, "slow_rows_speed": 10.0}, "restart_buffer_edge"),
 ])
 def test_bad_stack_buffer_settings_are_refused(kwargs, match):
     with pytest.raises(ConfigError, match=match):
@@ -52,12 +53,21 @@ def test_bad_stack_buffer_settings_are_refused(kwargs, match):
 
 def test_the_buffer_is_the_margin_less_the_half_width_and_the_edge_kept():
     cfg = stack_preset("sofar-6")
-    assert cfg.slow_rows_buffer_edge == 0.05 and cfg.mpc.track_margin == 1.2
+    assert cfg.restart_buffer_edge == 0.05 and cfg.mpc.track_margin == 1.2
     assert _buffer_width(cfg, AV21) == pytest.approx(1.2 - 0.5 * AV21.width - 0.05)
     wide = dataclasses.replace(cfg, mpc=dataclasses.replace(cfg.mpc, track_margin=2.2))  # the dynamic world's
     assert _buffer_width(wide, AV21) == pytest.approx(2.2 - 0.5 * AV21.width - 0.05)
-    assert _buffer_width(dataclasses.replace(cfg, slow_rows_buffer_edge=0.5), AV21) == 0.0  # no band left
+    assert _buffer_width(dataclasses.replace(cfg, restart_buffer_edge=0.5), AV21) == 0.0  # no band left
     assert _buffer_width(stack_preset("sofar-5"), AV21) == 0.0  # off
+
+
+def test_only_the_restart_mode_has_the_buffer():
+    from sofar_env.stack import OvertakingStack
+    from sofar_env.tracks import Track
+
+    stack = OvertakingStack(Track.load("LagunaSeca"), stack_preset("sofar-6"))
+    assert stack._restart_mpc.config.track_buffer == pytest.approx(0.2)
+    assert stack.mpc.config.track_buffer == 0.0 and stack._slow_mpc.config.track_buffer == 0.0
 
 
 def _solve(cache_dir, iterations=15, **kwargs):
