@@ -124,7 +124,7 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             report = mf.run_manifest(m, ROOT, workers=args.workers, out=args.out, progress=not args.no_progress)
             walls.append((m.name, time.perf_counter() - t0))
-            logger.info("%s", report.markdown if report is not None else "")
+            logger.info("%s", getattr(report, "markdown", report) or "")  # a table's report, or the probe's text
         for name, wall in walls:
             logger.info("%s: %.0f s", name, wall)
         return 0
