@@ -76,7 +76,10 @@ def shortest_rows(m: mf.Manifest, n: int, root: Path = ROOT) -> list[dict[str, s
     mine = [r for r in mf.raw_rows(root / m.out / m.csv_name, m.kind) if mf.row_episode(m, r) in ids]
     if m.kind == "interventions":
         return cheapest_replays(m, mine, n)
-    rows = sorted(mine, key=lambda r: (mf.row_length(m, r), r["strategy"], r["seed"]))
+    if m.kind == "standing-start":  # placements: no strategy or seed
+        rows = sorted(mine, key=lambda r: (mf.row_length(m, r), mf.row_id(m, r)))
+    else:
+        rows = sorted(mine, key=lambda r: (mf.row_length(m, r), r["strategy"], r["seed"]))
     per_track: dict[str, list[dict[str, str]]] = {}
     for r in rows:
         mine = per_track.setdefault(r["track"], [])
