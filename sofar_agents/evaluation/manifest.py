@@ -272,8 +272,8 @@ _OLDER_RACE_COLUMNS = {"opponents": "0", "config_hash": ""}
 
 def raw_rows(path: str | os.PathLike, kind: str = "table1") -> list[dict[str, str]]:
     """The complete rows of an episode CSV (``kind`` ``"multi-agent"``: a race CSV; ``"interventions"``: an
-    ``interventions.csv``; ``"standing-start"``: a probe's CSV) as written (strings); the columns of an older format that the file lacks hold the
-    value its rows stand for (``config_hash`` "")."""
+    ``interventions.csv``; ``"standing-start"``: a probe's CSV) as written (strings); the columns of an older
+    format that the file lacks hold the value its rows stand for (``config_hash`` "")."""
     if kind == "interventions":
         from sofar_agents.evaluation.interventions import _read_rows
 

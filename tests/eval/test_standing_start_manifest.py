@@ -67,5 +67,6 @@ def test_every_committed_probe_folder_has_its_manifest():
     root = Path(__file__).resolve().parents[2]
     outs = {mf.load_manifest(p).out for p in mf.manifest_paths(root / "experiments")
             if mf.load_manifest(p).kind == "standing-start"}
-    folders = {str(p.parent.relative_to(root)) for p in (root / "results" / "standing_start").glob("**/standing_start.csv")}
+    found = (root / "results" / "standing_start").glob("**/standing_start.csv")
+    folders = {str(p.parent.relative_to(root)) for p in found}
     assert folders and folders == outs
