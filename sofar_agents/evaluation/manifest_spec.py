@@ -171,7 +171,9 @@ class Manifest:
         if self.kind == "figures":
             return "episodes.csv"
         if self.kind == "standing-start":
-            return "standing_start.csv"
+            from sofar_agents.evaluation.standing_start import CSV_NAME
+
+            return CSV_NAME
         return f"{self.prefix or self.kind}_episodes.csv"
 
     @property

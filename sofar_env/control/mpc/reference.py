@@ -172,5 +172,6 @@ class IpoptReference:
 
 
 def _n_buffer(cfg: MPCConfig) -> int:
-    """1 where the track rows have the buffer slack (``MPCConfig.track_buffer``, end rows only), else 0."""
-    return int(cfg.track_buffer > 0.0 and cfg.track_rows != "reference")
+    """1 where the track rows have the buffer slack (``MPCConfig.track_buffer``; the config allows it with end rows
+    only), else 0."""
+    return int(cfg.track_buffer > 0.0)
