@@ -154,6 +154,8 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
 
 
 SHIPPED_POLICIES: dict[tuple[str, str], str] = {
+    ("sofar-6", "paper"): "pasta_lagunaseca_sofar6.json",
+    ("sofar-6", "interactive"): "pasta_lagunaseca_interactive_sofar6.json",
     ("sofar-4", "paper"): "pasta_lagunaseca_sofar4.json",
     ("sofar-4", "interactive"): "pasta_lagunaseca_interactive_sofar4.json",
     ("sofar-1", "paper"): "pasta_lagunaseca.json",
@@ -161,27 +163,30 @@ SHIPPED_POLICIES: dict[tuple[str, str], str] = {
     ("paper", "paper"): "pasta_lagunaseca_paper.json",
 }
 """The shipped PASTA policies, by (controller preset they were trained with, world scenario): all trained on
-Laguna Seca only; ``"sofar"`` looks up the default controller's version (``"sofar-4"``). The interactive ones were
+Laguna Seca only; ``"sofar"`` looks up the default controller's version (``"sofar-6"``). The interactive ones were
 trained with a field of 8 opponents (``n_opponents=8``), the dense field of the interactive world, and observe
-the interactive world's 16 values. The ``"sofar-1"`` ones were trained with the former default and made its
-tables."""
+the interactive world's 16 values. The ``"sofar-4"`` and ``"sofar-1"`` ones were trained with the former defaults
+and made their tables, by the same recipes."""
 
 
 NAMED_POLICIES: dict[str, str] = {
     "lagunaseca": "pasta_lagunaseca.json",
+    "lagunaseca-sofar-6": "pasta_lagunaseca_sofar6.json",
     "lagunaseca-sofar-4": "pasta_lagunaseca_sofar4.json",
     "lagunaseca-paper": "pasta_lagunaseca_paper.json",
     "lagunaseca-interactive": "pasta_lagunaseca_interactive.json",
+    "lagunaseca-interactive-sofar-6": "pasta_lagunaseca_interactive_sofar6.json",
     "lagunaseca-interactive-sofar-4": "pasta_lagunaseca_interactive_sofar4.json",
     "morl-dynamic": "pasta_morl_dynamic.json",
     "morl-dynamic-sofar-4": "pasta_morl_dynamic_sofar4.json",
     "morl-interactive-sofar-4": "pasta_morl_interactive_sofar4.json",
 }
 """The shipped PASTA policies by name (:func:`named_policy_path`, :func:`load_policy`). ``lagunaseca`` and
-``lagunaseca-interactive``: trained with ``"sofar-1"``, the former default; ``lagunaseca-sofar-4`` and
-``lagunaseca-interactive-sofar-4``: the same recipes with the default controller. ``morl-dynamic-sofar-4`` and
+``lagunaseca-interactive``: trained with ``"sofar-1"``, the first default; ``lagunaseca-sofar-4`` and
+``lagunaseca-interactive-sofar-4``: the same recipes with ``"sofar-4"``, the second; ``lagunaseca-sofar-6`` and
+``lagunaseca-interactive-sofar-6``: the same recipes with the default controller. ``morl-dynamic-sofar-4`` and
 ``morl-interactive-sofar-4``: the preference-conditioned policies of the dynamic and the dense interactive world
-(8 opponents), trained with the default controller on Laguna Seca, started at the cautious end of the gamma range
+(8 opponents), trained with ``"sofar-4"`` on Laguna Seca, started at the cautious end of the gamma range
 with a preference drawn every 64 decisions along the safety-overtakes path (``preference_sampling="trade-off"``);
 their gamma falls as the safety weight grows (``tests/agents/test_policies.py``,
 ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic world's first such policy, trained with
@@ -200,8 +205,8 @@ def named_policy_path(name: str) -> Path:
 def default_policy_path(stack: str = "sofar", scenario: str = "paper") -> Path:
     """Path of the PASTA policy shipped for a controller preset and a world (trained on Laguna Seca).
 
-    ``stack="sofar"`` (default) or ``"sofar-4"``: trained with the default controller; ``stack="sofar-1"``: trained
-    with the default before it; ``stack="paper"``: trained with the paper's Algorithm 1 as written
+    ``stack="sofar"`` (default) or ``"sofar-6"``: trained with the default controller; ``stack="sofar-4"`` and
+    ``"sofar-1"``: trained with the defaults before it; ``stack="paper"``: trained with the paper's Algorithm 1 as written
     (``gym.make(..., stack="paper")``). Raises ``ValueError`` for a combination without a shipped policy and
     ``FileNotFoundError`` (with instructions) when its files are missing.
     """

@@ -16,8 +16,8 @@ __all__ = ["StackConfig", "STACK_PRESETS", "stack_preset"]
 
 STACK_PRESETS = NameView(STACK_PRESET_REGISTRY)
 """Names accepted by :func:`stack_preset` (and by the environments' ``stack=`` key), in registration order:
-``"sofar"`` (the default, now ``"sofar-4"``), ``"sofar-1"``, ``"paper"``, ``"sofar-ends"``, ``"sofar-recover"``,
-``"sofar-2"``, ``"sofar-3"``, ``"sofar-4"``, ``"sofar-5"``, ``"sofar-daqp"``, ``"reference-numerics"``,
+``"sofar"`` (the default, now ``"sofar-6"``), ``"sofar-1"``, ``"paper"``, ``"sofar-ends"``, ``"sofar-recover"``,
+``"sofar-2"``, ``"sofar-3"``, ``"sofar-4"``, ``"sofar-5"``, ``"sofar-6"``, ``"sofar-daqp"``, ``"reference-numerics"``,
 ``"reference-numerics-no-phantoms"``. A live view of the registry that compares equal to the tuple of these
 names."""
 
@@ -26,7 +26,7 @@ def stack_preset(name: str) -> StackConfig:
     """The controller of a named preset (a frozen :class:`StackConfig`; case and surrounding spaces ignored).
 
     The presets and what each one is: ``STACK_PRESET_REGISTRY[name].doc``
-    (:mod:`sofar_env.configs.registry`). ``"sofar"`` is the default of every environment (now ``"sofar-4"``;
+    (:mod:`sofar_env.configs.registry`). ``"sofar"`` is the default of every environment (now ``"sofar-6"``;
 ``"sofar-1"`` is the default before it, ``StackConfig()``); ``"paper"`` is the
     paper's Algorithm 1 as written (the *controller* meaning of "paper", independent of the world
     ``scenario="paper"`` and the observation layout ``observation="paper"``). Raises ``ValueError`` listing the

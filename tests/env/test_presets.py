@@ -39,7 +39,10 @@ def test_paper_preset_never_follows_where_the_default_stack_does():
 @pytest.mark.parametrize("stack, scenario, name", [("sofar-1", "paper", "pasta_lagunaseca.json"),
                                                    ("paper", "paper", "pasta_lagunaseca_paper.json"),
                                                    ("sofar-1", "interactive", "pasta_lagunaseca_interactive.json"),
-                                                   ("sofar", "paper", "pasta_lagunaseca_sofar4.json"),
+                                                   ("sofar", "paper", "pasta_lagunaseca_sofar6.json"),
+                                                   ("sofar-6", "paper", "pasta_lagunaseca_sofar6.json"),
+                                                   ("sofar-6", "interactive",
+                                                    "pasta_lagunaseca_interactive_sofar6.json"),
                                                    ("sofar-4", "paper", "pasta_lagunaseca_sofar4.json"),
                                                    ("sofar-4", "interactive",
                                                     "pasta_lagunaseca_interactive_sofar4.json")])
@@ -60,10 +63,10 @@ def test_shipped_policies_load_by_name(stack, scenario, name):
 def test_the_default_controller_has_its_own_policies():
     """"sofar" looks up the default's version; a preset without a trained policy gets none."""
     for scenario in ("paper", "interactive"):
-        assert default_policy_path(stack="sofar", scenario=scenario) == default_policy_path(stack="sofar-4",
-                                                                                          scenario=scenario)
-        assert default_policy_path(stack="sofar", scenario=scenario) != default_policy_path(stack="sofar-1",
-                                                                                          scenario=scenario)
+        default = default_policy_path(stack="sofar", scenario=scenario)
+        assert default == default_policy_path(stack="sofar-6", scenario=scenario)
+        assert default not in (default_policy_path(stack="sofar-4", scenario=scenario),
+                               default_policy_path(stack="sofar-1", scenario=scenario))
     with pytest.raises(ValueError, match="no shipped PASTA policy"):
         default_policy_path(stack="sofar-3")
     with pytest.raises(ValueError, match="no shipped PASTA policy"):

@@ -1,11 +1,13 @@
 """Every preset, world and multi-car race resolves to the values it had before the configuration layer was
 rebuilt (the snapshot in ``data/resolved_configs.json``, written by :mod:`.resolved_configs`).
 
-The snapshot was re-written once on purpose, when the default moved to ``"sofar-4"``: every entry of
+The snapshot was re-written on purpose when the default moved, and only then. To ``"sofar-4"``: every entry of
 ``"sofar"`` and of the default (``env_config``, the multi-car cases) gained the four stall-fix fields and nothing
 else, each ``"sofar-1"`` entry equals the former ``"sofar"`` one and each new ``"sofar"`` entry the former
-``"sofar-4"`` one, in every world, single-car and multi-car. A new preset adds its entries (``"sofar-5"``: 7, every
-other entry unchanged)."""
+``"sofar-4"`` one, in every world, single-car and multi-car. To ``"sofar-6"``: the same entries gained
+``mpc.qp_fallback = "daqp"`` and ``restart_buffer_edge = 0.05`` and nothing else, each new ``"sofar"`` entry
+equal to the former ``"sofar-6"`` one. A new preset adds its entries (``"sofar-5"``: 7, every other entry
+unchanged)."""
 
 from __future__ import annotations
 

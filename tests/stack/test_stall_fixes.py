@@ -31,8 +31,8 @@ def test_sofar_2_is_one_registry_entry_over_sofar_recover():
                                         follow_creep_speed=2.0)
     assert "superseded" in doc
     assert stack_preset("sofar-1") == StackConfig()  # version 1 is StackConfig's own defaults
-    # one hash per preset, but "sofar" names the default: the value (and hash) of "sofar-4"
-    assert config_hash(stack_preset("sofar")) == config_hash(stack_preset("sofar-4"))
+    # one hash per preset, but "sofar" names the default: the value (and hash) of "sofar-6"
+    assert config_hash(stack_preset("sofar")) == config_hash(stack_preset("sofar-6"))
     assert len({config_hash(stack_preset(p)) for p in STACK_PRESETS if p != "sofar"}) == len(STACK_PRESETS) - 1
 
 
@@ -112,7 +112,7 @@ def test_invalid_stall_fix_settings_are_rejected():
 def test_sofar_4_is_sofar_3_with_the_curved_slow_rows(tracks):
     value, doc = registry.STACK_PRESET_REGISTRY["sofar-4"]
     assert value == dataclasses.replace(stack_preset("sofar-3"), slow_rows_curved=True)
-    assert "The default controller" in doc and value == stack_preset("sofar")
+    assert "The default controller" in doc and value != stack_preset("sofar")  # the default before "sofar-6"
     stack = OvertakingStack(tracks["Monza"], value)
     assert stack._slow_mpc.config.track_rows == "recoverable-curved" == stack._restart_mpc.config.track_rows
     assert stack.mpc.config.track_rows == "reference"

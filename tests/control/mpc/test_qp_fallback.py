@@ -27,8 +27,9 @@ def test_off_by_default_and_out_of_the_hash_until_set():
         MPCConfig(qp_fallback="osqp")
     assert stack_preset("sofar-5") == dataclasses.replace(
         stack_preset("sofar-4"), mpc=dataclasses.replace(stack_preset("sofar-4").mpc, qp_fallback="daqp"))
-    for preset in ("sofar", "sofar-1", "sofar-4", "paper", "sofar-daqp"):
+    for preset in ("sofar-1", "sofar-4", "paper", "sofar-daqp"):
         assert stack_preset(preset).mpc.qp_fallback == "off"
+    assert stack_preset("sofar").mpc.qp_fallback == "daqp"  # the default since "sofar-6"
 
 
 def _piqp_always_fails(monkeypatch):
