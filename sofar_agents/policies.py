@@ -205,10 +205,10 @@ def named_policy_path(name: str) -> Path:
 def default_policy_path(stack: str = "sofar", scenario: str = "paper") -> Path:
     """Path of the PASTA policy shipped for a controller preset and a world (trained on Laguna Seca).
 
-    ``stack="sofar"`` (default) or ``"sofar-6"``: trained with the default controller; ``stack="sofar-4"`` and
-    ``"sofar-1"``: trained with the defaults before it; ``stack="paper"``: trained with the paper's Algorithm 1 as written
-    (``gym.make(..., stack="paper")``). Raises ``ValueError`` for a combination without a shipped policy and
-    ``FileNotFoundError`` (with instructions) when its files are missing.
+    ``stack="sofar"`` (default) or ``"sofar-6"``: trained with the default controller; ``stack="sofar-4"``
+    and ``"sofar-1"``: trained with the defaults before it; ``stack="paper"``: trained with the paper's
+    Algorithm 1 as written (``gym.make(..., stack="paper")``). Raises ``ValueError`` for a combination without
+    a shipped policy and ``FileNotFoundError`` (with instructions) when its files are missing.
     """
     from importlib.resources import files
 

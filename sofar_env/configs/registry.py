@@ -199,22 +199,22 @@ Below 10 m/s (until 12 m/s) a second MPC bounds both ends of the car with room k
 (``slow_rows_speed``: ``"sofar-recover"``'s rows, which in the dynamic world also raise collisions at racing
 speed), with the restart mode and the turned-car creep of ``"sofar-2"``. The stall fixes of
 ``docs/decisions/stall-fixes.md``."""),
-    "sofar-4": Entry(_sofar_4(), """The default controller after ``"sofar-1"``, until ``"sofar-6"`` replaced it (version 4,
-called ``"sofar"`` in the tables made with it; kept so that they re-make from their manifests): ``"sofar-3"``
-with the slow end rows counting the track's curvature in the room kept for turning back (``slow_rows_curved``:
-in a corner a car turned towards the outside edge needs more room to turn back, since the track turns away
-while it does). Against ``"sofar-1"``: below 10 m/s (until 12 m/s) a second MPC bounds both ends of the car
-with room kept for turning back, a car below 1 m/s restarts with a tenth of the lateral weight, and a follow
+    "sofar-4": Entry(_sofar_4(), """The default controller after ``"sofar-1"``, until ``"sofar-6"`` replaced it
+(version 4, called ``"sofar"`` in the tables made with it; kept so that they re-make from their manifests):
+``"sofar-3"`` with the slow end rows counting the track's curvature in the room kept for turning back
+(``slow_rows_curved``: in a corner a car turned towards the outside edge needs more room to turn back, since the
+track turns away while it does). Against ``"sofar-1"``: below 10 m/s (until 12 m/s) a second MPC bounds both ends of
+the car with room kept for turning back, a car below 1 m/s restarts with a tenth of the lateral weight, and a follow
 decision lets a turned car creep. The stall fixes of ``docs/decisions/stall-fixes.md``."""),
-    "sofar-5": Entry(_sofar_5(), """A candidate default superseded by ``"sofar-6"``: ``"sofar-4"`` with DAQP solving the QPs
-PIQP fails on (``mpc.qp_fallback = "daqp"``, every MPC of the stack). PIQP can fail on a feasible QP far outside
-its soft track rows, such as a start from rest deep inside the dynamic world's 2.2 m track margin, and a failed
-QP makes the MPC brake. Measured against ``"sofar-4"`` in ``docs/decisions/qp-backend.md``."""),
+    "sofar-5": Entry(_sofar_5(), """A candidate default superseded by ``"sofar-6"``: ``"sofar-4"`` with DAQP solving
+the QPs PIQP fails on (``mpc.qp_fallback = "daqp"``, every MPC of the stack). PIQP can fail on a feasible QP far
+outside its soft track rows, such as a start from rest deep inside the dynamic world's 2.2 m track margin, and a
+failed QP makes the MPC brake. Measured against ``"sofar-4"`` in ``docs/decisions/qp-backend.md``."""),
     "sofar-6": Entry(_sofar_6(), """The default controller (version 6, also named ``"sofar"``): ``"sofar-5"`` with
-the restart mode's buffer slack (``restart_buffer_edge = 0.05``): while the car restarts from below 1 m/s (until 3 m/s) a violation
-of the track margin costs ``mpc.track_buffer_slack`` instead of ``mpc.track_slack`` until the car's side comes
-within 0.05 m of the edge (0.2 m of the paper worlds' 0.25 m buffer), so that a car standing inside the margin
-drives off along it instead of standing (the standing-start defect of ``docs/decisions/stall-fixes.md``)."""),
+the restart mode's buffer slack (``restart_buffer_edge = 0.05``): while the car restarts from below 1 m/s (until
+3 m/s) a violation of the track margin costs ``mpc.track_buffer_slack`` instead of ``mpc.track_slack`` until the car's
+side comes within 0.05 m of the edge (0.2 m of the paper worlds' 0.25 m buffer), so that a car standing inside the
+margin drives off along it instead of standing (the standing-start defect of ``docs/decisions/stall-fixes.md``)."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP
