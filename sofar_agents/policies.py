@@ -178,17 +178,20 @@ NAMED_POLICIES: dict[str, str] = {
     "lagunaseca-interactive-sofar-6": "pasta_lagunaseca_interactive_sofar6.json",
     "lagunaseca-interactive-sofar-4": "pasta_lagunaseca_interactive_sofar4.json",
     "morl-dynamic": "pasta_morl_dynamic.json",
+    "morl-dynamic-sofar-6": "pasta_morl_dynamic_sofar6.json",
     "morl-dynamic-sofar-4": "pasta_morl_dynamic_sofar4.json",
+    "morl-interactive-sofar-6": "pasta_morl_interactive_sofar6.json",
     "morl-interactive-sofar-4": "pasta_morl_interactive_sofar4.json",
 }
 """The shipped PASTA policies by name (:func:`named_policy_path`, :func:`load_policy`). ``lagunaseca`` and
 ``lagunaseca-interactive``: trained with ``"sofar-1"``, the first default; ``lagunaseca-sofar-4`` and
 ``lagunaseca-interactive-sofar-4``: the same recipes with ``"sofar-4"``, the second; ``lagunaseca-sofar-6`` and
-``lagunaseca-interactive-sofar-6``: the same recipes with the default controller. ``morl-dynamic-sofar-4`` and
-``morl-interactive-sofar-4``: the preference-conditioned policies of the dynamic and the dense interactive world
-(8 opponents), trained with ``"sofar-4"`` on Laguna Seca, started at the cautious end of the gamma range
+``lagunaseca-interactive-sofar-6``: the same recipes with the default controller. ``morl-dynamic-sofar-6`` and
+``morl-interactive-sofar-6``: the preference-conditioned policies of the dynamic and the dense interactive world
+(8 opponents), trained with the default controller on Laguna Seca, started at the cautious end of the gamma range
 with a preference drawn every 64 decisions along the safety-overtakes path (``preference_sampling="trade-off"``);
-their gamma falls as the safety weight grows (``tests/agents/test_policies.py``,
+``morl-dynamic-sofar-4`` and ``morl-interactive-sofar-4``: the same recipes with ``"sofar-4"``. Their gamma falls
+as the safety weight grows (``tests/agents/test_policies.py``,
 ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic world's first such policy, trained with
 ``"sofar-1"`` from the middle of the range."""
 

@@ -1,4 +1,4 @@
-"""Ray, imported lazily and started or joined in one place (sweeps and training).
+"""Ray, imported lazily and started or joined in one place (sweeps and training), and actors tied to their driver.
 
 ``address=None`` starts a local Ray instance with a given number of CPUs;
 ``"auto"`` or ``"HOST:6379"`` joins a running cluster (``ray start --head``). Without
@@ -14,6 +14,12 @@ Start-up: a local instance takes a few seconds to start and each worker imports 
 and builds its environments once, so Ray is slower than the default process pool on small
 sweeps such as ``eval/table.py --quick`` or ``train/pasta.py --quick`` (where the start-up is
 most of the run); it pays off on long sweeps, and on a cluster.
+
+Actors tied to the driver: Ray ends a job's actors when its driver exits, but an actor in the middle of a call
+(an episode, a rollout chunk) finishes it first, for nobody. Every actor of the package (the executor's and the
+training pool's) therefore takes the driver's :func:`driver_identity` and calls :func:`follow_driver` first thing:
+an actor on the driver's machine then ends its process as soon as the driver's process has ended
+(:func:`~sofar_agents.worker_lifetime.exit_with_process`), also when the driver was killed with SIGKILL.
 """
 
 from __future__ import annotations
@@ -21,6 +27,13 @@ from __future__ import annotations
 import logging
 import os
 import sys
+
+from sofar_agents.worker_lifetime import exit_with_process, process_start_time
+
+__all__ = ["INSTALL_HINT", "DriverIdentity", "driver_identity", "follow_driver", "init_ray", "require_ray"]
+
+DriverIdentity = tuple[str, int, "str | None"]
+"""``(Ray node id, pid, process start time)`` of a driver (:func:`driver_identity`)."""
 
 INSTALL_HINT = 'the Ray backend needs Ray: pip install "sofar[ray]" (or, from a clone, pip install -e ".[ray]")'
 
@@ -54,3 +67,23 @@ def init_ray(address: str | None, num_cpus: int) -> bool:
     else:
         ray.init(address=address, logging_level=logging.WARNING)
     return True
+
+
+def driver_identity() -> DriverIdentity:
+    """This process's :data:`DriverIdentity`, for its actors' :func:`follow_driver` (Ray must be initialised)."""
+    ray = require_ray()
+    return ray.get_runtime_context().get_node_id(), os.getpid(), process_start_time(os.getpid())
+
+
+def follow_driver(driver: DriverIdentity | None) -> None:
+    """In an actor: end this process once the driver ``driver`` has ended, if it runs on this node.
+
+    None, or a driver on another node, does nothing (Ray ends those actors when the driver's job ends).
+    """
+    if driver is None:
+        return
+    import ray
+
+    node_id, pid, start_time = driver
+    if ray.get_runtime_context().get_node_id() == node_id:
+        exit_with_process(pid, start_time)

@@ -7,8 +7,8 @@ task on an actor whose process dies is retried on the restarted actor (:data:`MA
 are exhausted the task is reported as failed, and a rerun retries it.
 
 The actors end with the driver: Ray ends a job's actors when its driver exits, and an actor on the driver's
-machine also watches the driver's process (:func:`~sofar_agents.worker_lifetime.exit_with_process`), so a driver
-killed with SIGKILL does not leave busy actors behind. The other processes of a local Ray instance are Ray's
+machine also watches the driver's process (:func:`~sofar_agents.ray_support.follow_driver`, as the training
+pool's actors do), so a driver killed with SIGKILL does not leave busy actors behind. The other processes of a local Ray instance are Ray's
 own: its GCS and raylet end with the driver, its agents follow the raylet within about a minute.
 
 ``address=None`` starts a local Ray instance with ``workers`` CPUs; ``"auto"`` or ``"HOST:6379"`` joins a running
@@ -25,8 +25,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from sofar_agents.ray_support import init_ray, require_ray
-from sofar_agents.worker_lifetime import exit_with_process, process_start_time
+from sofar_agents.ray_support import DriverIdentity, driver_identity, follow_driver, init_ray, require_ray
 
 __all__ = ["MAX_TASK_RETRIES", "run_on_ray"]
 
@@ -39,18 +38,13 @@ MAX_TASK_RETRIES = 3
 class _RunnerActor:
     """Actor body: runs tasks with its own runner.
 
-    ``driver``: ``(Ray node id, pid, start time)`` of the driver; an actor on the same node ends its process as
-    soon as the driver's process has ended.
+    ``driver``: the driver's :func:`~sofar_agents.ray_support.driver_identity`; an actor on the same node ends its
+    process as soon as the driver's process has ended.
     """
 
-    def __init__(self, runner_factory: Callable[[], Any], driver: tuple[str, int, str | None] | None = None) -> None:
+    def __init__(self, runner_factory: Callable[[], Any], driver: DriverIdentity | None = None) -> None:
         warnings.simplefilter("ignore", UserWarning)  # the driver reports failures; keep worker output quiet
-        if driver is not None:
-            import ray
-
-            node_id, pid, start_time = driver
-            if ray.get_runtime_context().get_node_id() == node_id:
-                exit_with_process(pid, start_time)
+        follow_driver(driver)
         self.runner = runner_factory()
 
     def run(self, idx: int, task: Any) -> tuple[int, bool, Any]:
@@ -75,7 +69,7 @@ def run_on_ray(pending: Sequence, runner_factory: Callable[[], Any], on_result: 
         n_cpus = int(ray.cluster_resources().get("CPU", 1))
         n_actors = max(1, min(int(workers or n_cpus), len(pending)))
         actor_cls = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=MAX_TASK_RETRIES)(_RunnerActor)
-        driver = (ray.get_runtime_context().get_node_id(), os.getpid(), process_start_time(os.getpid()))
+        driver = driver_identity()
         actors = [actor_cls.remote(runner_factory, driver) for _ in range(n_actors)]
         in_flight: dict = {}
         next_idx = 0

@@ -3,6 +3,10 @@
 :class:`RayEnvPool` is the :class:`~sofar_agents.pasta.actor_pool.ActorEnvPool` whose actors are Ray
 actors (one CPU each), on this machine or on a Ray cluster. How a rollout is collected, and why a
 seeded run equals the local backend's bit for bit, is in :mod:`sofar_agents.pasta.actor_pool`.
+
+The actors are started as the executor's are (:mod:`sofar_agents.ray_support`: Ray started or joined in one place,
+each actor tied to the driver's process, so a learner killed with SIGKILL leaves no rollout actor behind), but
+they are stateful and never restarted: a dead actor fails the rollout (why: docs/decisions/one-executor.md).
 """
 
 from __future__ import annotations
@@ -12,9 +16,17 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from sofar_agents.pasta.actor_pool import ActorEnvPool, EnvSlice
-from sofar_agents.ray_support import init_ray, require_ray
+from sofar_agents.ray_support import DriverIdentity, driver_identity, follow_driver, init_ray, require_ray
 
 __all__ = ["RayEnvPool", "init_ray"]
+
+
+class _RaySlice(EnvSlice):
+    """The actor body: an :class:`EnvSlice` that ends with the driver's process (``driver``, on the same node)."""
+
+    def __init__(self, make_vector: Callable[[], Any], start: int, n_total: int, driver: DriverIdentity | None) -> None:
+        follow_driver(driver)
+        super().__init__(make_vector, start, n_total)
 
 
 class RayEnvPool(ActorEnvPool):
@@ -39,8 +51,10 @@ class RayEnvPool(ActorEnvPool):
         super().__init__(env_fns, num_workers, chunk_steps, cars_per_race)
         self._ray = require_ray(local=address is None)
         self._started = init_ray(address, num_workers)
-        actor_cls = self._ray.remote(num_cpus=1, max_restarts=0)(EnvSlice)
-        self.actors = [actor_cls.remote(fn, lo, self.num_envs) for fn, (lo, _) in zip(self._vector_fns, self.slices)]
+        actor_cls = self._ray.remote(num_cpus=1, max_restarts=0)(_RaySlice)
+        driver = driver_identity()
+        self.actors = [actor_cls.remote(fn, lo, self.num_envs, driver)
+                       for fn, (lo, _) in zip(self._vector_fns, self.slices)]
         self._describe()
         # deep copies: arrays that Ray deserialises are read-only
         self.single_observation_space = copy.deepcopy(self.single_observation_space)

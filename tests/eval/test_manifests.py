@@ -34,7 +34,10 @@ manifest carries its manifest's hash."""
 EXTRA_STRATEGIES: dict[str, set[str]] = {
     name: {"PPO (SB3)"} for name in ("interactive_dense_morl_pareto", "interactive_dense_morl_pareto_seed10300",
                                      "dynamic_morl_pareto_seed10300", "dynamic_morl_pareto_seed10500",
-                                     "interactive_dense_morl_pareto_seed10500")
+                                     "interactive_dense_morl_pareto_seed10500",
+                                     "interactive_dense_morl_pareto_seed10300_sofar_6",
+                                     "interactive_dense_morl_pareto_seed10500_sofar_6",
+                                     "dynamic_morl_pareto_seed10300_sofar_6", "dynamic_morl_pareto_seed10500_sofar_6")
 }
 """Rows of a pareto file that are not its manifest's episodes (same configuration hash; the SB3 zip that made them is
 not committed), documented in the manifest."""

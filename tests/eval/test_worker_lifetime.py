@@ -1,5 +1,6 @@
-"""Worker processes end with their driver: a sweep of eval/table.py killed with SIGKILL leaves no worker behind
-(the process pool, the multi-agent pool and the Ray actors), and the pieces (sofar_agents.worker_lifetime)."""
+"""Worker processes end with their driver: a sweep of eval/table.py or a training run of train/pasta.py killed with
+SIGKILL leaves no worker behind (the executor's process pool, the multi-agent pool and Ray actors; the training
+pool's worker processes and Ray actors), and the pieces (sofar_agents.worker_lifetime)."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from .process_tree import alive, descendants, kill_all, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 TABLE = ROOT / "eval" / "table.py"
+TRAIN = ROOT / "train" / "pasta.py"
 EXIT_S = 15.0
 """How long the workers may take to end after their driver was killed [s] (a worker killed while still importing
 ends once its imports are done)."""
@@ -35,23 +37,35 @@ def _ray_actor(cmd: str) -> bool:
     return cmd.startswith("ray::_RunnerActor")
 
 
+def _ray_rollout_actor(cmd: str) -> bool:
+    return cmd.startswith("ray::_RaySlice")
+
+
 def _not_ray_agent(cmd: str) -> bool:  # Ray's agents follow its raylet on Ray's own schedule (up to a minute)
     return not (cmd.startswith("ray::") and "Agent" in cmd)
 
 
-CASES = {  # name: (table.py options, which descendants are the workers, which must end, seconds to start)
-    "process-pool": (["--rhos", "0.5", "--workers", "2"], _spawned, lambda cmd: True, 120),
-    "multi-agent-pool": (["--multi-agent", "--workers", "2"], _spawned, lambda cmd: True, 120),
-    "ray-actors": (["--rhos", "0.5", "--backend", "ray", "--workers", "2"], _ray_actor, _not_ray_agent, 240),
+TRAIN_LONG = ["--total-steps", "1000000", "--n-steps", "4096", "--save-every", "0", "--no-progress"]
+"""A training run that is still collecting its first rollout when its driver is killed."""
+
+CASES = {  # name: (script and its options, which descendants are the workers, which must end, seconds to start)
+    "process-pool": ([TABLE, *SMALL, "--rhos", "0.5", "--workers", "2"], _spawned, lambda cmd: True, 120),
+    "multi-agent-pool": ([TABLE, *SMALL, "--multi-agent", "--workers", "2"], _spawned, lambda cmd: True, 120),
+    "ray-actors": ([TABLE, *SMALL, "--rhos", "0.5", "--backend", "ray", "--workers", "2"], _ray_actor, _not_ray_agent,
+                   240),
+    "training-processes": ([TRAIN, *TRAIN_LONG, "--backend", "processes", "--num-workers", "2", "--n-envs", "2"],
+                           _spawned, lambda cmd: True, 120),
+    "training-ray-actors": ([TRAIN, *TRAIN_LONG, "--backend", "ray", "--num-workers", "2", "--n-envs", "2"],
+                            _ray_rollout_actor, _not_ray_agent, 240),
 }
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_killed_sweep_leaves_no_worker_behind(case, tmp_path):
-    options, is_worker, must_end, start_s = CASES[case]
-    if case == "ray-actors" and importlib.util.find_spec("ray") is None:
+    command, is_worker, must_end, start_s = CASES[case]
+    if "ray" in case and importlib.util.find_spec("ray") is None:
         pytest.skip("Ray is not installed")
-    driver = subprocess.Popen([sys.executable, str(TABLE), *SMALL, *options, "--out", str(tmp_path)], cwd=ROOT,
+    driver = subprocess.Popen([sys.executable, *map(str, command), "--out", str(tmp_path / "out")], cwd=ROOT,
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
     tracked: dict = {}
     try:
@@ -61,7 +75,7 @@ def test_killed_sweep_leaves_no_worker_behind(case, tmp_path):
 
         assert wait_for(workers_up, start_s), f"no workers after {start_s} s"
         assert driver.poll() is None, driver.stderr.read().decode()[-3000:]
-        time.sleep(3.0)  # let them get into their episodes (200 s each: still running when the driver dies)
+        time.sleep(3.0)  # let them get into their episodes or rollouts (still running when the driver dies)
         tracked.update(descendants(driver.pid))
         driver.send_signal(signal.SIGKILL)
         driver.wait(10)
