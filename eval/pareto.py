@@ -3,11 +3,14 @@
     python eval/pareto.py                                  # Table I protocol, shipped policy at 5 preferences
     python eval/pareto.py --scenario interactive --policy runs/pasta_int/pasta_final --workers 2
     python eval/pareto.py --quick                          # a quick look (~1 min): 1 circuit, 1 episode of 30 s
+    python eval/pareto.py --pool A/pareto_episodes.csv B/pareto_episodes.csv --out DIR   # seed sets pooled
 
 Each strategy is evaluated on the same seeded episodes and reported as (aggregate success %,
 overtakes per hour of racing); the hypervolume of each family's front (fixed gammas; the policy's
 preference sweep) comes from pymoo's HV indicator. Writes <out>/pareto.md, pareto.json, pareto.png and the
-per-episode CSV (rerunning the same command resumes it). The logic is in sofar_agents.evaluation.pareto.
+per-episode CSV (rerunning the same command resumes it). ``--pool`` runs nothing: it pools the episodes of
+several seed sets of one front (the strategies every file holds) into <out>/pareto_pooled.md, with each
+strategy's mean gamma. The logic is in sofar_agents.evaluation.pareto.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from pathlib import Path
 
 from sofar_agents import evaluation as ev
 from sofar_agents.cli_types import gamma_value, nonneg_float, nonneg_int, positive_float, positive_int
@@ -62,6 +66,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--quick", action="store_true",
                    help=f"a quick look: Laguna Seca, rho 0.5, 1 episode of {QUICK_DURATION:g} s, gammas 0.3 and "
                         "0.7, safety weights 0.2 and 0.8, to results/quick; explicit options override")
+    p.add_argument("--pool", nargs="+", default=None, metavar="CSV",
+                   help="run nothing: pool these pareto_episodes.csv files (seed sets of one front) into "
+                        "<out>/pareto_pooled.md (--out required)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--log-level", default="WARNING")
     return p.parse_args(argv)
@@ -70,6 +77,8 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
+    if args.pool:
+        return _pool(args.pool, args.out)
     policy = None if args.no_policy else ev.resolve_policy_path(
         args.policy, fallback="only the fixed gammas are evaluated", stack=args.stack, scenario=args.scenario)
     try:
@@ -102,6 +111,21 @@ def main(argv=None) -> int:
     if incomplete:
         logging.getLogger("pareto").error(incomplete)
         return 1
+    return 0
+
+
+def _pool(csvs: list[str], out: str | None) -> int:
+    if out is None:
+        print("error: --pool needs --out", file=sys.stderr)
+        return 2
+    try:
+        *_, md = ev.pooled_pareto(csvs)
+    except ValueError as exc:
+        print(f"error: --pool: {exc}", file=sys.stderr)
+        return 2
+    path = ev.write_markdown(Path(out) / "pareto_pooled.md", md)
+    print(md)
+    print(f"Wrote {path}")
     return 0
 
 

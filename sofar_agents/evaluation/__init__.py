@@ -20,7 +20,8 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
 * :mod:`~sofar_agents.evaluation.manifest`: experiments as manifests (``experiments/NAME.toml``:
   ``run_manifest``, ``check_manifest``; ``eval/manifest.py``);
 * :mod:`~sofar_agents.evaluation.pareto`: success against overtaking of fixed gammas and of a
-  preference-conditioned policy, fronts and their hypervolumes (``run_pareto``; ``eval/pareto.py``);
+  preference-conditioned policy, fronts and their hypervolumes (``run_pareto``; ``eval/pareto.py``; several
+  seed sets of one front pooled: ``pooled_pareto``, ``eval/pareto.py --pool``);
 * :mod:`~sofar_agents.evaluation.headroom`: what an adaptive gamma could gain over the best fixed one,
   by oracles over the fixed-gamma rows of Table I (``headroom``; ``eval/headroom.py``);
 * :mod:`~sofar_agents.evaluation.interventions`: the within-race part of that question: each failure of a
@@ -52,7 +53,8 @@ from sofar_agents.evaluation.latency import (PAPER_LATENCY_MS, format_latency, l
                                              measure_latency, write_json)
 from sofar_agents.evaluation.paired import PairedComparison, compare_to, format_paired, label_by_stack, paired_comparison
 from sofar_agents.evaluation.pareto import (ParetoPoint, ParetoReport, hypervolume, pareto_front,
-                                            pareto_strategies, preference_family, run_pareto, strategy_points)
+                                            pareto_strategies, pooled_pareto, preference_family, run_pareto,
+                                            strategy_points)
 from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FULL_TABLE1_STEPS, RHOS,
                                               TRACK_ABBREVIATIONS, TRACKS, EpisodeTask, Strategy,
                                               build_strategies, episode_seed, miqp_ablation_tasks,
@@ -100,6 +102,7 @@ __all__ = [
     "hypervolume",
     "pareto_front",
     "pareto_strategies",
+    "pooled_pareto",
     "preference_family",
     "run_pareto",
     "strategy_points",

@@ -101,14 +101,18 @@ def strategy_points(rows: Sequence[Mapping[str, Any]], strategies: Sequence[Stra
     points = []
     for strat in strategies:
         mine = [r for r in rows if r["strategy"] == strat.name]
-        if not mine:
-            continue
-        success = 100.0 * sum(bool(r["success"]) for r in mine) / len(mine)
-        hours = sum(float(r["sim_time"]) for r in mine) / 3600.0
-        rate = sum(int(r["overtakes"]) for r in mine) / hours if hours > 0 else 0.0
-        family = {"fixed": "fixed", "sb3": "baseline"}.get(strat.kind, "policy")
-        points.append(ParetoPoint(strat.name, family, success, rate, len(mine), strat.preference))
+        if mine:
+            family = {"fixed": "fixed", "sb3": "baseline"}.get(strat.kind, "policy")
+            points.append(_point(strat.name, family, mine, strat.preference))
     return points
+
+
+def _point(name: str, family: str, rows: Sequence[Mapping[str, Any]], preference: tuple[float, ...] | None) -> ParetoPoint:
+    """The point of the episodes ``rows`` (at least one) of one strategy."""
+    success = 100.0 * sum(bool(r["success"]) for r in rows) / len(rows)
+    hours = sum(float(r["sim_time"]) for r in rows) / 3600.0
+    rate = sum(int(r["overtakes"]) for r in rows) / hours if hours > 0 else 0.0
+    return ParetoPoint(name, family, success, rate, len(rows), preference)
 
 
 def pareto_front(values: np.ndarray) -> np.ndarray:
@@ -258,3 +262,69 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
                                       "points": [p.__dict__ for p in points]}, trailing_newline=False, indent=2)
     plot_fronts(points, paths["png"], title=f"{scenario} world, {stack} controller")
     return ParetoReport(points, hv, md, stats, paths)
+
+
+def _family_of(strategy: str) -> str:
+    if strategy.startswith("gamma="):
+        return "fixed"
+    return "baseline" if strategy == "PPO (SB3)" else "policy"
+
+
+def _preference_of(strategy: str) -> tuple[float, ...] | None:
+    if not strategy.startswith("pasta w="):
+        return None
+    try:
+        return tuple(float(w) for w in strategy[len("pasta w="):].split("/"))
+    except ValueError:
+        return None
+
+
+def pooled_pareto(csv_paths: Sequence[str | os.PathLike]) -> tuple[list[ParetoPoint], dict[str, float],
+                                                                    dict[str, tuple[float, float]], str]:
+    """The Pareto view of several ``pareto_episodes.csv`` files of one front (its seed sets), their episodes pooled.
+
+    A strategy is a point only if every file holds it, and then over all their episodes. Returns the points, the
+    hypervolume of each family, the mean and standard deviation of the per-episode ``mean_gamma`` of each
+    strategy, and a Markdown report. Raises ``ValueError`` when fewer than two files are given, a file has no rows, the rows of one
+    strategy carry two configuration hashes or controllers, or an episode (strategy, circuit, rho, seed) is
+    in two files.
+    """
+    paths = [Path(p) for p in csv_paths]
+    if len(paths) < 2:
+        raise ValueError("pooling needs at least two pareto_episodes.csv files")
+    per_file: list[list[dict[str, Any]]] = []
+    for path in paths:
+        if not path.is_file():
+            raise ValueError(f"no such CSV: {path}")
+        rows = read_episode_csv(path)
+        if not rows:
+            raise ValueError(f"{path} has no episode rows")
+        per_file.append(rows)
+    names = [r["strategy"] for r in per_file[0]]
+    common = [n for n in dict.fromkeys(names) if all(any(r["strategy"] == n for r in rows) for rows in per_file)]
+    rows = [r for file_rows in per_file for r in file_rows if r["strategy"] in common]
+    seen: set[tuple] = set()
+    for r in rows:
+        key = (r["strategy"], r["track"], float(r["rho"]), int(r["seed"]))
+        if key in seen:
+            raise ValueError(f"episode {key} is in two of the files: pool different seed sets only")
+        seen.add(key)
+    for name in common:
+        labels = {(r.get("config_hash", ""), r.get("stack", "")) for r in rows if r["strategy"] == name}
+        if len(labels) > 1:
+            raise ValueError(f"strategy {name!r} has rows of {len(labels)} configurations: {sorted(labels)}")
+    points = [_point(n, _family_of(n), [r for r in rows if r["strategy"] == n], _preference_of(n)) for n in common]
+    hv = {}
+    for family in ("fixed", "policy", "baseline"):
+        values = np.array([(p.success, p.overtakes_per_hour) for p in points if p.family == family])
+        if len(values):
+            hv[family] = hypervolume(values)
+    gamma = {}
+    for name in common:
+        means = np.array([float(r["mean_gamma"]) for r in rows if r["strategy"] == name])
+        gamma[name] = (float(means.mean()), float(means.std()))
+    settings = {"files": ", ".join(str(p) for p in paths), "episodes per point": len(rows) // max(len(common), 1)}
+    md = _markdown(points, hv, settings).replace("# Pareto view:", "# Pareto view, seed sets pooled:", 1)
+    md += ("\n| strategy | mean gamma | its spread over the episodes (sd of their means) |\n|---|---:|---:|\n"
+           + "".join(f"| {n} | {m:.3f} | {sd:.3f} |\n" for n, (m, sd) in gamma.items()))
+    return points, hv, gamma, md

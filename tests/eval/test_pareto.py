@@ -93,3 +93,70 @@ def test_pareto_script_quick_mode(tmp_path, monkeypatch):
     # resumed: nothing is run again
     assert cli.main(["--quick", "--duration", "3", "--workers", "1", "--no-progress", "--out", str(out)]) == 0
     assert cli.main(["--quick", "--safety-weights", "2", "--out", str(out)]) == 2
+
+
+def _write_front(path, seeds, *, config_hash="abc123", mean_gamma_of_policy=0.3):
+    """A pareto_episodes.csv with gamma=0.05 (always succeeds, 1 overtake), gamma=0.50 (fails on odd seeds,
+    3 overtakes) and the policy at one preference (succeeds, 2 overtakes, its mean gamma given), 360 s each."""
+    import csv
+
+    extra = {"laps": 1.0, "collision": False, "off_track": False, "slack_steps": 0, "steps": 3600,
+             "mpc_failures": 0, "miqp_failures": 0, "wall_time": 1.0, "episode": 0, "use_miqp": True,
+             "duration": 360.0, "policy_id": "", "stack": "sofar-6", "config_hash": config_hash}
+    rows = []
+    for seed in seeds:
+        for strategy, ok, ovt, gamma in (("gamma=0.05", True, 1, 0.05), ("gamma=0.50", seed % 2 == 0, 3, 0.5),
+                                         ("pasta w=0.9/0/0.0333/0.0333/0.0333", True, 2, mean_gamma_of_policy)):
+            rows.append({"track": "Monza", "strategy": strategy, "rho": 0.5, "seed": seed, "success": ok,
+                         "sim_time": 360.0, "overtakes": ovt, "mean_gamma": gamma, **extra})
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
+
+
+def test_pooled_seed_sets_are_one_front_over_all_their_episodes(tmp_path):
+    a = _write_front(tmp_path / "a.csv", [0, 1], mean_gamma_of_policy=0.2)
+    b = _write_front(tmp_path / "b.csv", [2, 3, 4, 5], mean_gamma_of_policy=0.5)
+    points, hv, gamma, md = ev.pooled_pareto([a, b])
+    by_name = {p.name: p for p in points}
+    assert by_name["gamma=0.50"].success == pytest.approx(50.0) and by_name["gamma=0.50"].episodes == 6
+    assert by_name["gamma=0.05"].overtakes_per_hour == pytest.approx(10.0)  # 6 overtakes in 6 x 360 s
+    policy = by_name["pasta w=0.9/0/0.0333/0.0333/0.0333"]
+    assert policy.family == "policy" and policy.preference == pytest.approx((0.9, 0.0, 0.0333, 0.0333, 0.0333))
+    # fixed front: (100 %, 10 /h) and (50 %, 30 /h): 100 x 10 + 50 x 20 = 2000; the policy (100 %, 20 /h): 2000
+    assert hv["fixed"] == pytest.approx(2000.0) and hv["policy"] == pytest.approx(2000.0)
+    mean, sd = gamma["pasta w=0.9/0/0.0333/0.0333/0.0333"]
+    assert mean == pytest.approx((2 * 0.2 + 4 * 0.5) / 6) and sd > 0.1
+    assert "seed sets pooled" in md and "| gamma=0.50 | - | 50.0 | 30.0 | 6 | * |" in md
+
+
+@pytest.mark.parametrize("case, message", [
+    ("one file", "at least two"),
+    ("same seeds twice", "is in two of the files"),
+    ("two hashes", "2 configurations"),
+    ("missing file", "no such CSV"),
+])
+def test_pooling_refuses_what_is_not_one_front(tmp_path, case, message):
+    a = _write_front(tmp_path / "a.csv", [0, 1])
+    other = {"one file": lambda: None, "same seeds twice": lambda: _write_front(tmp_path / "b.csv", [1, 2]),
+             "two hashes": lambda: _write_front(tmp_path / "b.csv", [2, 3], config_hash="def456"),
+             "missing file": lambda: tmp_path / "nope.csv"}[case]()
+    with pytest.raises(ValueError, match=message):
+        ev.pooled_pareto([a] if other is None else [a, other])
+
+
+def test_pareto_script_pools_without_running(tmp_path, capsys):
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("pareto_cli", Path(__file__).parents[2] / "eval" / "pareto.py")
+    cli = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cli)
+    a, b = _write_front(tmp_path / "a.csv", [0]), _write_front(tmp_path / "b.csv", [1])
+    assert cli.main(["--pool", str(a), str(b), "--out", str(tmp_path / "out")]) == 0
+    assert (tmp_path / "out" / "pareto_pooled.md").read_text().startswith("# Pareto view, seed sets pooled")
+    assert cli.main(["--pool", str(a), str(b)]) == 2 and "--pool needs --out" in capsys.readouterr().err
+    assert cli.main(["--pool", str(a), "--out", str(tmp_path / "x")]) == 2
+    assert not (tmp_path / "x").exists()
