@@ -15,10 +15,10 @@ and builds its environments once, so Ray is slower than the default process pool
 sweeps such as ``eval/table.py --quick`` or ``train/pasta.py --quick`` (where the start-up is
 most of the run); it pays off on long sweeps, and on a cluster.
 
-Actors tied to the driver: Ray ends a job's actors when its driver exits, but an actor in the middle of a call
-(an episode, a rollout chunk) finishes it first, for nobody. Every actor of the package (the executor's and the
-training pool's) therefore takes the driver's :func:`driver_identity` and calls :func:`follow_driver` first thing:
-an actor on the driver's machine then ends its process as soon as the driver's process has ended
+Actors tied to the driver: Ray ends a job's actors once it notices that their driver has exited. As a guard that
+does not depend on Ray noticing, every actor of the package (the executor's and the training pool's) takes the
+driver's :func:`driver_identity` and calls :func:`follow_driver` first thing: an actor on the driver's machine
+then ends its own process as soon as the driver's process has ended
 (:func:`~sofar_agents.worker_lifetime.exit_with_process`), also when the driver was killed with SIGKILL.
 """
 
