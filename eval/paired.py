@@ -24,7 +24,8 @@ With `--before-after BEFORE AFTER` the two CSVs are one seed set run by two cont
 all fixed gammas together, success with the paired test and collisions, off-tracks, stalls and overtakes per
 hour, each as before -> after (sofar_agents.evaluation.before_after).
 
-With `--pareto CSV` (one `pareto_episodes.csv` of `eval/pareto.py`) every point that is not a fixed gamma (a
+With `--pareto CSV [CSV ...]` (a `pareto_episodes.csv` of `eval/pareto.py`, or several seed sets of one
+front, their episodes pooled) every point that is not a fixed gamma (a
 policy at each preference, an SB3 policy) is compared with the fixed gamma nearest to its mean gamma and with the
 best fixed gamma (and with the strategies of `--b`, if given): success by the exact McNemar test, overtakes per
 hour by the Wilcoxon signed-rank test (sofar_agents.evaluation.pareto_paired).
@@ -51,7 +52,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--before-after", action="store_true",
                    help="compare two CSVs of the same episodes run by two controllers, on every outcome")
     p.add_argument("--pareto", action="store_true",
-                   help="one pareto_episodes.csv: each policy point against the nearest and the best fixed gamma")
+                   help="pareto_episodes.csv files (one front's seed sets, pooled): each policy point against the "
+                        "nearest and the best fixed gamma")
     p.add_argument("--out", default=None, help="also write the Markdown table to this file")
     return p.parse_args(argv)
 
@@ -81,9 +83,16 @@ def _paired(args: argparse.Namespace) -> str:
 def _pareto(args: argparse.Namespace) -> str:
     from sofar_agents.evaluation.pareto_paired import format_pareto_paired
 
-    if len(args.csv) != 1:
-        raise ValueError(f"--pareto takes one pareto_episodes.csv, got {len(args.csv)}")
-    ((name, rows),) = ev.read_seed_sets(args.csv).items()
+    sets = ev.read_seed_sets(args.csv)
+    rows, seen = [], set()
+    for set_name, set_rows in sets.items():
+        for r in set_rows:
+            key = (r["strategy"], r["track"], float(r["rho"]), int(r["seed"]))
+            if key in seen:
+                raise ValueError(f"episode {key} of {set_name} is in another file too: pool different seed sets only")
+            seen.add(key)
+            rows.append(r)
+    name = " + ".join(sets)
     return (f"Paired comparisons of the points of {name} with the fixed gammas:\n\n"
             + format_pareto_paired(rows, name, args.b or ()))
 

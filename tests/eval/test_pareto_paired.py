@@ -71,5 +71,17 @@ def test_the_script_writes_the_tables(tmp_path, capsys):
     assert mod.main(["--pareto", str(path), "--out", str(out)]) == 0
     text = out.read_text()
     assert "exact McNemar" in text and "Wilcoxon" in text and "| pasta w=0.1 | 0.420 | gamma=0.50, gamma=0.05 |" in text
-    assert mod.main(["--pareto", str(path), str(path)]) == 2
+    assert mod.main(["--pareto", str(path), str(path)]) == 2  # the same file twice
+    other = tmp_path / "set2" / "pareto_episodes.csv"
+    other.parent.mkdir()
+    other.write_text(path.read_text())
+    assert mod.main(["--pareto", str(path), str(other)]) == 2  # the same episodes twice
+    shifted = [{**r, "seed": r["seed"] + 100} for r in rows]
+    with other.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(shifted[0]))
+        w.writeheader()
+        w.writerows(shifted)
+    pooled = tmp_path / "pooled.md"
+    assert mod.main(["--pareto", str(path), str(other), "--out", str(pooled)]) == 0
+    assert "| pasta w=0.9 | gamma=0.05 | 20 |" in pooled.read_text()  # 10 + 10 paired episodes
     assert format_pareto_paired(rows).count("pasta w=0.1 | gamma=") == 4
