@@ -84,14 +84,7 @@ def _pareto(args: argparse.Namespace) -> str:
     from sofar_agents.evaluation.pareto_paired import format_pareto_paired
 
     sets = ev.read_seed_sets(args.csv)
-    rows, seen = [], set()
-    for set_name, set_rows in sets.items():
-        for r in set_rows:
-            key = (r["strategy"], r["track"], float(r["rho"]), int(r["seed"]))
-            if key in seen:
-                raise ValueError(f"episode {key} of {set_name} is in another file too: pool different seed sets only")
-            seen.add(key)
-            rows.append(r)
+    rows = ev.pool_seed_sets(sets)
     name = " + ".join(sets)
     return (f"Paired comparisons of the points of {name} with the fixed gammas:\n\n"
             + format_pareto_paired(rows, name, args.b or ()))

@@ -60,7 +60,8 @@ from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FU
                                               build_strategies, episode_seed, miqp_ablation_tasks,
                                               resolve_policy_path, table1_tasks)
 from sofar_agents.evaluation.results import (EPISODE_COLUMNS, TRACE_COLUMNS, EpisodeResult, read_episode_csv,
-                                             read_seed_sets, read_trace_csv, select_rows, write_markdown)
+                                             pool_seed_sets, read_seed_sets, read_trace_csv, select_rows,
+                                             write_markdown)
 from sofar_agents.evaluation.sweep import SweepStats, incomplete_message, run_sweep
 from sofar_agents.evaluation.training_curves import find_event_dirs, plot_training_curves, read_scalars
 from sofar_agents.evaluation.tables import (PAPER_TABLE1_SUCCESS, Summary, aggregate, format_table1,
@@ -124,6 +125,7 @@ __all__ = [
     "run_miqp_ablation",
     "TableReport",
     "read_episode_csv",
+    "pool_seed_sets",
     "read_seed_sets",
     "write_markdown",
     "select_rows",

@@ -34,7 +34,7 @@ import numpy as np
 from sofar_agents.evaluation.configs import episode_config, write_config_json
 from sofar_agents.evaluation.files import write_json_atomic, write_text_atomic
 from sofar_agents.evaluation.protocol import DEFAULT_DURATION, RHOS, TRACKS, Strategy, _fmt_float, table1_tasks
-from sofar_agents.evaluation.results import read_episode_csv, select_rows
+from sofar_agents.evaluation.results import pool_seed_sets, read_episode_csv, read_seed_sets, select_rows
 from sofar_agents.evaluation.sweep import SweepStats, run_sweep
 
 __all__ = ["OBJECTIVE_LABELS", "REFERENCE_POINT", "ParetoPoint", "ParetoReport", "preference_family",
@@ -142,6 +142,16 @@ def hypervolume(values: np.ndarray, reference: Sequence[float] = REFERENCE_POINT
     return float(HV(ref_point=-ref)(-v))
 
 
+def _family_hypervolumes(points: Sequence[ParetoPoint]) -> dict[str, float]:
+    """The hypervolume of each family's points (``fixed``, ``policy``, ``baseline``; families without points left out)."""
+    hv = {}
+    for family in ("fixed", "policy", "baseline"):
+        values = np.array([(p.success, p.overtakes_per_hour) for p in points if p.family == family])
+        if len(values):
+            hv[family] = hypervolume(values)
+    return hv
+
+
 def plot_fronts(points: Sequence[ParetoPoint], path: str | os.PathLike, title: str = "") -> Path:
     """A PNG of the points of each family and their fronts (staircase lines)."""
     import matplotlib
@@ -242,11 +252,7 @@ def run_pareto(policy: str | os.PathLike | None, preferences: Sequence[Sequence[
     stats = run_sweep(tasks, csv_path, workers=workers, progress=progress, backend=backend, address=address)
     rows = select_rows(read_episode_csv(csv_path), tasks)
     points = strategy_points(rows, strategies)
-    hv = {}
-    for family in ("fixed", "policy", "baseline"):
-        values = np.array([(p.success, p.overtakes_per_hour) for p in points if p.family == family])
-        if len(values):
-            hv[family] = hypervolume(values)
+    hv = _family_hypervolumes(points)
     settings = {"tracks": ", ".join(tracks), "rho": ", ".join(_fmt_float(r) for r in rhos),
                 "episodes per (track, rho)": episodes, "horizon": f"{duration:g} s", "base seed": base_seed,
                 "controller": stack, "world": scenario}
@@ -285,45 +291,30 @@ def pooled_pareto(csv_paths: Sequence[str | os.PathLike]) -> tuple[list[ParetoPo
 
     A strategy is a point only if every file holds it, and then over all their episodes. Returns the points, the
     hypervolume of each family, the mean and standard deviation of the per-episode ``mean_gamma`` of each
-    strategy, and a Markdown report. Raises ``ValueError`` when fewer than two files are given, a file has no rows, the rows of one
-    strategy carry two configuration hashes or controllers, or an episode (strategy, circuit, rho, seed) is
-    in two files.
+    strategy, and a Markdown report. Raises ``ValueError`` when fewer than two files are given, a file is missing,
+    given twice or has no rows, the rows of one strategy carry two configuration hashes or controllers, or an
+    episode (strategy, circuit, rho, seed) is in two files (:func:`~.results.pool_seed_sets`).
     """
-    paths = [Path(p) for p in csv_paths]
-    if len(paths) < 2:
+    if len(csv_paths) < 2:
         raise ValueError("pooling needs at least two pareto_episodes.csv files")
-    per_file: list[list[dict[str, Any]]] = []
-    for path in paths:
-        if not path.is_file():
-            raise ValueError(f"no such CSV: {path}")
-        rows = read_episode_csv(path)
-        if not rows:
-            raise ValueError(f"{path} has no episode rows")
-        per_file.append(rows)
-    names = [r["strategy"] for r in per_file[0]]
-    common = [n for n in dict.fromkeys(names) if all(any(r["strategy"] == n for r in rows) for rows in per_file)]
-    rows = [r for file_rows in per_file for r in file_rows if r["strategy"] in common]
-    seen: set[tuple] = set()
-    for r in rows:
-        key = (r["strategy"], r["track"], float(r["rho"]), int(r["seed"]))
-        if key in seen:
-            raise ValueError(f"episode {key} is in two of the files: pool different seed sets only")
-        seen.add(key)
+    sets = read_seed_sets(csv_paths)
+    for name, set_rows in sets.items():
+        if not set_rows:
+            raise ValueError(f"{name} has no episode rows")
+    in_every = set.intersection(*({r["strategy"] for r in set_rows} for set_rows in sets.values()))
+    common = [n for n in dict.fromkeys(r["strategy"] for r in next(iter(sets.values()))) if n in in_every]
+    rows = [r for r in pool_seed_sets(sets) if r["strategy"] in common]
     for name in common:
         labels = {(r.get("config_hash", ""), r.get("stack", "")) for r in rows if r["strategy"] == name}
         if len(labels) > 1:
             raise ValueError(f"strategy {name!r} has rows of {len(labels)} configurations: {sorted(labels)}")
     points = [_point(n, _family_of(n), [r for r in rows if r["strategy"] == n], _preference_of(n)) for n in common]
-    hv = {}
-    for family in ("fixed", "policy", "baseline"):
-        values = np.array([(p.success, p.overtakes_per_hour) for p in points if p.family == family])
-        if len(values):
-            hv[family] = hypervolume(values)
+    hv = _family_hypervolumes(points)
     gamma = {}
     for name in common:
         means = np.array([float(r["mean_gamma"]) for r in rows if r["strategy"] == name])
         gamma[name] = (float(means.mean()), float(means.std()))
-    settings = {"files": ", ".join(str(p) for p in paths), "episodes per point": len(rows) // max(len(common), 1)}
+    settings = {"files": ", ".join(str(p) for p in csv_paths), "episodes per point": len(rows) // max(len(common), 1)}
     md = _markdown(points, hv, settings).replace("# Pareto view:", "# Pareto view, seed sets pooled:", 1)
     md += ("\n| strategy | mean gamma | its spread over the episodes (sd of their means) |\n|---|---:|---:|\n"
            + "".join(f"| {n} | {m:.3f} | {sd:.3f} |\n" for n, (m, sd) in gamma.items()))

@@ -206,6 +206,25 @@ def read_seed_sets(paths: Sequence[str | os.PathLike]) -> dict[str, list[dict[st
     return sets
 
 
+def pool_seed_sets(sets: Mapping[str, Sequence[Mapping[str, Any]]]) -> list[dict[str, Any]]:
+    """The rows of several seed sets (:func:`read_seed_sets`) as one list, in order.
+
+    Raises ``ValueError`` when an episode (strategy, circuit, rho, seed) is in two of them: pooling is for
+    different seed sets of one experiment, whose episodes pair within each set.
+    """
+    rows: list[dict[str, Any]] = []
+    where: dict[tuple, str] = {}
+    for name, set_rows in sets.items():
+        for r in set_rows:
+            key = (r["strategy"], r["track"], float(r["rho"]), int(r["seed"]))
+            if key in where:
+                raise ValueError(f"episode {key} is in two of the files ({where[key]}, {name}): "
+                                 "pool different seed sets only")
+            where[key] = name
+            rows.append(dict(r))
+    return rows
+
+
 def write_markdown(path: str | os.PathLike, text: str) -> Path:
     """Write a Markdown report to ``path`` atomically, creating its folder; returns the path."""
     return write_text_atomic(path, text)
