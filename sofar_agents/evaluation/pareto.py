@@ -107,7 +107,8 @@ def strategy_points(rows: Sequence[Mapping[str, Any]], strategies: Sequence[Stra
     return points
 
 
-def _point(name: str, family: str, rows: Sequence[Mapping[str, Any]], preference: tuple[float, ...] | None) -> ParetoPoint:
+def _point(name: str, family: str, rows: Sequence[Mapping[str, Any]],
+           preference: tuple[float, ...] | None) -> ParetoPoint:
     """The point of the episodes ``rows`` (at least one) of one strategy."""
     success = 100.0 * sum(bool(r["success"]) for r in rows) / len(rows)
     hours = sum(float(r["sim_time"]) for r in rows) / 3600.0
@@ -143,7 +144,8 @@ def hypervolume(values: np.ndarray, reference: Sequence[float] = REFERENCE_POINT
 
 
 def _family_hypervolumes(points: Sequence[ParetoPoint]) -> dict[str, float]:
-    """The hypervolume of each family's points (``fixed``, ``policy``, ``baseline``; families without points left out)."""
+    """The hypervolume of each family's points (``fixed``, ``policy``, ``baseline``; a family without points is
+    left out)."""
     hv = {}
     for family in ("fixed", "policy", "baseline"):
         values = np.array([(p.success, p.overtakes_per_hour) for p in points if p.family == family])
