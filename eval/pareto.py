@@ -4,13 +4,16 @@
     python eval/pareto.py --scenario interactive --policy runs/pasta_int/pasta_final --workers 2
     python eval/pareto.py --quick                          # a quick look (~1 min): 1 circuit, 1 episode of 30 s
     python eval/pareto.py --pool A/pareto_episodes.csv B/pareto_episodes.csv --out DIR   # seed sets pooled
+    python eval/pareto.py --bootstrap A/pareto_episodes.csv [B/...] --out DIR       # hypervolume vs. episode noise
 
 Each strategy is evaluated on the same seeded episodes and reported as (aggregate success %,
 overtakes per hour of racing); the hypervolume of each family's front (fixed gammas; the policy's
 preference sweep) comes from pymoo's HV indicator. Writes <out>/pareto.md, pareto.json, pareto.png and the
 per-episode CSV (rerunning the same command resumes it). ``--pool`` runs nothing: it pools the episodes of
 several seed sets of one front (the strategies every file holds) into <out>/pareto_pooled.md, with each
-strategy's mean gamma. The logic is in sofar_agents.evaluation.pareto.
+strategy's mean gamma. ``--bootstrap`` runs nothing either: it draws the episodes of one or several seed sets
+again (paired, within each circuit and rho) and writes to <out>/hv_bootstrap.md how the difference of the policy's
+and the fixed gammas' hypervolumes spreads. The logic is in sofar_agents.evaluation.pareto and .pareto_bootstrap.
 """
 
 from __future__ import annotations
@@ -69,6 +72,14 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--pool", nargs="+", default=None, metavar="CSV",
                    help="run nothing: pool these pareto_episodes.csv files (seed sets of one front) into "
                         "<out>/pareto_pooled.md (--out required)")
+    p.add_argument("--bootstrap", nargs="+", default=None, metavar="CSV",
+                   help="run nothing: the paired bootstrap of the hypervolume of the policy's front minus the fixed "
+                        "gammas' over the episodes of these pareto_episodes.csv files (pooled) into "
+                        "<out>/hv_bootstrap.md (--out required)")
+    p.add_argument("--resamples", type=positive_int, default=2000,
+                   help="with --bootstrap: draws of the episodes (default 2000, at least 100)")
+    p.add_argument("--bootstrap-seed", type=nonneg_int, default=0,
+                   help="with --bootstrap: seed of the draws (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--log-level", default="WARNING")
     return p.parse_args(argv)
@@ -77,8 +88,13 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
+    if args.pool and args.bootstrap:
+        print("error: give --pool or --bootstrap, not both", file=sys.stderr)
+        return 2
     if args.pool:
         return _pool(args.pool, args.out)
+    if args.bootstrap:
+        return _bootstrap(args.bootstrap, args.out, args.resamples, args.bootstrap_seed)
     policy = None if args.no_policy else ev.resolve_policy_path(
         args.policy, fallback="only the fixed gammas are evaluated", stack=args.stack, scenario=args.scenario)
     try:
@@ -124,6 +140,23 @@ def _pool(csvs: list[str], out: str | None) -> int:
         print(f"error: --pool: {exc}", file=sys.stderr)
         return 2
     path = ev.write_markdown(Path(out) / "pareto_pooled.md", md)
+    print(md)
+    print(f"Wrote {path}")
+    return 0
+
+
+def _bootstrap(csvs: list[str], out: str | None, resamples: int, seed: int) -> int:
+    if out is None:
+        print("error: --bootstrap needs --out", file=sys.stderr)
+        return 2
+    try:
+        rows = ev.pool_seed_sets(ev.read_seed_sets(csvs))
+        result = ev.bootstrap_hypervolume(rows, resamples=resamples, seed=seed)
+    except ValueError as exc:
+        print(f"error: --bootstrap: {exc}", file=sys.stderr)
+        return 2
+    md = ev.bootstrap_markdown(result, csvs)
+    path = ev.write_markdown(Path(out) / "hv_bootstrap.md", md)
     print(md)
     print(f"Wrote {path}")
     return 0
