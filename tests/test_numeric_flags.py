@@ -62,7 +62,8 @@ def test_no_numeric_flag_takes_a_bare_int_or_float(path, parse_only):
     argv = {"eval/plot_training.py": ["run"], "eval/headroom.py": ["x.csv"], "eval/paired.py": ["x.csv"],
             "eval/interventions.py": ["x.csv"], "eval/trajectories.py": ["record", "--out", "x.npz"],
             "bench/bench_train.py": ["--compare", "HEAD"], "eval/reference_numerics.py": ["sweep"],
-            "eval/manifest.py": ["list"], "eval/pasta_preference.py": ["probe"]}.get(path, [])
+            "eval/manifest.py": ["list"], "eval/pasta_preference.py": ["probe"],
+            "eval/stall_probe.py": ["x.csv", "--out", "x"]}.get(path, [])
     parser = _run(path, argv).parser
     actions = list(parser._actions)
     for sub in (a for a in parser._actions if isinstance(a, argparse._SubParsersAction)):
@@ -89,6 +90,9 @@ USAGE_ERRORS = [  # (script, argv, the flag named in the message)
     ("eval/pareto.py", ["--episodes", "0"], "--episodes"),
     ("eval/pareto.py", ["--duration", "0"], "--duration"),
     ("eval/pareto.py", ["--workers", "-1"], "--workers"),
+    ("eval/pareto.py", ["--resamples", "0"], "--resamples"),
+    ("eval/stall_probe.py", ["x.csv", "--out", "x", "--before", "0"], "--before"),
+    ("eval/stall_probe.py", ["x.csv", "--out", "x", "--horizons", "0"], "--horizons"),
     ("bench/bench_env.py", ["--steps", "0"], "--steps"),
     ("bench/bench_env.py", ["--repeats", "0"], "--repeats"),
     ("bench/bench_miqp.py", ["--repeat", "0"], "--repeat"),

@@ -49,6 +49,9 @@ class ReferenceSolution:
     """(N,) track slacks of x_1..x_N [m]."""
     slack_barrier: np.ndarray | None = None
     """(N, m) DCBF slacks of the transitions x_k -> x_{k+1} [-]."""
+    objective: float | None = None
+    """The NLP's cost at the solution (tracking and slack terms; None on failure): two solutions of one problem,
+    e.g. from two guesses, compare by it."""
 
 
 class IpoptReference:
@@ -160,6 +163,7 @@ class IpoptReference:
             ok = bool(stats.get("success", False))
             iters = int(stats.get("iter_count", 0))
             z = np.array(sol["x"]).reshape(-1)
+            objective = float(sol["f"])
         except RuntimeError as exc:
             return ReferenceSolution(False, str(exc), 0)
         message = str(stats.get("return_status"))
@@ -168,7 +172,7 @@ class IpoptReference:
         zz = z.reshape(n_h, nb)
         return ReferenceSolution(True, message, iters, x=np.vstack([x0, zz[:, 2:7]]), u=zz[:, 0:2].copy(),
                                  slack_lat_acc=zz[:, 7].copy(), slack_track=zz[:, 8] + (zz[:, 9] if nbuf else 0.0),
-                                 slack_barrier=zz[:, 9 + nbuf:].copy())
+                                 slack_barrier=zz[:, 9 + nbuf:].copy(), objective=objective)
 
 
 def _n_buffer(cfg: MPCConfig) -> int:

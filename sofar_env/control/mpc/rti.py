@@ -74,7 +74,7 @@ from .ends import EndOffsets
 from .layout import N_FIXED, QPStructure
 from .linearisation import StageLinearisation
 from .model import relevant_slots, select_opponents, variable_box
-from .reference import IpoptReference
+from .reference import IpoptReference, ReferenceSolution
 from .types import (STATUS_FALLBACK_BRAKE, STATUS_FALLBACK_SHIFT, STATUS_SOLVED, MPCConfig, MPCResult,
                     MPCStageData, validate_arguments)
 from .warmstart import PlanShift, cold_guess
@@ -418,12 +418,9 @@ class MPCDCBF:
         cfg = self.config
         x0, arrays, opp, gamma = validate_arguments(x0, stage, opponents, gamma, self._n)
         xbar, ubar = self._guess(x0, None)
-        sel = select_opponents(opp, xbar, self._t, cfg)
+        sel, sol = self._reference_solve(x0, arrays, opp, gamma, xbar, ubar)
         m = len(sel)
-        if self._reference is None:
-            self._reference = IpoptReference(cfg, self.vehicle, self._lin.stage)
         barrier_min = barrier_table(x0[None, :], opp[None, :, :3], cfg.barrier)[2] if len(opp) else math.inf
-        sol = self._reference.solve(x0, arrays, sel, gamma, xbar, ubar)
         if not sol.success:
             return self._fallback(x0, f"ipopt: {sol.message}", t_start, sol.iterations, 1, barrier_min, m)
         first = float(max(sol.slack_barrier[0].max(), 0.0)) if m else 0.0
@@ -435,6 +432,32 @@ class MPCDCBF:
                          success=True, slack=slack, barrier_min=barrier_min,
                          solve_time=time.perf_counter() - t_start, qp_iterations=sol.iterations,
                          sqp_iterations=1, barrier_slack_first=first, n_opponents=m)
+
+    def reference_solution(self, x0, stage: MPCStageData, opponents, gamma: float,
+                           guess: tuple[np.ndarray, np.ndarray] | None = None) -> ReferenceSolution:
+        """IPOPT's solution of this step's NLP (as :meth:`solve_converged`) from ``guess`` = ((N+1, 5) states,
+        (N, 2) inputs; None: the MPC's own warm start), with its objective (:class:`~.reference.ReferenceSolution`).
+        The MPC is left as it was: its warm start and counters do not change. Raises ``ValueError`` for arguments
+        :meth:`solve` refuses and for a guess of another shape."""
+        x0, arrays, opp, gamma = validate_arguments(x0, stage, opponents, gamma, self._n)
+        if guess is None:
+            xbar, ubar = self._guess(x0, None)
+        else:
+            xbar, ubar = (np.array(a, dtype=float) for a in guess)
+            if xbar.shape != (self._n + 1, 5) or ubar.shape != (self._n, 2):
+                raise ValueError(f"guess must be ((N+1, 5), (N, 2)) = (({self._n + 1}, 5), ({self._n}, 2)) arrays, "
+                                 f"got {xbar.shape} and {ubar.shape}")
+            if not (all_finite(xbar) and all_finite(ubar)):
+                raise ValueError("guess must be finite")
+            xbar[0] = x0
+        return self._reference_solve(x0, arrays, opp, gamma, xbar, ubar)[1]
+
+    def _reference_solve(self, x0, arrays, opp, gamma, xbar, ubar) -> tuple[np.ndarray, ReferenceSolution]:
+        """The opponents with DCBF rows and IPOPT's solution from ``(xbar, ubar)``."""
+        sel = select_opponents(opp, xbar, self._t, self.config)
+        if self._reference is None:
+            self._reference = IpoptReference(self.config, self.vehicle, self._lin.stage)
+        return sel, self._reference.solve(x0, arrays, sel, gamma, xbar, ubar)
 
 
 def _track_violation(qs: QPStructure, zz: np.ndarray) -> np.ndarray:
