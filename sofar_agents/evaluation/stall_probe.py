@@ -13,14 +13,20 @@ call (state, stage data, opponents, gamma) are kept, and the MPC's nonlinear pro
 * from three guesses: standing (the state held, no input), and creeping (1 m/s^2 up to 4 m/s) while moving
   0.5 m/s^2 towards the left or the right, inside the edges less 1.5 m.
 
-Each solution is summarised by when its plan starts to move (the first stage above :data:`MOVING_SPEED`), its
-speed at the horizon's end, the range of its lateral offset, its largest barrier slack and its objective; per
-horizon the solution of lowest objective counts, and the real-time iteration's own plan of that step is listed
-with them (guess ``rti``). The verdict of a probed step: ``"drives"`` when the controller's own plan moves there
-(the standstill is ending or creeping); ``"rti"`` when it stands but the converged plan at its own horizon moves
-(the standstill is the real-time iteration's, not the problem's); ``"horizon"`` when the converged plan stands at
-the own horizon and moves at a longer one (the plan that drives off lies beyond the horizon); ``"stands"`` when
-standing is the best plan found at every horizon tried.
+Each solution is summarised by its speed at the first stage, when its plan starts to move (the first stage above
+:data:`MOVING_SPEED`), its speed at the horizon's end, the range of its lateral offset, its largest barrier slack
+and its objective; per horizon the solution of lowest objective counts, and the real-time iteration's own plan of
+that step is listed with them (guess ``rti``). A plan *starts* when its first stage is faster than
+:data:`STARTING_SPEED`. The verdict of a probed step:
+
+* ``"drives"``: the controller's own plan starts (the standstill is ending, or the car creeps);
+* ``"rti"``: it does not, but the converged plan at its own horizon starts (the standstill is the real-time
+  iteration's, not the problem's);
+* ``"waits"``: the converged plan at the own horizon moves, but only later in the horizon (at the next step the
+  problem is the same and the wait starts again: receding-horizon procrastination);
+* ``"horizon"``: the converged plan stands at the own horizon and moves at a longer one (the plan that drives off
+  lies beyond the horizon);
+* ``"stands"``: standing is the best plan found at every horizon tried.
 """
 
 from __future__ import annotations
@@ -35,10 +41,12 @@ import numpy as np
 from sofar_agents.evaluation.episode import make_env
 from sofar_agents.evaluation.protocol import EpisodeTask
 
-__all__ = ["MOVING_SPEED", "GUESSES", "ProbeRow", "StallProbe", "probe_problem", "probe_stall", "probe_markdown"]
+__all__ = ["MOVING_SPEED", "STARTING_SPEED", "GUESSES", "ProbeRow", "StallProbe", "probe_problem", "probe_stall", "probe_markdown"]
 
 MOVING_SPEED = 0.2
 """Planned speed above which a plan counts as moving [m/s]."""
+STARTING_SPEED = 0.01
+"""Speed of the first stage above which a plan starts at once [m/s]."""
 GUESSES = ("own", "stand", "left", "right")
 """The guesses (module docstring); ``own``, the MPC's warm start, only at its own horizon."""
 
@@ -52,6 +60,8 @@ class ProbeRow:
     """The horizon's length [s]."""
     guess: str
     success: bool
+    v_first: float
+    """Speed of the first stage [m/s]."""
     moves_from_s: float
     """Time of the first stage planned above :data:`MOVING_SPEED` [s]; nan when the plan stands."""
     v_end: float
@@ -81,16 +91,18 @@ class StallProbe:
 
     @property
     def verdict(self) -> str:
-        """``"drives"``, ``"rti"``, ``"horizon"`` or ``"stands"`` (module docstring); ``"failed"`` without a
-        converged solution at the own horizon."""
+        """``"drives"``, ``"rti"``, ``"waits"``, ``"horizon"`` or ``"stands"`` (module docstring); ``"failed"``
+        without a converged solution at the own horizon."""
         rti = next(r for r in self.rows if r.guess == "rti")
-        if not math.isnan(rti.moves_from_s):
+        if rti.v_first > STARTING_SPEED:
             return "drives"
         own = self.best(self.own_horizon)
         if own is None:
             return "failed"
-        if not math.isnan(own.moves_from_s):
+        if own.v_first > STARTING_SPEED:
             return "rti"
+        if not math.isnan(own.moves_from_s):
+            return "waits"
         longer = [self.best(h) for h in sorted({r.horizon for r in self.rows}) if h > self.own_horizon]
         return "horizon" if any(b is not None and not math.isnan(b.moves_from_s) for b in longer) else "stands"
 
@@ -116,10 +128,11 @@ def _row(mpc, horizon: int, guess: str, sol) -> ProbeRow:
     t = mpc.config.time_grid()
     if not sol.success:
         nan = math.nan
-        return ProbeRow(horizon, float(t[-1]), guess, False, nan, nan, nan, nan, nan, nan)
+        return ProbeRow(horizon, float(t[-1]), guess, False, nan, nan, nan, nan, nan, nan, nan)
     moving = np.flatnonzero(sol.x[:, 3] > MOVING_SPEED)
     slack = float(sol.slack_barrier.max()) if sol.slack_barrier.size else 0.0
-    return ProbeRow(horizon, float(t[-1]), guess, True, float(t[moving[0]]) if len(moving) else math.nan,
+    return ProbeRow(horizon, float(t[-1]), guess, True, float(sol.x[1, 3]),
+                    float(t[moving[0]]) if len(moving) else math.nan,
                     float(sol.x[-1, 3]), float(sol.x[:, 1].min()), float(sol.x[:, 1].max()), max(slack, 0.0),
                     float(sol.objective))
 
@@ -128,7 +141,7 @@ def _rti_row(mpc, result) -> ProbeRow:
     """The controller's own plan of the step (its :class:`~sofar_env.control.mpc.MPCResult`)."""
     t = mpc.config.time_grid()
     moving = np.flatnonzero(result.x_pred[:, 3] > MOVING_SPEED)
-    return ProbeRow(mpc.config.horizon, float(t[-1]), "rti", bool(result.success),
+    return ProbeRow(mpc.config.horizon, float(t[-1]), "rti", bool(result.success), float(result.x_pred[1, 3]),
                     float(t[moving[0]]) if len(moving) else math.nan, float(result.x_pred[-1, 3]),
                     float(result.x_pred[:, 1].min()), float(result.x_pred[:, 1].max()),
                     float(result.slack.get("barrier", 0.0)), math.nan)
@@ -217,10 +230,11 @@ def probe_stall(task: EpisodeTask, times: Sequence[float], horizons: Sequence[in
 def probe_markdown(probes: Sequence[StallProbe], command: str = "") -> str:
     """A Markdown report: per stall its verdict, and every solution."""
     lines = ["# Stalls probed: the MPC's problem at a stalled step, solved to convergence (IPOPT)", "",
-             "Verdict of a probed step: `drives` (the controller's own plan moves there), `rti` (it stands, the "
-             "converged plan at its own horizon drives off), `horizon` (the converged plan stands there and drives "
-             "off at a longer horizon), `stands` (standing is the best plan found at every horizon tried); per "
-             "horizon the converged solution of lowest objective counts. Rows: `rti` the controller's own plan; "
+             "Verdict of a probed step: `drives` (the controller's own plan starts: its first stage faster than "
+             f"{STARTING_SPEED:g} m/s), `rti` (it does not, the converged plan at its own horizon starts), `waits` "
+             "(the converged plan at the own horizon moves only later in the horizon), `horizon` (it stands there "
+             "and moves at a longer horizon), `stands` (standing is the best plan found at every horizon tried); "
+             "per horizon the converged solution of lowest objective counts. Rows: `rti` the controller's own plan; "
              "guesses `own` (the MPC's warm start), `stand`, `left`, `right` (creeping towards that side).", "",
              "| stack | world | circuit | rho | seed | gamma | at [s] | n, e, v | verdict |",
              "|---|---|---|---:|---:|---:|---:|---|---|"]
@@ -229,19 +243,20 @@ def probe_markdown(probes: Sequence[StallProbe], command: str = "") -> str:
         world = t.scenario + (f", {t.n_opponents} opponents" if t.n_opponents is not None else "")
         lines.append(f"| {t.stack} | {world} | {t.track} | {t.rho:g} | {t.seed} | {t.strategy.gamma:g} | {p.at:.1f} | "
                      f"{p.state[0]:.2f} m, {p.state[1]:.3f} rad, {p.state[2]:.2f} m/s | **{p.verdict}** |")
-    lines += ["", "| circuit, seed, gamma, time | horizon | guess | moves from [s] | v at the end [m/s] "
-              "| lateral range [m] | largest barrier slack | objective |", "|---|---|---|---:|---:|---|---:|---:|"]
+    lines += ["", "| circuit, seed, gamma, time | horizon | guess | v first stage [m/s] | moves from [s] "
+              "| v at the end [m/s] | lateral range [m] | largest barrier slack | objective |",
+              "|---|---|---|---:|---:|---:|---|---:|---:|"]
     for p in probes:
         for r in p.rows:
             if not r.success:
                 lines.append(f"| {p.task.track}, {p.task.seed}, {p.task.strategy.gamma:g}, {p.at:.1f} s | {r.horizon} "
-                             f"({r.horizon_s:.1f} s) | {r.guess} | failed | | | | |")
+                             f"({r.horizon_s:.1f} s) | {r.guess} | failed | | | | | |")
                 continue
             best = " (best)" if p.best(r.horizon) is r else ""
             moves = "stands" if math.isnan(r.moves_from_s) else f"{r.moves_from_s:.2f}"
             objective = "" if math.isnan(r.objective) else f"{r.objective:,.0f}"
             lines.append(f"| {p.task.track}, {p.task.seed}, {p.task.strategy.gamma:g}, {p.at:.1f} s | {r.horizon} "
-                         f"({r.horizon_s:.1f} s) | {r.guess}{best} | {moves} | {r.v_end:.2f} | "
+                         f"({r.horizon_s:.1f} s) | {r.guess}{best} | {r.v_first:.3f} | {moves} | {r.v_end:.2f} | "
                          f"{r.n_low:.2f} to {r.n_high:.2f} | {r.barrier_slack:.3f} | {objective} |")
     if command:
         lines += ["", f"Command: `{command}`"]

@@ -77,20 +77,23 @@ def test_the_probe_solves_every_horizon_from_every_guess_and_keeps_the_cheapest(
     assert [(r.horizon, r.guess) for r in rows] == [(20, "own"), (20, "stand"), (20, "left"), (20, "right"),
                                                     (30, "stand"), (30, "left"), (30, "right")]
     assert all(r.success for r in rows) and mpc._xg is None  # the MPC probed is left as it was
-    rti = ProbeRow(20, 1.5, "rti", True, math.nan, 0.0, 0.0, 0.0, 0.1, math.nan)
+    rti = ProbeRow(20, 1.5, "rti", True, 0.0, math.nan, 0.0, 0.0, 0.0, 0.1, math.nan)
     probe = StallProbe(None, 1.0, (0.0, 0.0, 0.0, 0.0), 20, (rti, *rows))
     for h in (20, 30):
         best = probe.best(h)
         assert best.objective == min(r.objective for r in rows if r.horizon == h)
-    assert probe.verdict in ("rti", "horizon", "stands")
+    assert probe.verdict in ("rti", "waits", "horizon", "stands")
 
 
-def _row(horizon, guess, moves, objective=1.0):
-    return ProbeRow(horizon, horizon * 0.075, guess, True, 0.5 if moves else math.nan, 1.0, 0.0, 0.0, 0.0, objective)
+def _row(horizon, guess, moves, objective=1.0, starts=None):
+    starts = moves if starts is None else starts
+    return ProbeRow(horizon, horizon * 0.075, guess, True, 0.3 if starts else 0.0, 0.5 if moves else math.nan, 1.0,
+                    0.0, 0.0, 0.0, objective)
 
 
 @pytest.mark.parametrize("rows, verdict", [
     ([_row(20, "rti", True), _row(20, "own", False)], "drives"),
+    ([_row(20, "rti", True, starts=False), _row(20, "own", True, starts=False)], "waits"),
     ([_row(20, "rti", False), _row(20, "own", True, 2.0), _row(20, "stand", False, 3.0)], "rti"),
     ([_row(20, "rti", False), _row(20, "own", True, 3.0), _row(20, "stand", False, 2.0)], "stands"),
     ([_row(20, "rti", False), _row(20, "own", False), _row(40, "stand", False, 1.0), _row(40, "left", True, 2.0)],
