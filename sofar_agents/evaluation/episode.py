@@ -55,11 +55,8 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
         raise RuntimeError(f"episode {task.track}/{task.strategy.name}: the environment's configuration has "
                            f"config_hash {env_hash}, the task's is {wanted} (stack {task.stack!r}, scenario "
                            f"{task.scenario!r}, duration {task.duration:g} s)")
-    options: dict[str, Any] = {"rho": float(task.rho)}
-    if task.n_opponents is not None:
-        options["n_opponents"] = int(task.n_opponents)
     t0 = time.perf_counter()
-    obs, info = env.reset(seed=int(task.seed), options=options)
+    obs, info = env.reset(seed=int(task.seed), options=reset_options(task))
     steps = slack = 0
     gamma_sum = 0.0
     collision = off_track = stalled = terminated = truncated = False
@@ -100,6 +97,14 @@ def run_episode(env, policy: Callable[[Any], Any], task: EpisodeTask) -> tuple[E
         config_hash=env_hash,
     )
     return result, trace
+
+
+def reset_options(task: EpisodeTask) -> dict[str, Any]:
+    """The ``options`` of ``env.reset`` for ``task``: its rho, and its field size when it sets one."""
+    options: dict[str, Any] = {"rho": float(task.rho)}
+    if task.n_opponents is not None:
+        options["n_opponents"] = int(task.n_opponents)
+    return options
 
 
 def make_env(track: str, use_miqp: bool = True, duration: float = DEFAULT_DURATION, stack: str = "sofar",

@@ -126,11 +126,11 @@ def bootstrap_hypervolume(rows: Sequence[Mapping[str, Any]], families: tuple[str
     for i, c in enumerate(cells):
         cell_index.setdefault(c, []).append(i)
     rng = np.random.default_rng(seed)
-    counts = np.zeros((int(resamples), n_ep))
+    counts = np.zeros((int(resamples), n_ep))  # how often each draw takes each episode
+    rows_of_draws = np.arange(int(resamples))[:, None]
     for idx in cell_index.values():
         draws = rng.choice(np.asarray(idx), size=(int(resamples), len(idx)), replace=True)
-        for j in range(len(idx)):
-            np.add.at(counts, (np.arange(int(resamples)), draws[:, j]), 1.0)
+        np.add.at(counts, (rows_of_draws, draws), 1.0)
     points = {n: _points(counts, table[n]) for n in strategies}
     ones = np.ones((1, n_ep))
     observed = tuple(hypervolume(np.vstack([_points(ones, table[n]) for n in members[f]])) for f in families)

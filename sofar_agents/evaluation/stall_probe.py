@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sofar_agents.evaluation.episode import make_env
+from sofar_agents.evaluation.episode import make_env, reset_options
 from sofar_agents.evaluation.protocol import EpisodeTask
 
 __all__ = ["MOVING_SPEED", "STARTING_SPEED", "GUESSES", "ProbeRow", "StallProbe", "probe_problem", "probe_stall", "probe_markdown"]
@@ -157,11 +157,10 @@ def probe_problem(mpc, stage, x0: np.ndarray, opponents: np.ndarray, gamma: floa
 
     own_n = mpc.config.horizon
     rows = []
-    probe = copy.deepcopy(mpc)
     t = mpc.config.time_grid()
-    rows.append(_row(mpc, own_n, "own", probe.reference_solution(x0, stage, opponents, gamma)))
+    rows.append(_row(mpc, own_n, "own", mpc.reference_solution(x0, stage, opponents, gamma)))
     for kind in GUESSES[1:]:
-        rows.append(_row(mpc, own_n, kind, probe.reference_solution(
+        rows.append(_row(mpc, own_n, kind, mpc.reference_solution(
             x0, stage, opponents, gamma, guess=_guess(kind, x0, t, stage.n_min, stage.n_max))))
     for h in horizons:
         if h == own_n:
@@ -194,16 +193,14 @@ def probe_stall(task: EpisodeTask, times: Sequence[float], horizons: Sequence[in
                    scenario=task.scenario)
     try:
         u = env.unwrapped
-        options = {"rho": float(task.rho)}
-        if task.n_opponents is not None:
-            options["n_opponents"] = int(task.n_opponents)
-        env.reset(seed=int(task.seed), options=options)
+        env.reset(seed=int(task.seed), options=reset_options(task))
         last: list = []
+        near = [False]  # the next step may be the probed one: keep the MPC as it was before its solve
         for mpc in u.stack.mpcs:
             solve = type(mpc).solve.__get__(mpc)
 
             def recorded(x0, stage, opponents, gamma, _solve=solve, _mpc=mpc):
-                before = copy.deepcopy(_mpc)
+                before = copy.deepcopy(_mpc) if near[0] else None
                 result = _solve(x0, stage, opponents, gamma)
                 last[:] = [(before, np.array(x0, float), stage, np.array(opponents, float), float(gamma), result)]
                 return result
@@ -212,8 +209,10 @@ def probe_stall(task: EpisodeTask, times: Sequence[float], horizons: Sequence[in
         action = np.array([task.strategy.gamma], np.float32)
         lookup = StageLookup(u.track, u.stack.edges, u.stack.config.speed_factor)
         probes = []
+        dt = float(u.race.config.dt)
         for at in times:
             while u.race.time < at - 1e-9:
+                near[0] = u.race.time >= at - 1.5 * dt
                 _, _, terminated, truncated, _ = env.step(action)
                 if terminated or truncated:
                     raise ValueError(f"the episode ended at {u.race.time:.1f} s, before {at:g} s")
