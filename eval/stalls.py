@@ -19,6 +19,7 @@ One process; the logic is in sofar_agents.evaluation.stalls.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import csv
 import gzip
 import io
@@ -34,6 +35,7 @@ from sofar_agents.evaluation import stall_rows as sr
 from sofar_agents.evaluation import stalls as st
 from sofar_agents.evaluation.files import write_text_atomic
 from sofar_agents.evaluation.protocol import exact_text
+from sofar_env.stack.config import STACK_PRESETS
 
 logger = logging.getLogger("stalls")
 
@@ -49,6 +51,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--stacks", nargs="+", default=None,
                    help="controller presets (default: sofar sofar-1, the default and its former version; with "
                         "--replay: every preset in the CSVs)")
+    p.add_argument("--replay-with", default=None, metavar="PRESET", choices=list(STACK_PRESETS),
+                   help="with --replay: run the stalled episodes with this controller preset instead of their own "
+                        "(do a candidate's episodes still stall where the committed preset's did?), one of "
+                        + ", ".join(STACK_PRESETS))
     p.add_argument("--limit", type=positive_int, default=None, help="with --replay: at most this many stalls per CSV")
     p.add_argument("--gammas", nargs="+", type=gamma_value, default=[0.05, 0.5], help="fixed gammas of the seed set")
     p.add_argument("--tracks", nargs="+", default=list(ev.TRACKS), help="circuits of the seed set")
@@ -61,6 +67,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     args = p.parse_args(argv)
     if args.replay and args.report:
         p.error("--replay and --report exclude each other")
+    if args.replay_with and not args.replay:
+        p.error("--replay-with needs --replay")
     return args
 
 
@@ -222,6 +230,8 @@ def main(argv=None) -> int:
             tasks, labels = [], []
             for name, rows in ev.read_seed_sets(args.replay).items():
                 found = sr.stalled_tasks(rows, args.stacks)[:args.limit]
+                if args.replay_with:
+                    found = [dataclasses.replace(t, stack=args.replay_with, pinned_hash=None) for t in found]
                 logger.info("%s: %d stalls", name, len(found))
                 tasks += found
                 labels += [f"committed {name[name.find('results/'):] if 'results/' in name else name}"] * len(found)

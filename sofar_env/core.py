@@ -441,7 +441,7 @@ class ControlledRace:
                 key = (c, horizon)
                 if key not in advances:
                     x = plan.mpc.x_pred
-                    advances[key] = published_advance(self.stacks[c].config.mpc.time_grid(), x[:, 0], x[-1, 3],
+                    advances[key] = published_advance(self.stacks[c].plan_times, x[:, 0], x[-1, 3],
                                                       dt, horizon)
                 if new is None:
                     new = np.array(rows, dtype=float)

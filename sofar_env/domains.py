@@ -216,9 +216,10 @@ def real(default: Any = MISSING, *, gt: float | None = None, ge: float | None = 
     return _field(default, Domain("real", gt=gt, ge=ge, lt=lt, le=le, inf=inf, optional=optional, unit=unit))
 
 
-def integer(default: Any = MISSING, *, ge: int | None = None, le: int | None = None) -> Any:
+def integer(default: Any = MISSING, *, ge: int | None = None, le: int | None = None,
+            optional: bool | str = False) -> Any:
     """An integer field (not a bool, not a float) within the bounds."""
-    return _field(default, Domain("int", ge=ge, le=le))
+    return _field(default, Domain("int", ge=ge, le=le, optional=optional))
 
 
 def flag(default: bool) -> Any:

@@ -146,6 +146,10 @@ def _sofar_6() -> StackConfig:
     return dataclasses.replace(_sofar_5(), restart_buffer_edge=0.05)
 
 
+def _sofar_7() -> StackConfig:
+    return dataclasses.replace(_sofar_6(), restart_horizon=80)
+
+
 DEFAULT_STACK_PRESET = "sofar-6"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
@@ -215,6 +219,11 @@ the restart mode's buffer slack (``restart_buffer_edge = 0.05``): while the car 
 3 m/s) a violation of the track margin costs ``mpc.track_buffer_slack`` instead of ``mpc.track_slack`` until the car's
 side comes within 0.05 m of the edge (0.2 m of the paper worlds' 0.25 m buffer), so that a car standing inside the
 margin drives off along it instead of standing (the standing-start defect of ``docs/decisions/stall-fixes.md``)."""),
+    "sofar-7": Entry(_sofar_7(), """A candidate default, not the default: ``"sofar-6"`` with a 6 s horizon in the restart
+mode (``restart_horizon = 80`` stages against the MPC's 20, 1.5 s). In a jam (a car stopped a few metres ahead, its
+barrier already violated) every forward move first goes deeper into the barrier, and over 1.5 s standing is the
+optimum of the MPC's problem; solved to convergence, a 3-6 s horizon drives off at 9 of the 18 probed steps of the
+default's stalls (``docs/decisions/stall-fixes.md``, "The remaining stalls probed")."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

@@ -138,6 +138,12 @@ class StackConfig:
     (``mpc.track_buffer`` of that MPC; 0 where the margin leaves no such band), so that a car standing inside the
     margin drives off along it instead of standing, while the last metres to the edge stay as expensive as
     without it. Above ``restart_exit_speed`` nothing changes [m], >= 0. Decision: ``docs/decisions/stall-fixes.md``."""
+    restart_horizon: int | None = neutral(integer(None, ge=2, optional="mpc.horizon"))
+    """Stages of the restart mode's MPC (None: ``mpc.horizon``, the default; only with the restart mode), on the
+    MPC's time grid (``mpc.ts`` apart after the first step). Its stage data are looked up along its own warm start.
+    In a jam (a car stopped a few metres ahead, the barrier already violated) every forward move first goes deeper
+    into the barrier, and over the 1.5 s horizon standing costs less; over 3-6 s a move around the car can pay
+    off [-], >= 2. Decision: ``docs/decisions/stall-fixes.md``."""
     follow_creep_speed: float = neutral(real(0.0, ge=0.0, unit="m/s"))
     """*Turned-car creep* (0: off, the default). While a car is followed and the ego is turned to the track by
     more than ``follow_creep_angle``, and until it is turned by less than ``follow_creep_release``, the follow
@@ -206,6 +212,9 @@ class StackConfig:
             if self.slow_rows_speed is None and self.mpc.track_rows == "reference":
                 raise ConfigError("stack.restart_buffer_edge needs end rows in the restart mode's MPC "
                                   "(stack.slow_rows_speed, or stack.mpc.track_rows other than 'reference')")
+        if self.restart_horizon is not None and self.restart_lateral_weight is None:
+            raise ConfigError("stack.restart_horizon needs the restart mode (stack.restart_lateral_weight), "
+                              "got restart_lateral_weight = None")
         if self.slow_rows_curved and self.slow_rows_speed is None:
             raise ConfigError("stack.slow_rows_curved needs stack.slow_rows_speed (it is a property of the slow end "
                               "rows), got slow_rows_speed = None")

@@ -93,11 +93,15 @@ class OvertakingStack:
         if cfg.restart_lateral_weight is not None and cfg.reference_numerics is None:
             q = (cfg.mpc.q[0], float(cfg.restart_lateral_weight)) + tuple(cfg.mpc.q[2:])
             rows = slow_rows if slow else cfg.mpc.track_rows
-            self._restart_mpc = MPCDCBF(dataclasses.replace(cfg.mpc, q=q, track_rows=rows,
-                                                            track_buffer=_buffer_width(cfg, vehicle)), vehicle)
+            restart = dataclasses.replace(cfg.mpc, q=q, track_rows=rows, track_buffer=_buffer_width(cfg, vehicle))
+            if cfg.restart_horizon is not None:
+                restart = dataclasses.replace(restart, horizon=cfg.restart_horizon)
+            self._restart_mpc = MPCDCBF(restart, vehicle)
             self._turn_back_angle = EndOffsets(vehicle, recoverable=True).e_star
         self._node_t = np.arange(cfg.miqp.nodes) * cfg.miqp.node_dt
         self._mpc_t = cfg.mpc.time_grid()
+        # the restart mode's time grid; its own only with restart_horizon (then its stage data are its own)
+        self._restart_t = self._mpc_t if cfg.restart_horizon is None else self._restart_mpc.config.time_grid()
         self.reset()
 
     def reset(self) -> None:
@@ -138,6 +142,12 @@ class OvertakingStack:
         return self._restart_mpc if self._restarting else self._own_mpc
 
     @property
+    def plan_times(self) -> np.ndarray:
+        """(N+1,) times [s] of the stages of the last step's plan (``StackOutput.mpc.x_pred``): the MPC's time grid,
+        or the restart mode's with ``restart_horizon``. Read-only."""
+        return self._restart_t if self._restarting else self._mpc_t
+
+    @property
     def _own_mpc(self) -> MPCDCBF:
         """The stack's MPC at this speed: the slow end rows' below ``slow_rows_speed``, else its own."""
         return self._slow_mpc if self._slow else self.mpc
@@ -167,10 +177,13 @@ class OvertakingStack:
         self._plan_s = ego_s
         return elapsed
 
-    def stage_data(self, ego_s: float) -> MPCStageData:
-        """Per-stage data of the MPC at the s of its warm start (:class:`~sofar_env.stack.stage.StageLookup`)."""
+    def stage_data(self, ego_s: float, mpc: MPCDCBF | None = None) -> MPCStageData:
+        """Per-stage data of the MPC at the s of its warm start (:class:`~sofar_env.stack.stage.StageLookup`):
+        the stack's own at this speed, or ``mpc`` on its own time grid (the restart mode's with
+        ``restart_horizon``)."""
         cfg = self.config
-        s_rel = self._own_mpc.predicted_s()
+        s_rel = (self._own_mpc if mpc is None else mpc).predicted_s()
+        t = self._mpc_t if mpc is None else mpc.config.time_grid()
         s_abs, kappa, v_ref, n_min, n_max = self._stage(ego_s, s_rel)
         if self._plan is not None and cfg.use_miqp:
             shift = float(self.track.gap(ego_s, self._plan_s))
@@ -179,12 +192,14 @@ class OvertakingStack:
             n_ref = np.zeros_like(s_rel)
         if cfg.use_miqp:
             creep = cfg.follow_creep_speed if self._creeping else 0.0
-            cap = self.pass_or_follow.speed_cap(ego_s, s_rel, self._mpc_t, self._step, creep=creep)
+            cap = self.pass_or_follow.speed_cap(ego_s, s_rel, t, self._step, creep=creep)
             if cap is not None:
                 v_ref = np.minimum(v_ref, cap)
         # an MPC that bounds the car's ends itself gets the edges without the frozen-heading tightening
         x_prev = self._last_pred if cfg.mpc.track_rows == "reference" and not self._slow else None
-        n_min, n_max = self.edges.for_mpc(s_abs, x_prev, self._mpc_t, cfg.mpc.control_dt,
+        if x_prev is not None and len(x_prev) != len(t):  # a plan of the other horizon (restart_horizon)
+            x_prev = None
+        n_min, n_max = self.edges.for_mpc(s_abs, x_prev, t, cfg.mpc.control_dt,
                                           edge_relative=cfg.use_miqp and self.pass_or_follow.parked_plan,
                                           edges=(n_min, n_max))
         return MPCStageData(kappa=kappa, n_ref=n_ref, v_ref=v_ref, n_min=n_min, n_max=n_max)
@@ -225,22 +240,29 @@ class OvertakingStack:
         if self._slow_mpc is not None:
             self._slow_rows(v)
         stage = self.stage_data(s)
+        mpc = self._select_mpc(v, stage)
+        grid = self.plan_times
+        if grid is not self._mpc_t:
+            stage = self.stage_data(s, mpc)
         opp_mpc = opp_rel
         if cfg.pace_prediction and len(opp_rel):
             # the MPC predicts opponents at constant speed: give it their mean speed over its horizon
-            t_end = float(self._mpc_t[-1])
+            t_end = float(grid[-1])
             s_end = self.predict(s, opp_rel, np.array([t_end]))[:, 0]
             opp_mpc = opp_rel.copy()
             opp_mpc[:, 2] = (s_end - opp_rel[:, 0]) / t_end
         if lateral_rate is not None:
             # the MPC (constant lateral rate) gets the sensed offset and the mean rate over its horizon
-            t_end = float(self._mpc_t[-1])
+            t_end = float(grid[-1])
             rate = lateral_rate * (min(t_end, cfg.lateral_prediction_time) / t_end)
             opp_mpc = np.column_stack([opp_mpc[:, 0], n_now, opp_mpc[:, 2], rate])
         if cfg.reference_numerics is not None:  # its slots are filled from every opponent on the track
             half = 0.5 * float(self.track.length)
             opp_mpc = relative_opponents(self.track, s, opponents, half, half)[:, :3]
-        result = self._solve_mpc(np.array([0.0, n, e, v, delta]), stage, opp_mpc, gamma)
+        x0 = np.array([0.0, n, e, v, delta])
+        result = mpc.solve(x0, stage, opp_mpc, gamma)
+        if self._restarting:
+            result = self._steer_to_lock(result, x0)
         if not result.success:
             self.counters["mpc_failures"] += 1
         self.counters["qp_fallbacks"] += result.qp_fallbacks
@@ -278,27 +300,28 @@ class OvertakingStack:
         self._slow = slow
         self.counters["slow_rows_steps"] += int(slow)
 
-    def _solve_mpc(self, x0: np.ndarray, stage: MPCStageData, opponents: np.ndarray, gamma: float) -> MPCResult:
-        """The MPC step: the stack's MPC, or in the restart mode (``restart_lateral_weight``) the second MPC,
-        steering towards full lock while its plan stays below ``restart_speed`` with the car turned by ``e*``
-        or more (:class:`~sofar_env.configs.stack.StackConfig`)."""
+    def _select_mpc(self, v: float, stage: MPCStageData) -> MPCDCBF:
+        """The MPC that solves this step at speed ``v`` [m/s] under the own MPC's ``stage`` data: the stack's MPC,
+        or in the restart mode (``restart_lateral_weight``) the second MPC, whose plan then steers towards full
+        lock while it stays below ``restart_speed`` with the car turned by ``e*`` or more
+        (:class:`~sofar_env.configs.stack.StackConfig`). Enters and leaves the mode (a cold start of the MPC that
+        takes over)."""
         own = self._own_mpc
         spare = self._restart_mpc
         if spare is None:
-            return own.solve(x0, stage, opponents, gamma)
+            return own
         cfg = self.config
-        v = float(x0[3])
         free = float(np.max(stage.v_ref)) >= cfg.restart_speed
         if free and (v < cfg.restart_speed or (self._restarting and v < cfg.restart_exit_speed)):
             if not self._restarting:
                 spare.reset()
                 self.counters["slow_restarts"] += 1
             self._restarting = True
-            return self._steer_to_lock(spare.solve(x0, stage, opponents, gamma), x0)
+            return spare
         if self._restarting:  # back to the stack's own MPC, from a cold start
             self._restarting = False
             own.reset()
-        return own.solve(x0, stage, opponents, gamma)
+        return own
 
     def _steer_to_lock(self, result: MPCResult, x0: np.ndarray) -> MPCResult:
         """``result`` with its steering rate replaced by one towards full lock on the side that turns the car back,
