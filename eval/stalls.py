@@ -247,6 +247,9 @@ def main(argv=None) -> int:
     except ValueError as exc:  # a stalls.csv of another version in --out
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if not (out / "stalls.csv").exists():  # nothing ran and nothing was there: no report to make
+        print(f"no stalled episode to replay in {', '.join(args.replay or [])}: nothing written")
+        return 0
     command = "python eval/stalls.py " + " ".join(argv if argv is not None else sys.argv[1:])
     print(write_report(out, f"\n{len(tasks)} episodes; this call ran for {wall:.0f} s in one process. "
                             f"Command: `{command}`\n"))

@@ -150,6 +150,10 @@ def _sofar_7() -> StackConfig:
     return dataclasses.replace(_sofar_6(), restart_horizon=80)
 
 
+def _sofar_8() -> StackConfig:
+    return dataclasses.replace(_sofar_7(), restart_heading_extent=2.45)
+
+
 DEFAULT_STACK_PRESET = "sofar-6"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
@@ -224,6 +228,10 @@ mode (``restart_horizon = 80`` stages against the MPC's 20, 1.5 s). In a jam (a 
 barrier already violated) every forward move first goes deeper into the barrier, and over 1.5 s standing is the
 optimum of the MPC's problem; solved to convergence, a 3-6 s horizon drives off at 9 of the 18 probed steps of the
 default's stalls (``docs/decisions/stall-fixes.md``, "The remaining stalls probed")."""),
+    "sofar-8": Entry(_sofar_8(), """A candidate default, not the default: ``"sofar-7"`` with the restart mode's barrier
+widened with the heading error as in multi-car races (``restart_heading_extent = 2.45`` m, half the car's length).
+Driving off over 6 s, a car turned towards a car stopped beside it can sweep its front corner into that car's rear
+while the ellipse of aligned cars is still satisfied; the widened ellipse counts the turn."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

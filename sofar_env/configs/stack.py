@@ -144,6 +144,12 @@ class StackConfig:
     In a jam (a car stopped a few metres ahead, the barrier already violated) every forward move first goes deeper
     into the barrier, and over the 1.5 s horizon standing costs less; over 3-6 s a move around the car can pay
     off [-], >= 2. Decision: ``docs/decisions/stall-fixes.md``."""
+    restart_heading_extent: float | None = neutral(real(None, ge=0.0, optional="mpc.barrier.heading_extent",
+                                                        unit="m"))
+    """``mpc.barrier.heading_extent`` of the restart mode's MPC (None: the MPC's own, the default; only with the
+    restart mode): the barrier's lateral semi-axis widened with the heading error, so that a car turned at low
+    speed keeps its corners, not only its centre, clear of a car beside it (the ellipse of aligned cars does not
+    cover a turned footprint) [m], >= 0. Decision: ``docs/decisions/stall-fixes.md``."""
     follow_creep_speed: float = neutral(real(0.0, ge=0.0, unit="m/s"))
     """*Turned-car creep* (0: off, the default). While a car is followed and the ego is turned to the track by
     more than ``follow_creep_angle``, and until it is turned by less than ``follow_creep_release``, the follow
@@ -214,6 +220,9 @@ class StackConfig:
                                   "(stack.slow_rows_speed, or stack.mpc.track_rows other than 'reference')")
         if self.restart_horizon is not None and self.restart_lateral_weight is None:
             raise ConfigError("stack.restart_horizon needs the restart mode (stack.restart_lateral_weight), "
+                              "got restart_lateral_weight = None")
+        if self.restart_heading_extent is not None and self.restart_lateral_weight is None:
+            raise ConfigError("stack.restart_heading_extent needs the restart mode (stack.restart_lateral_weight), "
                               "got restart_lateral_weight = None")
         if self.slow_rows_curved and self.slow_rows_speed is None:
             raise ConfigError("stack.slow_rows_curved needs stack.slow_rows_speed (it is a property of the slow end "

@@ -96,6 +96,9 @@ class OvertakingStack:
             restart = dataclasses.replace(cfg.mpc, q=q, track_rows=rows, track_buffer=_buffer_width(cfg, vehicle))
             if cfg.restart_horizon is not None:
                 restart = dataclasses.replace(restart, horizon=cfg.restart_horizon)
+            if cfg.restart_heading_extent is not None:
+                restart = dataclasses.replace(restart, barrier=dataclasses.replace(
+                    restart.barrier, heading_extent=cfg.restart_heading_extent))
             self._restart_mpc = MPCDCBF(restart, vehicle)
             self._turn_back_angle = EndOffsets(vehicle, recoverable=True).e_star
         self._node_t = np.arange(cfg.miqp.nodes) * cfg.miqp.node_dt

@@ -142,6 +142,30 @@ def test_replay_of_a_stall(tmp_path):
     assert (old / "stalls.csv").read_text() == "label,track,rho,seed,stack,gamma\n"
 
 
+def test_replay_with_another_preset_and_a_csv_without_stalls(tmp_path):
+    """``--replay-with`` runs the committed stalls with another preset (its name and hash in the rows); a CSV without
+    a stall writes nothing and exits 0; ``--replay-with`` without ``--replay`` or with an unknown preset is refused."""
+    row = {"track": "LagunaSeca", "rho": 0.1, "seed": 4258579602, "strategy": "gamma=0.15", "success": 0,
+           "use_miqp": 1, "stalled": 1, "duration": 20.0, "n_opponents": 8, "stack": "sofar-recover",
+           "scenario": "interactive"}
+    write_episode_csv(tmp_path / "run" / "table1_episodes.csv", [row])
+    out = tmp_path / "stalls"
+    assert stalls_cli.main(["--replay", str(tmp_path / "run" / "table1_episodes.csv"), "--replay-with", "sofar-7",
+                            "--out", str(out), "--log-level", "WARNING"]) == 0
+    with open(out / "stalls.csv", newline="") as f:
+        (first,) = csv.DictReader(f)
+    assert first["stack"] == "sofar-7" and first["outcome"] == "success"
+    assert first["config_hash"] == episode_config_hash("sofar-7", "interactive", 20.0)
+    write_episode_csv(tmp_path / "none" / "table1_episodes.csv", [{**row, "stalled": 0, "success": 1}])
+    assert stalls_cli.main(["--replay", str(tmp_path / "none" / "table1_episodes.csv"), "--out",
+                            str(tmp_path / "empty"), "--log-level", "WARNING"]) == 0
+    assert not any((tmp_path / "empty").iterdir())
+    for argv in (["--replay-with", "sofar-7"], ["--replay", "x.csv", "--replay-with", "no-such-preset"]):
+        with pytest.raises(SystemExit) as exc:
+            stalls_cli.main(argv)
+        assert exc.value.code == 2
+
+
 def test_replay_records_the_steps_of_every_mpc_of_the_stack(tmp_path):
     """``"sofar-3"`` solves slow steps with its second MPC (the slow end rows): the recorder sees those steps too,
     so its stall is classified from records. Held-out dense interactive episode (base seed 9600): Laguna Seca,
