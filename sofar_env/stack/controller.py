@@ -147,7 +147,7 @@ class OvertakingStack:
     @property
     def plan_times(self) -> np.ndarray:
         """(N+1,) times [s] of the stages of the last step's plan (``StackOutput.mpc.x_pred``): the MPC's time grid,
-        or the restart mode's with ``restart_horizon``. Read-only."""
+        or the restart mode's with ``restart_horizon`` (the stack's own array: not to be written to)."""
         return self._restart_t if self._restarting else self._mpc_t
 
     @property
