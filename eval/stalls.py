@@ -19,8 +19,8 @@ One process; the logic is in sofar_agents.evaluation.stalls.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import csv
+import dataclasses
 import gzip
 import io
 import logging

@@ -140,10 +140,9 @@ class StackConfig:
     without it. Above ``restart_exit_speed`` nothing changes [m], >= 0. Decision: ``docs/decisions/stall-fixes.md``."""
     restart_horizon: int | None = neutral(integer(None, ge=2, optional="mpc.horizon"))
     """Stages of the restart mode's MPC (None: ``mpc.horizon``, the default; only with the restart mode), on the
-    MPC's time grid (``mpc.ts`` apart after the first step). Its stage data are looked up along its own warm start.
-    In a jam (a car stopped a few metres ahead, the barrier already violated) every forward move first goes deeper
-    into the barrier, and over the 1.5 s horizon standing costs less; over 3-6 s a move around the car can pay
-    off [-], >= 2. Decision: ``docs/decisions/stall-fixes.md``."""
+    MPC's time grid (``mpc.ts`` apart after the first step); its stage data are looked up along its own warm start
+    and :attr:`~sofar_env.stack.OvertakingStack.plan_times` gives the times of its plan [-], >= 2. Measured (the
+    candidates ``"sofar-7"`` and ``"sofar-8"``, not adopted): ``docs/decisions/stall-fixes.md``."""
     restart_heading_extent: float | None = neutral(real(None, ge=0.0, optional="mpc.barrier.heading_extent",
                                                         unit="m"))
     """``mpc.barrier.heading_extent`` of the restart mode's MPC (None: the MPC's own, the default; only with the
