@@ -159,24 +159,30 @@ def test_the_creep_floors_the_follow_cap_only_with_room_ahead(tracks):
     assert np.all(crept[room] >= 2.0) and np.any(cap[room] < 2.0)
 
 
+def _replay(track: str, rho: float, seed: int, gamma: float, duration: float, stacks) -> dict:
+    """One seeded episode of the dense interactive world (8 opponents) at a fixed ``gamma`` under each preset of
+    ``stacks``: preset -> its :class:`~sofar_agents.evaluation.results.EpisodeResult`."""
+    from sofar_agents.evaluation.episode import make_env, run_episode
+    from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
+
+    outcomes = {}
+    for stack in stacks:
+        task = EpisodeTask(track, Strategy.fixed(gamma), rho, 0, seed, duration=duration, n_opponents=8,
+                           stack=stack, scenario="interactive")
+        env = make_env(task.track, duration=task.duration, stack=stack, scenario=task.scenario)
+        try:
+            outcomes[stack], _ = run_episode(env, lambda obs: np.array([gamma]), task)
+        finally:
+            env.close()
+    return outcomes
+
+
 def test_a_replayed_stall_drives_off_with_sofar_2():
     """The stall of Laguna Seca (dense interactive world, rho 0.1, seed 4258579602, gamma 0.15): ``"sofar-recover"``
     brakes to a stop at 33.6 s turned 0.57 rad to the track under a follow decision behind a car at 2 m/s,
     1.2 m from its lateral edge, and stands there (stalled at 54.8 s); ``"sofar-2"`` and ``"sofar-3"`` (the ends
     bounded only below 10 m/s) drive on."""
-    from sofar_agents.evaluation.episode import make_env, run_episode
-    from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
-
-    outcomes = {}
-    for stack in ("sofar-recover", "sofar-2", "sofar-3"):
-        task = EpisodeTask("LagunaSeca", Strategy.fixed(0.15), 0.1, 0, 4258579602, duration=60.0, n_opponents=8,
-                           stack=stack, scenario="interactive")
-        env = make_env(task.track, duration=task.duration, stack=stack, scenario=task.scenario)
-        try:
-            result, _ = run_episode(env, lambda obs: np.array([0.15]), task)
-        finally:
-            env.close()
-        outcomes[stack] = result
+    outcomes = _replay("LagunaSeca", 0.1, 4258579602, 0.15, 60.0, ("sofar-recover", "sofar-2", "sofar-3"))
     assert outcomes["sofar-recover"].stalled and 50.0 < outcomes["sofar-recover"].sim_time < 60.0
     for stack in ("sofar-2", "sofar-3"):
         assert not outcomes[stack].stalled and not outcomes[stack].collision
@@ -210,19 +216,7 @@ def test_a_replayed_jam_drives_off_with_sofar_8():
     """The stall of Monza (dense interactive world, rho 0.1, seed 330114025, gamma 0.5): ``"sofar-6"`` stands from
     about 42 s 5 m behind a car creeping at 0.3 m/s with 8.7 m of room beside it, its barrier violated (stalled at
     61.9 s); over the restart mode's 6 s horizon ``"sofar-7"`` and ``"sofar-8"`` drive around it."""
-    from sofar_agents.evaluation.episode import make_env, run_episode
-    from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
-
-    outcomes = {}
-    for stack in ("sofar-6", "sofar-8"):
-        task = EpisodeTask("Monza", Strategy.fixed(0.5), 0.1, 0, 330114025, duration=70.0, n_opponents=8,
-                           stack=stack, scenario="interactive")
-        env = make_env(task.track, duration=task.duration, stack=stack, scenario=task.scenario)
-        try:
-            result, _ = run_episode(env, lambda obs: np.array([0.5]), task)
-        finally:
-            env.close()
-        outcomes[stack] = result
+    outcomes = _replay("Monza", 0.1, 330114025, 0.5, 70.0, ("sofar-6", "sofar-8"))
     if not (outcomes["sofar-6"].stalled and 60.0 < outcomes["sofar-6"].sim_time < 64.0):
         pytest.skip("the committed stall does not reproduce here (a seeded dense race reproduces on one instruction "
                     f"set only): sofar-6 {outcomes['sofar-6'].sim_time:.1f} s")
