@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..domains import check_fields, flag, integer, nested, real, reals
+from ..domains import check_fields, flag, integer, nested, neutral, real, reals
 from ..errors import ConfigError
 
 __all__ = ["PaceConfig", "LineConfig", "DefenceConfig", "TrafficConfig", "OpponentConfig"]
@@ -158,6 +158,14 @@ class TrafficConfig:
     band_margin: float = real(0.5, ge=0.0, unit="m")
     """Two cars are in the same lateral band when their offsets differ by less than the car width plus
     this [m], >= 0."""
+    yield_to_any: bool = neutral(flag(True))
+    """Whether a *squeezed* car (no room beside a car or ego it keeps clear of,
+    :mod:`~sofar_env.opponents.steering`) brakes whoever squeezes it (True: the behaviour of every committed
+    table). False: it brakes only when one of them is ahead of it (or level) or faster than it, since dropping back
+    makes room only for a car that moves past; a car squeezed by a slower or standing car behind it keeps its pace.
+    With True, a car squeezed by a standing ego (or opponent) a car length behind it brakes to a standstill and
+    stays squeezed while both stand: a deadlock that holds the ego behind it until the stall rule ends the
+    episode. Decision: ``docs/decisions/interactive-opponents.md``."""
 
     def __post_init__(self) -> None:
         check_fields(self, f"{_PATH}.traffic")

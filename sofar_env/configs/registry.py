@@ -306,6 +306,14 @@ _DYNAMIC["race"].update({
 _DYNAMIC["stack"] = {"speed_factor": 0.7, "mpc": {"track_margin": 2.2, "q": (0.0, 20.0, 0.0, 2.5, 0.0),
                                                   "r": (0.01, 50.0)}}
 
+
+def _version_2(overrides: dict[str, Any]) -> dict[str, Any]:
+    """``overrides`` with the squeeze deadlock removed (``TrafficConfig.yield_to_any = False``)."""
+    out = copy.deepcopy(overrides)
+    out["race"]["opponents"]["traffic"] = {"yield_to_any": False}
+    return out
+
+
 WORLD_REGISTRY: dict[str, Entry] = {
     "paper": Entry(World({}), """The paper's world (the *world* meaning of "paper"; the default, the
 ``SOfAR-<Circuit>-v0`` ids): the MPC's own kinematic bicycle as the plant, exact sensing, opponents on a fixed
@@ -317,6 +325,13 @@ latency; the extended 16-value observation. Kinematic plant."""),
 (the ``-Dynamic-v0`` ids), with what makes the kinematic controller fit it: the car's yaw-rate loop, limits
 inside the tyres' grip at the lowest mu, starts at 0.5-0.7 of the profile, and the controller settings
 ``speed_factor`` 0.7, ``mpc.track_margin`` 2.2 m and calmer steering weights (applied on top of any preset)."""),
+    "interactive-2": Entry(World(_version_2(_INTERACTIVE)), """A candidate next version of ``"interactive"``, not the
+default: a squeezed opponent drops back only for a car or ego level with it, ahead of it or faster
+(``race.opponents.traffic.yield_to_any = False``). In ``"interactive"`` a car squeezed by a standing ego a car length
+behind it brakes to a standstill and stays squeezed while both stand, which holds the ego until the stall rule ends the
+episode (most stalls of the default controller; ``docs/decisions/interactive-opponents.md``)."""),
+    "dynamic-2": Entry(World(_version_2(_DYNAMIC)), """A candidate next version of ``"dynamic"``, not the default: the
+dynamic world with the squeezed-opponent rule of ``"interactive-2"``."""),
 }
 """The worlds: name -> Entry(World, doc), in the order of ``SCENARIOS``."""
 

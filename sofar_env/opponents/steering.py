@@ -17,7 +17,10 @@ lengths and speeds:
    or about to be (within ``guard_time``), both ``BRAKE_LEAD`` earlier at the
    relative speed, so that the tracker brakes in time; when they conflict with the
    envelope, the target is the point of the keep-clear bounds nearest to it, and the
-   car is *squeezed* (the traffic rules make it drop back in the next step);
+   car is *squeezed* (the traffic rules make it drop back in the next step); with
+   ``TrafficConfig.yield_to_any = False`` only when a car or ego it keeps clear of is
+   level with it, ahead of it or faster: dropping back makes no room for a slower
+   or standing car behind;
 4. the tracker step toward the target, then the bounds on the position: every
    corner on the track first, then ``HARD_GAP`` side to side from each opponent
    within ``side_window`` and ``clearance`` from the ego within ``guard_time``; a
@@ -82,7 +85,7 @@ def steer(dt: float, ego, state: tuple, gap: np.ndarray, s_new, v_new,
     line_data = (bool(lines.active), lines.offsets, lines.a1, lines.a2, lines.w1, lines.w2, lines.p1, lines.p2,
                  cfg.lines.lateral_speed, cfg.lines.lateral_accel)
     spacing = (traffic.side_window, vehicle.width + traffic.band_margin, vehicle.width + HARD_GAP,
-               vehicle.width + dcfg.clearance)
+               vehicle.width + dcfg.clearance, bool(traffic.yield_to_any))
     clamps = _steer(float(dt), field, egos, defence_state, defence_rules, line_data, spacing, band.envelope_data(),
                     band.hard_data(), (n_out, nd_out, squeezed))
     return n_out, nd_out, int(clamps), squeezed
@@ -99,7 +102,9 @@ def _steer(dt, field, egos, defence_state, defence_rules, line_data, spacing, ba
       moves)``, changed in place; ``defence_rules``: ``(alongside, min_gap, max_gap, release, min_closing,
       trigger, guard_time, lateral_speed, lateral_accel)``;
     * ``line_data``: ``(active, offsets, a1, a2, w1, w2, p1, p2, lateral_speed, lateral_accel)`` of the lines;
-    * ``spacing``: ``(side_window, soft separation, hard separation, separation from an ego)``;
+    * ``spacing``: ``(side_window, soft separation, hard separation, separation from an ego, yield_to_any)``
+      (``TrafficConfig.yield_to_any``: whether a squeezed car is flagged whoever squeezes it, or only when a car
+      or ego it keeps clear of is ahead of it, level, or faster);
     * ``band_envelope``, ``band_hard``: :meth:`EdgeBand.envelope_data` and :meth:`EdgeBand.hard_data` (both end
       with the track length);
     * ``out``: ``(n_out, nd_out, squeezed)``, written.
@@ -110,7 +115,7 @@ def _steer(dt, field, egos, defence_state, defence_rules, line_data, spacing, ba
     (along, min_gap, max_gap, release, min_closing, trigger, guard_time, d_lateral_speed,
      d_lateral_accel) = defence_rules
     lines_active, offsets, a1, a2, w1, w2, p1, p2, l_lateral_speed, l_lateral_accel = line_data
-    side_window, sep_soft, sep_hard, sep_ego = spacing
+    side_window, sep_soft, sep_hard, sep_ego, yield_to_any = spacing
     soft_knots, soft_lo, soft_hi, lookahead, lookahead_time, length = band_envelope
     half_width, half_length, half_length_sq, knots, wl, wr, hard_length, kappa_knots, kappa = band_hard
     n_out, nd_out, squeezed = out
@@ -132,6 +137,7 @@ def _steer(dt, field, egos, defence_state, defence_rules, line_data, spacing, ba
     a_lim = np.empty(m)
     ego_soft = np.zeros((m, n_egos), dtype=np.bool_)
     ego_hard = np.zeros((m, n_egos), dtype=np.bool_)
+    ego_passing = np.zeros((m, n_egos), dtype=np.bool_)  # ego e is level with or ahead of car i, or faster
     half = 0.5 * length
     for i in range(m):
         if n_egos > 0:
@@ -145,6 +151,7 @@ def _steer(dt, field, egos, defence_state, defence_rules, line_data, spacing, ba
                 key = g if behind else abs(g)
                 if best < 0 or (behind and not best_behind) or (behind == best_behind and key < best_key):
                     best, best_key, best_behind, best_gap, best_closing = e, key, behind, g, closing
+                ego_passing[i, e] = g <= 0.0 or closing > 0.0
                 ego_soft[i, e] = guarded(g, closing, along, guard_time, BRAKE_LEAD)
                 ego_hard[i, e] = guarded(g, closing, along, guard_time, 0.0)
             defence_step(i, best_gap, best_closing, n[i], n_dot[i], egos[best, 1], aggressiveness, approach, used,
@@ -198,7 +205,7 @@ def _steer(dt, field, egos, defence_state, defence_rules, line_data, spacing, ba
         lo_t, hi_t = py_max(lo_e, lo_k), py_min(hi_e, hi_k)
         squeezed[i] = False
         if lo_t > hi_t:  # the keep-clear bounds win, as close to the envelope as they allow
-            squeezed[i] = True
+            squeezed[i] = yield_to_any or _yields(i, soft_near, gap, v, ego_soft, ego_passing)
             lo_t = py_min(py_max(py_min(py_max(tgt, lo_e), hi_e), lo_k), hi_k)
             hi_t = lo_t
         clipped = py_min(py_max(tgt, lo_t), hi_t)
@@ -226,6 +233,20 @@ def _steer(dt, field, egos, defence_state, defence_rules, line_data, spacing, ba
             clamps += 1
         n_out[i], nd_out[i] = n_i, nd_i
     return clamps
+
+
+@kernel
+def _yields(i, soft_near, gap, v, ego_soft, ego_passing):
+    """Whether squeezed car ``i`` has a reason to drop back: a car it keeps clear of is level with or ahead of it
+    or faster than it, or such an ego (``ego_passing``). Dropping back behind a slower or standing car behind it
+    makes no room (``TrafficConfig.yield_to_any = False``)."""
+    for j in range(soft_near.shape[1]):
+        if soft_near[i, j] and (gap[i, j] >= 0.0 or v[j] > v[i]):
+            return True
+    for e in range(ego_soft.shape[1]):
+        if ego_soft[i, e] and ego_passing[i, e]:
+            return True
+    return False
 
 
 @kernel
