@@ -21,10 +21,19 @@ left at the end are the final slow phase). Each record holds what the controller
   :class:`~sofar_env.control.mpc.ends.EndOffsets`) and the *row room* (the same edge minus what the MPC's own
   track rows bound, :func:`rooms`; < 0: those rows are violated at this state).
 
+* whether the car ahead is held by a *squeezed* car (``squeezed_ahead``, in truth): the nearest opponent ahead
+  within :data:`NEAR_GAP` is slower than 1 m/s and squeezed (its traffic rule makes it brake,
+  :mod:`sofar_env.opponents.steering`), or stands in a queue of cars slower than 1 m/s, each within
+  :data:`QUEUE_GAP` of the next, that a squeezed car leads (nan in records of an earlier version of the recorder).
+
 Classification (:func:`classify`), on the *window*: the last :data:`WINDOW_STEPS` records (the final 10 s of
 the stall). A property holds when it holds in at least half of the window's steps. The first rule that
 holds gives the class:
 
+0. ``squeeze_deadlock`` (the world holds the car ahead): the car ahead is held by a squeezed car
+   (``squeezed_ahead``). With ``TrafficConfig.yield_to_any`` (the worlds ``"interactive"`` and ``"dynamic"``) a
+   car squeezed by a standing ego behind it brakes to a standstill and stays squeezed while both stand: whatever
+   the controller then plans, that car will not move. (The controller may still pass it where there is room.)
 1. ``mpc_fallback`` (no feasible forward plan): the MPC's status is a fallback (its QP failed).
 2. ``follow_hold`` (a follow decision that never releases): the plan in force follows a car and the speed
    reference the MPC gets, capped by that follow decision, stays below 1 m/s over the whole horizon.
@@ -41,9 +50,9 @@ holds gives the class:
 6. ``other``: none of the above.
 
 Evidence (:func:`classify`): medians over the window of the record fields, the most frequent decision, the
-shares ``fallback``, ``follow``, ``stopped_ahead``, ``angled`` and ``away``, and the *onset* (the first record
-of the last uninterrupted run below 1 m/s, where the stall began: time, decision, heading error, gap to and speed
-of the car ahead).
+shares ``squeezed``, ``fallback``, ``follow``, ``stopped_ahead``, ``angled`` and ``away``, and the *onset* (the
+first record of the last uninterrupted run below 1 m/s, where the stall began: time, decision, heading error, gap to
+and speed of the car ahead).
 
 """
 
@@ -60,8 +69,8 @@ from sofar_agents.evaluation.episode import make_env, run_episode
 from sofar_agents.evaluation.protocol import EpisodeTask
 from sofar_agents.evaluation.results import EpisodeResult
 
-__all__ = ["StepRecord", "StallReport", "CLASSES", "RECORD_SPEED", "WINDOW_STEPS", "NEAR_GAP", "ANGLE", "ROOM",
-           "record_episode", "classify", "rooms"]
+__all__ = ["StepRecord", "StallReport", "CLASSES", "RECORD_SPEED", "WINDOW_STEPS", "NEAR_GAP", "QUEUE_GAP", "ANGLE",
+           "ROOM", "record_episode", "classify", "rooms"]
 
 RECORD_SPEED = 3.0
 """Steps slower than this [m/s] are recorded; a faster step drops the records (the final slow phase is left)."""
@@ -69,6 +78,8 @@ WINDOW_STEPS = 100
 """Records the classification looks at: the last 10 s of the stall."""
 NEAR_GAP = 15.0
 """A car ahead counts as blocking within this gap between reference points [m] (two car lengths and more)."""
+QUEUE_GAP = 20.0
+"""Two standing cars one behind the other within this gap [m] are one queue (the traffic's ``follow_gap`` is 12 m)."""
 ANGLE = 0.31
 """Heading error [rad] from which a car turned towards an edge cannot drive away from it without its front end
 first moving further out (``e*`` of :class:`~sofar_env.control.mpc.ends.EndOffsets`, AV-21)."""
@@ -81,6 +92,7 @@ _HALF_WIDTH = 0.95
 """Half the AV-21's width [m] (``VehicleParams.width`` / 2; the MPC's track margin is it plus 0.25 m)."""
 
 CLASSES: dict[str, str] = {
+    "squeeze_deadlock": "car ahead held at a standstill by the world's squeeze rule",
     "mpc_fallback": "no feasible forward plan (MPC fallback loop)",
     "follow_hold": "follow decision that never releases",
     "stopped_ahead_no_room": "car stopped ahead with no room",
@@ -135,6 +147,8 @@ class StepRecord:
     row_room: float = math.nan
     """Room the MPC's own track rows leave at this state on the side the car is turned towards [m] (:func:`rooms`;
     < 0: the rows are violated, any forward move that does not bring them back costs slack)."""
+    squeezed_ahead: float = math.nan
+    """1 when the car ahead is, in truth, held by a squeezed car (module docstring), else 0 (nan: not recorded)."""
 
 
 @dataclass
@@ -211,6 +225,7 @@ class _Recorder:
             room_beside = max(wl - (n_o + half), (n_o - half) + wr)
         return StepRecord(
             step=step, t=float(race.time), s=s, n=n, e=e, v=v, delta=delta, decision=decision,
+            squeezed_ahead=_squeezed_ahead(race.opponents),
             plan_status=plan.status if plan is not None else "", plan_slack=float(plan.max_slack) if plan else 0.0,
             followed_v=followed_v, mpc_status=mpc.status, track_slack=float(mpc.slack.get("track", 0.0)),
             barrier_slack=float(mpc.slack.get("barrier", 0.0)), h_min=float(mpc.barrier_min),
@@ -220,6 +235,22 @@ class _Recorder:
             gap_ahead=gap, n_ahead=n_o, v_ahead=v_o, room_beside=room_beside,
             corner_room=_corner_room(track, veh, s, n, e),
             **rooms(stack.edges, veh, stack.mpc_in_force.config, s, n, e))
+
+
+def _squeezed_ahead(field) -> float:
+    """:attr:`StepRecord.squeezed_ahead` of the opponent field ``field`` (:class:`~sofar_env.opponents.Opponents`):
+    1 when the nearest car ahead within :data:`NEAR_GAP` heads a standing queue, or stands in one, that a squeezed
+    car leads (each car slower than 1 m/s and within :data:`QUEUE_GAP` of the one behind it), else 0."""
+    order = np.argsort(field.rel)
+    squeezed, rel, v = field.squeezed, field.rel, field.v
+    last = 0.0  # the ego
+    for k in order[rel[order] > 0.0]:
+        if rel[k] - last > (NEAR_GAP if last == 0.0 else QUEUE_GAP) or abs(float(v[k])) >= SLOW:
+            return 0.0
+        if squeezed[k]:
+            return 1.0
+        last = float(rel[k])
+    return 0.0
 
 
 def rooms(edges, vehicle, mpc_config, s: float, n: float, e: float) -> dict[str, float]:
@@ -355,6 +386,9 @@ def classify(records: Sequence[StepRecord], window: int = WINDOW_STEPS) -> tuple
     ev["stopped_ahead"] = round(_share(stopped), 2)
     ev["angled"] = round(_share(abs(r.e) >= ANGLE for r in w), 2)
     ev["away"] = round(_share(r.e * (r.n_ref - r.n) < 0.0 for r in w), 2)
+    ev["squeezed"] = round(_share(r.squeezed_ahead == 1.0 for r in w), 2)
+    if ev["squeezed"] >= 0.5:
+        return "squeeze_deadlock", ev
     if ev["fallback"] >= 0.5:
         return "mpc_fallback", ev
     if _share(r.decision == "follow" and r.v_ref < SLOW for r in w) >= 0.5:

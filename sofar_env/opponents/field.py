@@ -102,6 +102,12 @@ class Opponents:
         return int(self.s.shape[0])
 
     @property
+    def squeezed(self) -> np.ndarray:
+        """(count,) whether each car was squeezed in the last step, so that it brakes in the next
+        (:mod:`~sofar_env.opponents.steering`; all False with the behaviours off). A copy."""
+        return self._squeezed.copy() if len(self._squeezed) == self.count else np.zeros(self.count, dtype=bool)
+
+    @property
     def episode(self) -> _Episode | None:
         """Per-episode draws (paces, lines, defence state, lifts); None with the behaviours off."""
         return self._episode

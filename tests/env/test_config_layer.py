@@ -46,7 +46,7 @@ def test_presets_and_worlds_are_documented_registry_entries():
                                                             "sofar-2", "sofar-3", "sofar-4", "sofar-5", "sofar-6",
                                                             "sofar-7", "sofar-8", "sofar-daqp",
                                                             "reference-numerics", "reference-numerics-no-phantoms")
-    assert SCENARIOS == tuple(WORLD_REGISTRY) == ("paper", "interactive", "dynamic")
+    assert SCENARIOS == tuple(WORLD_REGISTRY) == ("paper", "interactive", "dynamic", "interactive-2", "dynamic-2")
     for name, (value, doc) in STACK_PRESET_REGISTRY.items():
         assert isinstance(value, StackConfig) and doc.strip(), name
         assert stack_preset(name) is value and stack_preset(f" {name.upper()} ") is value

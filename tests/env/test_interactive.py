@@ -30,9 +30,9 @@ def test_scenario_sets_the_world_and_user_keys_win():
     # the user's keys apply on top of the scenario
     cfg2 = gym.make("SOfAR-Monza-Interactive-v0", config={"race": {"sensor": {"latency_steps": 0}}}).unwrapped.config
     assert cfg2.race.sensor.enabled and cfg2.race.sensor.latency_steps == 0
-    with pytest.raises(ValueError, match="valid scenarios: paper, interactive, dynamic"):
+    with pytest.raises(ValueError, match="valid scenarios: paper, interactive, dynamic, interactive-2, dynamic-2"):
         gym.make("SOfAR-Monza-v0", scenario="mars")
-    assert SCENARIOS == ("paper", "interactive", "dynamic") and scenario_overrides("paper") == {}
+    assert SCENARIOS == ("paper", "interactive", "dynamic", "interactive-2", "dynamic-2") and scenario_overrides("paper") == {}
 
 
 @pytest.mark.parametrize("env_id", INTERACTIVE_IDS)

@@ -9,6 +9,7 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from sofar_agents.evaluation import stall_rows as sr
@@ -33,6 +34,7 @@ def _window(n: int = 100, **changes) -> list[st.StepRecord]:
 
 
 @pytest.mark.parametrize(("changes", "expected"), [
+    ({"squeezed_ahead": 1.0, "gap_ahead": 5.0, "v_ahead": 0.0, "v_next": 0.0}, "squeeze_deadlock"),
     ({"mpc_status": "fallback_shift"}, "mpc_fallback"),
     ({"decision": "follow", "v_ref": 0.0, "followed_v": 0.0}, "follow_hold"),
     ({"gap_ahead": 8.0, "v_ahead": 0.0, "room_beside": 1.0}, "stopped_ahead_no_room"),
@@ -47,6 +49,12 @@ def test_each_rule_by_hand(changes, expected):
 
 
 def test_rules_apply_in_order_and_by_majority():
+    # behind a car the world's squeeze rule holds, every other rule gives way (rule 0 first); an old record (nan) or
+    # a car that is not squeezed does not count
+    held = _window(squeezed_ahead=1.0, decision="follow", v_ref=0.0, gap_ahead=8.0, v_ahead=0.0, room_beside=1.0)
+    assert st.classify(held)[0] == "squeeze_deadlock" and st.classify(held)[1]["squeezed"] == 1.0
+    assert st.classify(_window(squeezed_ahead=0.0, mpc_status="fallback_shift"))[0] == "mpc_fallback"
+    assert st.classify(_window(mpc_status="fallback_shift"))[1]["squeezed"] == 0.0
     # a fallback loop behind a stopped car with no room is a fallback loop (rule 1 before rule 3)
     both = _window(mpc_status="fallback_brake", gap_ahead=8.0, v_ahead=0.0, room_beside=1.0)
     assert st.classify(both)[0] == "mpc_fallback"
@@ -63,6 +71,28 @@ def test_rules_apply_in_order_and_by_majority():
     late = _window(300, mpc_status="fallback_shift") + _window(100)
     assert st.classify(late)[0] == "other"
     assert st.classify([])[0] == "other"
+
+
+# opponents ahead as (gap [m], speed [m/s], squeezed) -> squeezed_ahead
+QUEUES = [
+    ("the car ahead squeezed and standing", [(5.0, 0.0, True)], 1.0),
+    ("a standing queue led by a squeezed car", [(5.5, 0.0, False), (17.5, 0.0, False), (29.5, 0.1, True)], 1.0),
+    ("the queue broken by a gap", [(5.5, 0.0, False), (30.0, 0.0, True)], 0.0),
+    ("a moving car in the queue", [(5.5, 0.0, False), (17.5, 3.0, False), (29.5, 0.0, True)], 0.0),
+    ("the car ahead beyond the near gap", [(16.0, 0.0, True)], 0.0),
+    ("the car ahead squeezed but moving", [(5.0, 2.0, True)], 0.0),
+    ("a queue without a squeezed car", [(5.0, 0.0, False), (17.0, 0.0, False)], 0.0),
+    ("no car ahead (one behind)", [(-5.0, 0.0, True)], 0.0),
+]
+
+
+@pytest.mark.parametrize(("cars", "expected"), [q[1:] for q in QUEUES], ids=[q[0] for q in QUEUES])
+def test_a_car_ahead_held_by_a_squeezed_car(cars, expected):
+    from types import SimpleNamespace
+
+    rel, v, squeezed = (np.array(x) for x in zip(*cars))
+    field = SimpleNamespace(rel=rel[::-1].astype(float), v=v[::-1].astype(float), squeezed=squeezed[::-1].astype(bool))
+    assert st._squeezed_ahead(field) == expected
 
 
 def test_every_class_is_documented():

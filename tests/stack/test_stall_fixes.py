@@ -159,16 +159,17 @@ def test_the_creep_floors_the_follow_cap_only_with_room_ahead(tracks):
     assert np.all(crept[room] >= 2.0) and np.any(cap[room] < 2.0)
 
 
-def _replay(track: str, rho: float, seed: int, gamma: float, duration: float, stacks) -> dict:
-    """One seeded episode of the dense interactive world (8 opponents) at a fixed ``gamma`` under each preset of
-    ``stacks``: preset -> its :class:`~sofar_agents.evaluation.results.EpisodeResult`."""
+def _replay(track: str, rho: float, seed: int, gamma: float, duration: float, stacks,
+            scenario: str = "interactive") -> dict:
+    """One seeded episode of the dense interactive world (8 opponents; ``scenario``: another world) at a fixed
+    ``gamma`` under each preset of ``stacks``: preset -> its :class:`~sofar_agents.evaluation.results.EpisodeResult`."""
     from sofar_agents.evaluation.episode import make_env, run_episode
     from sofar_agents.evaluation.protocol import EpisodeTask, Strategy
 
     outcomes = {}
     for stack in stacks:
         task = EpisodeTask(track, Strategy.fixed(gamma), rho, 0, seed, duration=duration, n_opponents=8,
-                           stack=stack, scenario="interactive")
+                           stack=stack, scenario=scenario)
         env = make_env(task.track, duration=task.duration, stack=stack, scenario=task.scenario)
         try:
             outcomes[stack], _ = run_episode(env, lambda obs: np.array([gamma]), task)
@@ -214,11 +215,22 @@ def test_the_restart_mode_plans_over_its_own_horizon_and_hands_back_the_own_one(
 
 def test_a_replayed_jam_drives_off_with_sofar_8():
     """The stall of Monza (dense interactive world, rho 0.1, seed 330114025, gamma 0.5): ``"sofar-6"`` stands from
-    about 42 s 5 m behind a car creeping at 0.3 m/s with 8.7 m of room beside it, its barrier violated (stalled at
-    61.9 s); over the restart mode's 6 s horizon ``"sofar-7"`` and ``"sofar-8"`` drive around it."""
+    about 42 s 5 m behind a car that its approach squeezed to a standstill (sensed at up to 0.3 m/s), with 8.7 m of
+    room beside it, its barrier violated (stalled at 61.9 s); over the restart mode's 6 s horizon ``"sofar-7"`` and
+    ``"sofar-8"`` drive around it."""
     outcomes = _replay("Monza", 0.1, 330114025, 0.5, 70.0, ("sofar-6", "sofar-8"))
     if not (outcomes["sofar-6"].stalled and 60.0 < outcomes["sofar-6"].sim_time < 64.0):
         pytest.skip("the committed stall does not reproduce here (a seeded dense race reproduces on one instruction "
                     f"set only): sofar-6 {outcomes['sofar-6'].sim_time:.1f} s")
     assert not outcomes["sofar-8"].stalled and not outcomes["sofar-8"].collision
     assert outcomes["sofar-8"].sim_time == pytest.approx(70.0, abs=0.2)
+
+
+def test_the_replayed_jam_is_the_squeeze_deadlock_of_the_world():
+    """The same episode in ``"interactive-2"``: the car ahead, squeezed by the ego closing from behind, brakes, but
+    once the ego stands it is no longer made to drop back for it (``TrafficConfig.yield_to_any = False``) and drives
+    on; ``"sofar-6"`` follows it and races to the end of the 70 s without a stall or a collision. (The world differs
+    from the first squeeze on, so this is another race from the same seed, not a replay of the stall.)"""
+    outcome = _replay("Monza", 0.1, 330114025, 0.5, 70.0, ("sofar-6",), scenario="interactive-2")["sofar-6"]
+    assert not outcome.stalled and not outcome.collision and not outcome.off_track
+    assert outcome.sim_time == pytest.approx(70.0, abs=0.2)
