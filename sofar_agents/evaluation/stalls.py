@@ -243,13 +243,13 @@ def _squeezed_ahead(field) -> float:
     car leads (each car slower than 1 m/s and within :data:`QUEUE_GAP` of the one behind it), else 0."""
     order = np.argsort(field.rel)
     squeezed, rel, v = field.squeezed, field.rel, field.v
-    last = 0.0  # the ego
+    last, reach = 0.0, NEAR_GAP  # from the ego to the car ahead, then along the queue
     for k in order[rel[order] > 0.0]:
-        if rel[k] - last > (NEAR_GAP if last == 0.0 else QUEUE_GAP) or abs(float(v[k])) >= SLOW:
+        if rel[k] - last > reach or abs(float(v[k])) >= SLOW:
             return 0.0
         if squeezed[k]:
             return 1.0
-        last = float(rel[k])
+        last, reach = float(rel[k]), QUEUE_GAP
     return 0.0
 
 

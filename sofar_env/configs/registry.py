@@ -310,7 +310,7 @@ _DYNAMIC["stack"] = {"speed_factor": 0.7, "mpc": {"track_margin": 2.2, "q": (0.0
 def _version_2(overrides: dict[str, Any]) -> dict[str, Any]:
     """``overrides`` with the squeeze deadlock removed (``TrafficConfig.yield_to_any = False``)."""
     out = copy.deepcopy(overrides)
-    out["race"]["opponents"]["traffic"] = {"yield_to_any": False}
+    out["race"]["opponents"].setdefault("traffic", {})["yield_to_any"] = False
     return out
 
 
