@@ -138,6 +138,14 @@ class StackConfig:
     (``mpc.track_buffer`` of that MPC; 0 where the margin leaves no such band), so that a car standing inside the
     margin drives off along it instead of standing, while the last metres to the edge stay as expensive as
     without it. Above ``restart_exit_speed`` nothing changes [m], >= 0. Decision: ``docs/decisions/stall-fixes.md``."""
+    restart_buffer_scale: float | None = neutral(real(None, gt=0.0, le=1.0, optional="mpc.track_buffer_slack as it is"))
+    """The weights of the restart mode's buffer slack as a share of ``mpc.track_buffer_slack`` (None: 1, the
+    default; only with ``restart_buffer_edge``). At rest on the inside of a tight corner (radius 20-25 m) with
+    the car's end inside the margin, every plan that moves along the corner takes the end deeper into the band,
+    and over the MPC's 1.5 s that costs more than the speed it gains: the optimum stands still for about a second
+    and starts only near the horizon's end, at every step again. A lower weight lets it drive off at once
+    (``"sofar-9"``: 0.25) [-], in (0, 1]. Decision: ``docs/decisions/stall-fixes.md``, "Standing in a tight
+    corner"."""
     restart_horizon: int | None = neutral(integer(None, ge=2, optional="mpc.horizon"))
     """Stages of the restart mode's MPC (None: ``mpc.horizon``, the default; only with the restart mode), on the
     MPC's time grid (``mpc.ts`` apart after the first step); its stage data are looked up along its own warm start
@@ -217,6 +225,9 @@ class StackConfig:
             if self.slow_rows_speed is None and self.mpc.track_rows == "reference":
                 raise ConfigError("stack.restart_buffer_edge needs end rows in the restart mode's MPC "
                                   "(stack.slow_rows_speed, or stack.mpc.track_rows other than 'reference')")
+        if self.restart_buffer_scale is not None and self.restart_buffer_edge is None:
+            raise ConfigError("stack.restart_buffer_scale needs the restart mode's buffer slack "
+                              "(stack.restart_buffer_edge), got restart_buffer_edge = None")
         if self.restart_horizon is not None and self.restart_lateral_weight is None:
             raise ConfigError("stack.restart_horizon needs the restart mode (stack.restart_lateral_weight), "
                               "got restart_lateral_weight = None")

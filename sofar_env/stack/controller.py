@@ -94,6 +94,9 @@ class OvertakingStack:
             q = (cfg.mpc.q[0], float(cfg.restart_lateral_weight)) + tuple(cfg.mpc.q[2:])
             rows = slow_rows if slow else cfg.mpc.track_rows
             restart = dataclasses.replace(cfg.mpc, q=q, track_rows=rows, track_buffer=_buffer_width(cfg, vehicle))
+            if cfg.restart_buffer_scale is not None:
+                restart = dataclasses.replace(restart, track_buffer_slack=tuple(
+                    float(cfg.restart_buffer_scale) * w for w in cfg.mpc.track_buffer_slack))
             if cfg.restart_horizon is not None:
                 restart = dataclasses.replace(restart, horizon=cfg.restart_horizon)
             if cfg.restart_heading_extent is not None:
