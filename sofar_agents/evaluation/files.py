@@ -3,7 +3,8 @@
 Every writer here writes the whole content to a temporary file in the target's folder, flushes it to disk and
 moves it over the target with ``os.replace`` (atomic on POSIX and Windows within one file system). A write that
 fails (a full disk, Ctrl-C, a value that cannot be serialised) leaves the target as it was and no temporary file
-behind; the error propagates. The target's folder is created when missing.
+behind; the error propagates. The target's folder is created when missing. The new file has the permission bits
+of the one it replaces, or those of a new file (:mod:`sofar_agents.file_modes`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import os
 import tempfile
 from pathlib import Path
 from typing import Any
+
+from sofar_agents.file_modes import publish_mode
 
 __all__ = ["write_bytes_atomic", "write_text_atomic", "write_json_atomic"]
 
@@ -24,6 +27,7 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
     fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
+            publish_mode(f.fileno(), p)
             f.write(data)
             f.flush()
             os.fsync(f.fileno())

@@ -54,6 +54,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sofar_agents.file_modes import publish_mode
 from sofar_agents.pasta.checkpoint_meta import FORMAT_VERSION, validate_metadata
 from sofar_agents.pasta.config import PASTAConfig
 from sofar_agents.pasta.env_record import training_env_record
@@ -310,6 +311,7 @@ def _write_pair(pt_path: Path, pt_data: bytes, json_path: Path, json_data: bytes
             fd, name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
             tmp.append(Path(name))
             with os.fdopen(fd, "wb") as f:
+                publish_mode(f.fileno(), target)
                 f.write(data)
                 f.flush()
                 os.fsync(f.fileno())

@@ -115,3 +115,14 @@ def test_the_json_and_the_tensor_file_must_belong_together(trained: tuple[PASTA,
         else:
             with pytest.raises(ValueError, match=r"a\.json and .*a\.pt are not one checkpoint: weights_sha256"):
                 load(a)
+
+
+def test_a_saved_pair_has_the_mode_of_a_new_file(trained: tuple[PASTA, Path], tmp_path: Path) -> None:
+    """Both files of a checkpoint are readable as any new file is (0666 less the umask), not mkstemp's 0600."""
+    agent, _ = trained
+    old = os.umask(0o022)
+    try:
+        json_path = agent.save(tmp_path / "agent")
+    finally:
+        os.umask(old)
+    assert {p.stat().st_mode & 0o777 for p in (json_path, json_path.with_suffix(".pt"))} == {0o644}

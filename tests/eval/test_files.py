@@ -63,3 +63,18 @@ def test_the_tables_markdown_is_written_through_it(tmp_path, monkeypatch):
         write_markdown(target, "new\n")
     monkeypatch.undo()
     assert target.read_text() == "old\n" and _folder(target) == ["table1.md"]
+
+
+def test_a_new_file_gets_the_mode_open_gives_and_a_replaced_one_keeps_its_own(tmp_path):
+    """mkstemp's temporary file is 0600; the published file is not: 0666 less the umask when new, the replaced
+    file's own bits otherwise (a results folder shared by a group stays readable)."""
+    old = os.umask(0o027)
+    try:
+        target = tmp_path / "stalls.md"
+        write_text_atomic(target, "one\n")
+        assert target.stat().st_mode & 0o777 == 0o640
+        os.chmod(target, 0o604)
+        write_text_atomic(target, "two\n")
+        assert target.stat().st_mode & 0o777 == 0o604 and target.read_text() == "two\n"
+    finally:
+        os.umask(old)
