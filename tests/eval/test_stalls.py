@@ -213,9 +213,9 @@ def test_replay_records_the_steps_of_every_mpc_of_the_stack(tmp_path):
     assert len(steps) >= 150 and all(r.mpc_status for r in steps)
 
 
-def _episode_hashes(path: Path) -> dict[tuple, str]:
+def _episodes(path: Path) -> dict[tuple, dict[str, str]]:
     with open(path, newline="") as f:
-        return {(r["track"], float(r["rho"]), int(r["seed"]), float(r["strategy"][6:]), r["stack"]): r["config_hash"]
+        return {(r["track"], float(r["rho"]), int(r["seed"]), float(r["strategy"][6:])): r
                 for r in csv.DictReader(f) if r["strategy"].startswith("gamma=")}
 
 
@@ -223,7 +223,8 @@ def _episode_hashes(path: Path) -> dict[tuple, str]:
                          ids=lambda p: str(p.parent.relative_to(ROOT / "results")))
 def test_committed_stall_rows_carry_the_hash_of_the_episode_they_replay(path: Path) -> None:
     """Each row of a committed stalls.csv names its episode: a row of a committed per-episode CSV (label
-    ``committed <folder>``) or of the folder's own seed set (``fresh seed N``); it carries that row's hash."""
+    ``committed <folder>``) or of the folder's own seed set (``fresh seed N``); it carries that row's hash, or,
+    replayed with another controller (``--replay-with``), the hash of that controller in the episode's world."""
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
     assert rows and list(rows[0]) == list(sr.REPORT_COLUMNS)
@@ -233,6 +234,11 @@ def test_committed_stall_rows_carry_the_hash_of_the_episode_they_replay(path: Pa
         src = (ROOT / label.removeprefix("committed ") if label.startswith("committed ") else path.parent)
         src = src / "table1_episodes.csv"
         if src not in sources:
-            sources[src] = _episode_hashes(src)
-        key = (r["track"], float(r["rho"]), int(r["seed"]), float(r["gamma"]), r["stack"])
-        assert r["config_hash"] and sources[src].get(key) == r["config_hash"], (label, key)
+            sources[src] = _episodes(src)
+        key = (r["track"], float(r["rho"]), int(r["seed"]), float(r["gamma"]))
+        episode = sources[src].get(key)
+        assert episode is not None and r["config_hash"], (label, key)
+        if r["stack"] == episode["stack"]:
+            assert r["config_hash"] == episode["config_hash"], (label, key)
+        else:
+            assert r["config_hash"] == episode_config_hash(r["stack"], episode["scenario"], float(episode["duration"]))

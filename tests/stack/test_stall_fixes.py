@@ -4,6 +4,7 @@ turned-car creep and the parked follow gap, and the preset ``"sofar-2"`` that sw
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -19,10 +20,12 @@ NEW_FIELDS = {  # field -> a value that switches it on or moves it
     "restart_lateral_weight": 15.0, "restart_speed": 0.5, "restart_exit_speed": 4.0,
     "follow_creep_speed": 2.0, "follow_creep_angle": 0.4, "follow_creep_release": 0.1, "parked_follow_gap": 20.0,
     "slow_rows_speed": 10.0, "slow_rows_exit_speed": 14.0, "slow_rows_curved": True, "restart_horizon": 40,
-    "restart_heading_extent": 2.45,
+    "restart_heading_extent": 2.45, "restart_buffer_scale": 0.25,
 }
 NEEDS = {"slow_rows_curved": {"slow_rows_speed": 10.0}, "restart_horizon": {"restart_lateral_weight": 15.0},
-         "restart_heading_extent": {"restart_lateral_weight": 15.0}}
+         "restart_heading_extent": {"restart_lateral_weight": 15.0},
+         "restart_buffer_scale": {"restart_lateral_weight": 15.0, "slow_rows_speed": 10.0, "slow_rows_exit_speed": 12.0,
+                                  "restart_buffer_edge": 0.05}}
 """Fields that act only with another one set: the base they are compared on."""
 
 
@@ -118,6 +121,11 @@ def test_invalid_stall_fix_settings_are_rejected():
     for bad in (1, 40.0, True, "40"):
         with pytest.raises(ValueError, match="restart_horizon must be None .* or an integer >= 2"):
             StackConfig(restart_lateral_weight=15.0, restart_horizon=bad)
+    with pytest.raises(ValueError, match="restart_buffer_scale needs the restart mode's buffer slack"):
+        StackConfig(restart_lateral_weight=15.0, restart_buffer_scale=0.25)
+    for bad in (0.0, -0.25, 1.5, math.nan, math.inf, "0.25"):
+        with pytest.raises(ValueError, match=r"restart_buffer_scale must be None .* in \(0, 1\]"):
+            dataclasses.replace(stack_preset("sofar-6"), restart_buffer_scale=bad)
 
 
 def test_sofar_4_is_sofar_3_with_the_curved_slow_rows(tracks):
@@ -234,3 +242,36 @@ def test_the_replayed_jam_is_the_squeeze_deadlock_of_the_world():
     outcome = _replay("Monza", 0.1, 330114025, 0.5, 70.0, ("sofar-6",), scenario="interactive-2")["sofar-6"]
     assert not outcome.stalled and not outcome.collision and not outcome.off_track
     assert outcome.sim_time == pytest.approx(70.0, abs=0.2)
+
+
+def test_sofar_9_drives_off_from_the_inside_of_a_tight_corner(tracks):
+    """The free-road stall of Laguna Seca (set 13100, rho 0.5, gamma 0.95) as the restart mode's MPC sees it: at
+    rest 1.56 m left of the centre line on the inside of a left corner of radius 25 m, the wheels at the corner's
+    0.119 rad, the car's end 0.10 m inside the track margin (0.2 m of band before the buffer slack ends). Moving
+    along the corner takes the end deeper into the band; over 1.5 s ``"sofar-6"`` stands for 0.9 s and starts only
+    near the horizon's end, in every real-time iteration at this state and in the converged solution alike (so it
+    stands again at the next step); ``"sofar-9"``, whose band costs a quarter as much, starts at once, and keeps
+    the end inside the band."""
+    from sofar_env.control.mpc.types import MPCStageData
+
+    k = 21
+    stage = MPCStageData(kappa=np.full(k, 0.04), n_ref=np.zeros(k), v_ref=np.full(k, 15.575),
+                         n_min=np.full(k, -10.4), n_max=np.full(k, 2.656))
+    x0 = np.array([0.0, 1.559, 0.0, 0.0, 0.119])
+    first = {}
+    for preset in ("sofar-6", "sofar-9"):
+        stack = OvertakingStack(tracks["LagunaSeca"], stack_preset(preset))
+        mpc = stack._restart_mpc
+        assert mpc.config.track_buffer == pytest.approx(0.2)
+        plans = [mpc.solve(x0, stage, np.zeros((0, 3)), 0.5) for _ in range(6)]
+        assert all(p.success for p in plans)
+        first[preset] = [float(p.x_pred[1, 3]) for p in plans]
+        converged = mpc.solve_converged(x0, stage, np.zeros((0, 3)), 0.5)
+        first[preset].append(float(converged.x_pred[1, 3]))
+        if preset == "sofar-9":
+            assert mpc.config.track_buffer_slack == (500.0, 5000.0)
+            assert converged.slack["track"] <= 0.2 + 1e-6  # the end stays inside the band
+        else:
+            assert float(converged.x_pred[-1, 3]) > 1.0  # it does plan to move, only later
+    assert max(first["sofar-6"]) < 0.01
+    assert min(first["sofar-9"][1:]) > 0.2  # from the second iteration on it accelerates at once
