@@ -138,14 +138,13 @@ class StackConfig:
     (``mpc.track_buffer`` of that MPC; 0 where the margin leaves no such band), so that a car standing inside the
     margin drives off along it instead of standing, while the last metres to the edge stay as expensive as
     without it. Above ``restart_exit_speed`` nothing changes [m], >= 0. Decision: ``docs/decisions/stall-fixes.md``."""
-    restart_buffer_scale: float | None = neutral(real(None, gt=0.0, le=1.0, optional="mpc.track_buffer_slack as it is"))
-    """The weights of the restart mode's buffer slack as a share of ``mpc.track_buffer_slack`` (None: 1, the
-    default; only with ``restart_buffer_edge``). At rest on the inside of a tight corner (radius 20-25 m) with
-    the car's end inside the margin, every plan that moves along the corner takes the end deeper into the band,
-    and over the MPC's 1.5 s that costs more than the speed it gains: the optimum stands still for about a second
-    and starts only near the horizon's end, at every step again. A lower weight lets it drive off at once
-    (``"sofar-9"``: 0.25) [-], in (0, 1]. Decision: ``docs/decisions/stall-fixes.md``, "Standing in a tight
-    corner"."""
+    restart_buffer_scale: float | None = neutral(real(None, gt=0.0, le=1.0,
+                                                      optional="mpc.track_buffer_slack as it is"))
+    """The restart mode's buffer-slack weights as a share of ``mpc.track_buffer_slack`` (None: 1, the default;
+    only with ``restart_buffer_edge``): the other MPCs and the rest of the margin keep their weights. Lower, a car
+    at rest with its end inside the margin's band drives off along it sooner, where every moving plan takes the
+    end deeper into the band [-], in (0, 1]. Measured (the candidate ``"sofar-9"``, 0.25):
+    ``docs/decisions/stall-fixes.md``, "Standing in a tight corner"."""
     restart_horizon: int | None = neutral(integer(None, ge=2, optional="mpc.horizon"))
     """Stages of the restart mode's MPC (None: ``mpc.horizon``, the default; only with the restart mode), on the
     MPC's time grid (``mpc.ts`` apart after the first step); its stage data are looked up along its own warm start
