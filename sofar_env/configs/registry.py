@@ -158,6 +158,10 @@ def _sofar_9() -> StackConfig:
     return dataclasses.replace(_sofar_6(), restart_buffer_scale=0.25)
 
 
+def _sofar_10() -> StackConfig:
+    return dataclasses.replace(_sofar_6(), follow_queue=True)
+
+
 DEFAULT_STACK_PRESET = "sofar-6"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
@@ -245,6 +249,12 @@ car's end inside the track margin, moving along the corner takes the end deeper 
 MPC's 1.5 s ``"sofar-6"`` finds standing for about a second cheaper than starting, at every step again (the free-road
 stalls of ``docs/decisions/stall-fixes.md``, "Standing in a tight corner"); the band still ends 0.05 m from the
 edge, beyond which the full weight holds."""),
+    "sofar-10": Entry(_sofar_10(), """A candidate default, not the default: ``"sofar-6"`` following the queue
+(``follow_queue``). When the pass of a car further ahead is blocked and the plan that follows it would have to pass a
+nearer car with its clearance violated, ``"sofar-6"`` finds that follow plan no better than the pass and holds the
+pass: it passes one car into a chicane whose line the next car holds, and closes on that car's rear (the paper
+world's held-out collision of ``docs/decisions/follow-clearance.md``, "Following the queue"). With it the nearer car
+is followed too."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

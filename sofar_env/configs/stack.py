@@ -51,6 +51,12 @@ class StackConfig:
     """Hysteresis of the follow decision [m], in [0, ``follow_slack``]: while following, an opponent ahead
     stays blocked until the passing plan violates its clearance by at most this (entering takes
     ``follow_slack``). Decision: ``docs/decisions/follow-clearance.md``."""
+    follow_queue: bool = neutral(flag(False))
+    """Follow the queue (False: the default): when the plan that follows the blocked opponents violates the clearance
+    of a nearer car ahead that it passes by more than ``follow_slack``, and the ego can stay behind that car, it is
+    followed too (and so on, at most once per opponent). Without it such a follow plan can be no better than the
+    pass, and the pass is then held although it violates a car further ahead by metres: the ego passes one car into
+    a corner where the next holds the line (``docs/decisions/follow-clearance.md``, "Following the queue")."""
     follow_recheck: int = integer(2, ge=1)
     """While following, the passing plan is re-examined at every this-many-th MIQP call (1: at
     every call). In between, only the follow plan is re-solved, for the same followed cars

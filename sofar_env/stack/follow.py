@@ -177,6 +177,9 @@ class PassOrFollow:
                     planner.restore_memory(memory)
                     follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked,
                                                progress, planner)
+                    if cfg.follow_queue and planner is self.planner:
+                        follow, blocked = self._follow_queue(follow, blocked, memory, ego_s, ego_n, ego_v, s_nodes,
+                                                             n_ref, opp_rel, opp_s, progress)
                     if follow is not None and follow.max_slack < plan.max_slack:
                         plan = follow
                         self.target = FollowTarget(opp_rel[blocked].copy(), ego_s, step,
@@ -188,6 +191,24 @@ class PassOrFollow:
                     self.passes += int(self.target is None)
                     self.parked_plan = True
         return plan
+
+    def _follow_queue(self, follow: PlanResult | None, blocked: np.ndarray, memory, ego_s: float, ego_n: float,
+                      ego_v: float, s_nodes: np.ndarray, n_ref: np.ndarray, opp_rel: np.ndarray, opp_s: np.ndarray,
+                      progress: float) -> tuple[PlanResult | None, np.ndarray]:
+        """``StackConfig.follow_queue``: the follow plan ``follow`` of the ``blocked`` opponents, extended to every car
+        ahead that the plan passes with its clearance violated by more than ``follow_slack`` and behind which the ego
+        can stay, re-solved (from the planner's ``memory`` of before this step) until it violates no such car or one
+        fails. Returns the last follow plan (None if it failed) and the followed opponents."""
+        followable = self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s) & (opp_rel[:, 0] > 0.0)
+        while follow is not None:
+            nearer = followable & ~blocked & (follow.opponent_slack > self.config.follow_slack)
+            if not nearer.any():
+                break
+            blocked = blocked | nearer
+            self.planner.restore_memory(memory)
+            follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked, progress,
+                                       self.planner)
+        return follow, blocked
 
     def _parked_blocked(self, plan: PlanResult, ego_v: float, opp_rel: np.ndarray,
                         opp_s: np.ndarray) -> np.ndarray:
