@@ -20,7 +20,7 @@ NEW_FIELDS = {  # field -> a value that switches it on or moves it
     "restart_lateral_weight": 15.0, "restart_speed": 0.5, "restart_exit_speed": 4.0,
     "follow_creep_speed": 2.0, "follow_creep_angle": 0.4, "follow_creep_release": 0.1, "parked_follow_gap": 20.0,
     "slow_rows_speed": 10.0, "slow_rows_exit_speed": 14.0, "slow_rows_curved": True, "restart_horizon": 40,
-    "restart_heading_extent": 2.45, "restart_buffer_scale": 0.25,
+    "restart_heading_extent": 2.45, "restart_buffer_scale": 0.25, "follow_queue": True,
 }
 NEEDS = {"slow_rows_curved": {"slow_rows_speed": 10.0}, "restart_horizon": {"restart_lateral_weight": 15.0},
          "restart_heading_extent": {"restart_lateral_weight": 15.0},
