@@ -18,6 +18,9 @@ braking at ``follow_decel`` allows) and caps the MPC speed reference at
   (the follow plan keeps the ego's side of it until the ego is ``a0`` behind): holding
   such a pass is what squeezes the ego between that car and a closing edge at a corner
   entry.
+* With ``follow_queue``, a nearer car that the follow plan would pass with its clearance violated
+  by more than ``follow_slack`` is followed too, when the ego can stay behind it (else the follow
+  plan is no better than the pass, and the pass is held into the corner the queue takes).
 * While following, the pass is re-examined at every ``follow_recheck``-th MIQP call (in
   between only the follow plan is re-solved), with hysteresis: a pass is resumed only
   once its clearance violation has fallen to ``follow_release_slack``.
