@@ -159,8 +159,8 @@ class PassOrFollow:
                 # ego can stay or drop (can_stay_behind): follow it
                 # hysteresis: while following, a pass is only resumed once it is (nearly) clear
                 threshold = cfg.follow_release_slack if was_following is not None else cfg.follow_slack
-                blocked = ((plan.opponent_slack > threshold) & (opp_rel[:, 0] > 0.0)
-                           & self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s))
+                followable = (opp_rel[:, 0] > 0.0) & self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s)
+                blocked = (plan.opponent_slack > threshold) & followable
                 planner = self.planner
                 constrained = plan.sides != 0
                 if self._parked_planner is not None and constrained.any() and self._all_parked(opp_rel, constrained):
@@ -181,8 +181,8 @@ class PassOrFollow:
                     follow = self._follow_plan(ego_s, ego_n, ego_v, s_nodes, n_ref, opp_rel, opp_s, blocked,
                                                progress, planner)
                     if cfg.follow_queue and planner is self.planner:
-                        follow, blocked = self._follow_queue(follow, blocked, memory, ego_s, ego_n, ego_v, s_nodes,
-                                                             n_ref, opp_rel, opp_s, progress)
+                        follow, blocked = self._follow_queue(follow, blocked, followable, memory, ego_s, ego_n,
+                                                             ego_v, s_nodes, n_ref, opp_rel, opp_s, progress)
                     if follow is not None and follow.max_slack < plan.max_slack:
                         plan = follow
                         self.target = FollowTarget(opp_rel[blocked].copy(), ego_s, step,
@@ -195,14 +195,13 @@ class PassOrFollow:
                     self.parked_plan = True
         return plan
 
-    def _follow_queue(self, follow: PlanResult | None, blocked: np.ndarray, memory, ego_s: float, ego_n: float,
-                      ego_v: float, s_nodes: np.ndarray, n_ref: np.ndarray, opp_rel: np.ndarray, opp_s: np.ndarray,
-                      progress: float) -> tuple[PlanResult | None, np.ndarray]:
+    def _follow_queue(self, follow: PlanResult | None, blocked: np.ndarray, followable: np.ndarray, memory,
+                      ego_s: float, ego_n: float, ego_v: float, s_nodes: np.ndarray, n_ref: np.ndarray,
+                      opp_rel: np.ndarray, opp_s: np.ndarray, progress: float) -> tuple[PlanResult | None, np.ndarray]:
         """``StackConfig.follow_queue``: the follow plan ``follow`` of the ``blocked`` opponents, extended to every car
-        ahead that the plan passes with its clearance violated by more than ``follow_slack`` and behind which the ego
-        can stay, re-solved (from the planner's ``memory`` of before this step) until it violates no such car or one
-        fails. Returns the last follow plan (None if it failed) and the followed opponents."""
-        followable = self.can_stay_behind(ego_v, opp_rel[:, 0], opp_s) & (opp_rel[:, 0] > 0.0)
+        of ``followable`` (ahead, and the ego can stay behind it) that the plan passes with its clearance violated by
+        more than ``follow_slack``, re-solved (from the planner's ``memory`` of before this step) until it violates no
+        such car or one fails. Returns the last follow plan (None if it failed) and the followed opponents."""
         while follow is not None:
             nearer = followable & ~blocked & (follow.opponent_slack > self.config.follow_slack)
             if not nearer.any():
