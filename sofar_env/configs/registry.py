@@ -162,6 +162,12 @@ def _sofar_10() -> StackConfig:
     return dataclasses.replace(_sofar_6(), follow_queue=True)
 
 
+def _sofar_11() -> StackConfig:
+    base = _sofar_10()
+    barrier = dataclasses.replace(base.mpc.barrier, heading_extent=2.45)
+    return dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, barrier=barrier))
+
+
 DEFAULT_STACK_PRESET = "sofar-6"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
@@ -255,6 +261,12 @@ nearer car with its clearance violated, ``"sofar-6"`` finds that follow plan no 
 pass: it passes one car into a chicane whose line the next car holds, and closes on that car's rear (the paper
 world's held-out collision of ``docs/decisions/follow-clearance.md``, "Following the queue"). With it the nearer car
 is followed too."""),
+    "sofar-11": Entry(_sofar_11(), """A candidate default, not the default: ``"sofar-10"`` with the MPC's barrier
+widened with the heading error in every world (``mpc.barrier.heading_extent = 2.45`` m, half the car's length), as multi-car
+races have it by default. The ellipse of aligned cars certifies no contact only while the cars are aligned; at a slow
+turn-in beside a car, the ego turned towards it sweeps its front corner into it while that ellipse still reads
+``h`` > 0 (the paper world's protocol collision of ``docs/decisions/follow-clearance.md``, "Turning in beside a
+car"). Where the opponents' lateral rates are not sensed (the single-car worlds) only the ego's own turn counts."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP
