@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..domains import check_fields, choice, flag, integer, real
+from ..domains import check_fields, choice, flag, integer, neutral, real
 
 __all__ = ["MIQPConfig"]
 
@@ -76,6 +76,14 @@ class MIQPConfig:
     either side of the ego are never linked into one cluster (the ego is already between them).
     0 (the default) turns the lock off; multi-car races set it through ``race.side_lock``. Decision:
     ``docs/decisions/multi-car-defaults.md``."""
+    free_plan: str = neutral(choice("raceline", ("raceline", "smooth")))
+    """The plan where no opponent is relevant (none within its clearance window over the horizon):
+    ``"raceline"`` (the default) returns ``n_ref`` clipped into the corridor before any problem is built, without
+    the continuity bound of node 0, the smoothness or the consistency cost: where the last car of a pass drops out
+    of the window, the lateral reference steps from the car's offset to the raceline at once. ``"smooth"`` solves
+    the same QP as with opponents, without side constraints (continuity, deviation, smoothness and consistency
+    costs, the corridor): the plan returns to the raceline as smoothly as every other plan moves. Decision:
+    ``docs/decisions/dynamic-world-settings.md``, "The departures"."""
     solver: str = choice("daqp", ("daqp", "enumerate"))
     """"daqp" (DAQP branch-and-bound) or "enumerate" (one QP per side pattern)."""
     incumbent: bool = flag(True)

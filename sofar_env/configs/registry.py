@@ -168,6 +168,11 @@ def _sofar_11() -> StackConfig:
     return dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, barrier=barrier))
 
 
+def _sofar_12() -> StackConfig:
+    base = _sofar_11()
+    return dataclasses.replace(base, miqp=dataclasses.replace(base.miqp, free_plan="smooth"))
+
+
 DEFAULT_STACK_PRESET = "sofar-6"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
@@ -267,6 +272,13 @@ races have it by default. The ellipse of aligned cars certifies no contact only 
 turn-in beside a car, the ego turned towards it sweeps its front corner into it while that ellipse still reads
 ``h`` > 0 (the paper world's protocol collision of ``docs/decisions/follow-clearance.md``, "Turning in beside a
 car"). Where the opponents' lateral rates are not sensed (the single-car worlds) only the ego's own turn counts."""),
+    "sofar-12": Entry(_sofar_12(), """A candidate default, not the default: ``"sofar-11"`` with the passing planner's
+smooth free plan (``miqp.free_plan = "smooth"``). Where the last car of a pass leaves the planner's clearance window,
+``"sofar-11"``'s plan is the raceline at once, a step of the lateral reference from the car's offset, which the MPC
+takes at its lateral-acceleration limit while braking; on the dynamic world's single-track plant that combination
+spins the car or runs it wide (``docs/decisions/dynamic-world-settings.md``, "The departures"). The smooth free
+plan is the planner's problem without side constraints: the return keeps the continuity and smoothness of every
+other plan."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

@@ -49,7 +49,8 @@ The opponents are predicted at constant speed and offset, or along a given
 prediction (``opponent_s``, e.g. the speed profile). An opponent with no active
 pair is not relevant: side 0 and no variables. Without any relevant opponent the
 plan is ``n_ref`` clipped into the corridor (status ``"no_opponents"``, no
-continuity or smoothing applied), returned before any problem is built.
+continuity or smoothing applied), returned before any problem is built; with
+``free_plan = "smooth"`` the problem above is solved without side constraints instead.
 :attr:`PlanResult.opponent_slack` reports the violation per opponent (the stack's
 pass-or-follow decision uses it). The reported objective is the cost above at the
 returned ``(d, b)`` with the minimal slack, the same for both solver routes.
@@ -65,7 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._interp import interp as _interp_kernel
-from .build import NO_OPPONENTS, UNBOUNDED, _corridor, build_problem, finish_plan
+from .build import NO_OPPONENTS, PROBLEM, UNBOUNDED, _corridor, build_problem, finish_plan
 from .clearance import ClearanceWindow
 from .config import MIQPConfig
 from .hysteresis import prior_sides
@@ -223,6 +224,9 @@ class PassingSidePlanner:
         except Exception as exc:  # numerical trouble while building: never raise
             lo, hi, _ = _corridor(n_min, n_max, float(cfg.track_margin), s_nodes, n_ref, opp, opp_s, ego_n, progress)
             return self._fallback(t0, s_nodes, n_ref, lo, hi, progress, opp, None, f"build failed: {exc!r}")
+        if status == NO_OPPONENTS and cfg.free_plan == "smooth":
+            parts = self._free_problem(s_nodes, n_ref, lo, hi, ego_n, progress)
+            status = PROBLEM
         if status == NO_OPPONENTS:
             d = n_ref.clip(lo, hi)
             self._remember(s_nodes, d, opp, np.zeros(M, dtype=int))
@@ -269,6 +273,24 @@ class PassingSidePlanner:
         has_sides = self._prev_sides is not None and self._prev_opp is not None
         return (has_plan, self._prev_s if has_plan else _EMPTY, self._prev_d if has_plan else _EMPTY, has_sides,
                 self._prev_opp if has_sides else _NO_OPP, self._prev_sides if has_sides else _NO_SIDES)
+
+    def _free_problem(self, s_nodes: np.ndarray, n_ref: np.ndarray, lo: np.ndarray, hi: np.ndarray, ego_n: float,
+                      progress: float) -> tuple:
+        """The problem data of :func:`.build.build_problem` without a relevant opponent (``free_plan = "smooth"``):
+        no cluster and no pair; node 0's continuity bounds, the previous plan at the new nodes and the linear
+        cost as that function makes them."""
+        cfg = self.config
+        p_lo, p_hi = lo.copy(), hi.copy()
+        e = min(max(ego_n, float(lo[0])), float(hi[0]))
+        p_lo[0] = max(float(lo[0]), e - cfg.continuity)
+        p_hi[0] = min(float(hi[0]), e + cfg.continuity)
+        d_prev = _EMPTY
+        f_d = -2.0 * cfg.w_dev * n_ref
+        if self._prev_d is not None:
+            d_prev = np.interp(s_nodes + progress, self._prev_s, self._prev_d)
+            f_d = -2.0 * (cfg.w_dev * n_ref + cfg.w_prev * d_prev)
+        none_i, none_f = np.zeros(0, dtype=np.int64), np.zeros(0)
+        return (0, none_i, p_lo, p_hi, d_prev, f_d, none_i, none_f, none_i, none_i, none_i, none_f, none_f, none_i)
 
     def _problem(self, n_ref: np.ndarray, parts: tuple) -> SideProblem:
         """The :class:`SideProblem` of the data built by :func:`.build.build_problem` (``parts``): with the

@@ -126,6 +126,35 @@ def test_heading_extent_widens_the_lateral_semi_axis_with_the_egos_heading():
             BarrierParams(heading_extent=bad)
 
 
+def test_heading_extent_certifies_no_contact_for_a_turned_ego():
+    """The aligned ellipse certifies "no contact" only for aligned cars: an ego turned towards a car beside it
+    touches it while h > 0 (by 0.9 at most). Widened by half the car's length times |sin e|, h < 0 wherever the
+    two footprints touch, for any heading up to 1 rad (zero closing speed, a straight track, the opponent aligned);
+    and at the paper world's protocol collision (Laguna Seca, a turn-in at 0.6 m/s beside a car at 2.5 m/s)."""
+    from sofar_env.configs.vehicle import AV21
+    from sofar_env.geometry import footprint_corners, rectangles_intersect
+
+    wide = BarrierParams(heading_extent=2.45)
+    rng = np.random.default_rng(7)
+    n = 100_000
+    e, ds, dn = rng.uniform(-1.0, 1.0, n), rng.uniform(-8.0, 8.0, n), rng.uniform(-4.5, 4.5, n)
+    touch = rectangles_intersect(footprint_corners(np.zeros(n), np.zeros(n), e, AV21),
+                                 footprint_corners(ds, dn, np.zeros(n), AV21))
+    ego = np.stack([np.zeros(n), np.zeros(n), e, np.full(n, 5.0), np.zeros(n)], axis=-1)
+    opp = np.stack([ds, dn, np.full(n, 5.0)], axis=-1)
+    assert touch.sum() > 10_000
+    assert np.all(barrier(ego, opp, wide)[touch] < 0.0)
+    aligned = barrier(ego, opp, P)[touch]
+    assert np.sum(aligned >= 0.0) > 1_000 and aligned.max() > 0.5  # the aligned ellipse misses turned contacts
+    # the collision state: the opponent 0.19 m ahead and 2.71 m to the right, the ego turned 0.379 rad towards it
+    ego = np.array([0.0, 0.0, -0.379, 0.62, 0.0])
+    opp = np.array([0.19, -2.71, 2.48])
+    assert rectangles_intersect(footprint_corners(0.0, 0.0, -0.379, AV21)[None],
+                                footprint_corners(0.19, -2.71, 0.0, AV21)[None])[0]
+    assert 0.0 < float(barrier(ego, opp, P)) < 0.02
+    assert float(barrier(ego, opp, wide)) < -0.4
+
+
 def test_heading_extent_also_covers_the_opponents_course():
     """Rows (s, n, v, sin_course): the semi-axis widens by heading_extent |sin c|_eps for the opponent's
     course c as for the ego's heading; a course of 0 is the three-column row; without the option the course

@@ -203,6 +203,44 @@ def test_no_relevant_opponents_returns_the_clipped_reference(opponents):
     np.testing.assert_array_equal(res.s, s)
 
 
+def _free_optimum(n_ref, lo, hi, ego_n, cfg, d_prev=None):
+    """The plan without side rows by an independent route: bounded linear least squares (scipy's BVLS) on
+    sqrt(w_dev) (d - n_ref), sqrt(w_smooth) diff(d) and sqrt(w_prev) (d - d_prev), continuity at node 0."""
+    from scipy.optimize import lsq_linear
+
+    lo, hi = lo.copy(), hi.copy()
+    e = float(np.clip(ego_n, lo[0], hi[0]))
+    lo[0], hi[0] = max(lo[0], e - cfg.continuity), min(hi[0], e + cfg.continuity)
+    blocks = [np.sqrt(cfg.w_dev) * np.eye(N), np.sqrt(cfg.w_smooth) * np.diff(np.eye(N), axis=0)]
+    rhs = [np.sqrt(cfg.w_dev) * n_ref, np.zeros(N - 1)]
+    if d_prev is not None:
+        blocks.append(np.sqrt(cfg.w_prev) * np.eye(N))
+        rhs.append(np.sqrt(cfg.w_prev) * d_prev)
+    return lsq_linear(np.vstack(blocks), np.concatenate(rhs), bounds=(lo, hi), method="bvls", tol=1e-14).x
+
+
+@pytest.mark.parametrize("solver", ["daqp", "enumerate"])
+def test_the_smooth_free_plan_is_the_qp_without_side_constraints(solver):
+    """``free_plan = "smooth"``: without a relevant opponent the plan is the problem above with no side row
+    (continuity at node 0, the corridor, the deviation and smoothness costs, and with a previous plan its
+    consistency term), where the default returns the clipped reference, a step from the ego's offset."""
+    cfg = MIQPConfig(free_plan="smooth", solver=solver)
+    s, _, n_min, n_max = straight()
+    n_ref = 6.0 * np.sin(s / 50.0)  # leaves the corridor in places
+    lo, hi = n_min + cfg.track_margin, n_max - cfg.track_margin
+    planner = PassingSidePlanner(cfg)
+    res = planner.plan(s, n_ref, n_min, n_max, 4.0, np.zeros((0, 3)))
+    assert res.status == "optimal" and res.success and res.n_binaries == 0 and res.max_slack == 0.0
+    np.testing.assert_allclose(res.d, _free_optimum(n_ref, lo, hi, 4.0, cfg), atol=1e-6)
+    assert abs(res.d[0] - 4.0) <= cfg.continuity + 1e-9 and np.abs(np.diff(res.d)).max() < 0.5
+    default = PassingSidePlanner().plan(s, n_ref, n_min, n_max, 4.0, np.zeros((0, 3)))
+    assert default.status == "no_opponents" and abs(default.d[0] - 4.0) > 3.0
+    # the next call, 3 m on, a car far ahead (not relevant): the consistency term with the previous plan
+    again = planner.plan(s, n_ref, n_min, n_max, float(res.d[1]), np.array([[900.0, 0.0, 50.0]]), progress=3.0)
+    d_prev = np.interp(s + 3.0, s, res.d)
+    np.testing.assert_allclose(again.d, _free_optimum(n_ref, lo, hi, float(res.d[1]), cfg, d_prev), atol=1e-6)
+
+
 def test_bounds_and_continuity_hold():
     rng = np.random.default_rng(11)
     for _ in range(20):
