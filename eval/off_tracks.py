@@ -113,10 +113,11 @@ def markdown(rows) -> str:
                      + " | ".join(str(n.get(c, 0)) for c in classes) + f" | {outside} | {braking} |")
     text = "\n".join(lines) + "\n"
     cols = ("stack", "track", "rho", "seed", "gamma", "sim_time", "cls", "v", "lat_demand", "side", "outside", "slip",
-            "accel", "plan_move", "plan_room", "nearest", "following", "e")
-    text += ("\nEvery departure (at its last step; `slip`: the largest side-slip [rad] and `plan_move` the range of "
-             "the plan's final lateral offset [m] over the last 2 s; `accel`: the mean commanded acceleration "
-             "[m/s²] and `plan_room` the smallest room of the planned footprint to an edge [m] over the last 1 s):\n\n")
+            "accel", "lat_slack", "plan_move", "plan_room", "nearest", "following", "e")
+    text += ("\nEvery departure (at its last step; over the last 2 s `slip`, the largest side-slip [rad], "
+             "`lat_slack`, the MPC's largest lateral-acceleration slack [m/s²], and `plan_move`, the range of the "
+             "plan's final lateral offset [m]; over the last 1 s `accel`, the mean commanded acceleration [m/s²], "
+             "and `plan_room`, the smallest room of the planned footprint to an edge [m]):\n\n")
     text += "| " + " | ".join(cols) + " |\n|" + "---|" * len(cols) + "\n"
     for r in rows:
         if r["outcome"] == "off_track":

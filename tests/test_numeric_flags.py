@@ -63,7 +63,8 @@ def test_no_numeric_flag_takes_a_bare_int_or_float(path, parse_only):
             "eval/interventions.py": ["x.csv"], "eval/trajectories.py": ["record", "--out", "x.npz"],
             "bench/bench_train.py": ["--compare", "HEAD"], "eval/reference_numerics.py": ["sweep"],
             "eval/manifest.py": ["list"], "eval/pasta_preference.py": ["probe"],
-            "eval/stall_probe.py": ["x.csv", "--out", "x"]}.get(path, [])
+            "eval/stall_probe.py": ["x.csv", "--out", "x"],
+            "eval/off_tracks.py": ["--replay", "x.csv", "--out", "x"]}.get(path, [])
     parser = _run(path, argv).parser
     actions = list(parser._actions)
     for sub in (a for a in parser._actions if isinstance(a, argparse._SubParsersAction)):

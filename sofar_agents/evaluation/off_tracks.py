@@ -21,7 +21,8 @@ Evidence (:func:`classify`), at the last step unless named otherwise: speed, ``v
 acceleration the track's curvature asks for), whether the car left on the outside of the turn, the largest
 side-slip over the window, the mean commanded acceleration over the last second, the *plan move* (the range of
 the plan's final lateral offset over the window: how far the planners moved the car's target in that time), the
-distance to the nearest car, and whether the plan in force followed a car.
+distance to the nearest car, whether the plan in force followed a car, and the largest slack of the MPC's
+lateral-acceleration rows over the window (its plan beyond ``lat_acc_max``).
 """
 
 from __future__ import annotations
@@ -75,6 +76,9 @@ class OffTrackRecord:
     """Yaw rate of the plant [rad/s] (the kinematic bicycle's on the kinematic plant)."""
     accel: float
     """Commanded acceleration, the MPC's first input [m/s^2]."""
+    lat_slack: float
+    """Largest slack of the MPC's lateral-acceleration rows [m/s^2]: how far its plan goes beyond
+    ``lat_acc_max``."""
     mpc_status: str
     plan_n_end: float
     """Lateral offset at the end of the MPC's plan [m]."""
@@ -161,7 +165,8 @@ class _Recorder:
         self.records.append(OffTrackRecord(
             t=float(race.time), s=s, n=n, e=e, v=v, kappa=float(track.curvature(s)),
             width_left=float(track.width_left(s)), width_right=float(track.width_right(s)), beta=beta,
-            yaw_rate=yaw_rate, accel=float(out.u[0]), mpc_status=mpc.status,
+            yaw_rate=yaw_rate, accel=float(out.u[0]), lat_slack=float(mpc.slack.get("lat_acc", 0.0)),
+            mpc_status=mpc.status,
             plan_n_end=float(mpc.x_pred[-1, 1]) if solved else math.nan,
             plan_room=_plan_room(track, float(out.ego_s), mpc.x_pred, veh) if solved else math.nan,
             nearest=nearest, following=bool(out.following)))
@@ -210,6 +215,7 @@ def classify(records: Sequence[OffTrackRecord], window: float = WINDOW) -> tuple
         "side": "left" if left_side else "right",
         "outside": bool(last.kappa != 0.0 and (left_side == (last.kappa < 0.0))),
         "slip": round(slip, 3), "accel": round(float(np.mean([r.accel for r in w1])), 2),
+        "lat_slack": round(max(r.lat_slack for r in w), 2),
         "plan_move": round(max(ends) - min(ends), 2) if ends else math.nan,
         "plan_room": round(min(rooms), 2) if rooms else math.nan,
         "nearest": round(last.nearest, 1), "following": any(r.following for r in w), "e": round(last.e, 3),
@@ -222,8 +228,8 @@ def classify(records: Sequence[OffTrackRecord], window: float = WINDOW) -> tuple
 
 
 REPORT_COLUMNS = ("label", "track", "rho", "seed", "stack", "config_hash", "gamma", "outcome", "sim_time", "cls", "v",
-                  "lat_demand", "side", "outside", "slip", "accel", "plan_move", "plan_room", "nearest", "following",
-                  "e", "wall_time")
+                  "lat_demand", "side", "outside", "slip", "accel", "lat_slack", "plan_move", "plan_room", "nearest",
+                  "following", "e", "wall_time")
 """Columns of :func:`report_rows` (one row per replayed episode)."""
 
 RECORD_COLUMNS = ("label", "track", "rho", "seed", "stack", "gamma") + tuple(f.name for f in fields(OffTrackRecord))

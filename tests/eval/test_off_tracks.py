@@ -22,8 +22,8 @@ import off_tracks as off_tracks_cli  # noqa: E402
 
 # A step on a left turn, the car on its line and its plan inside: nothing wrong.
 _ON = ot.OffTrackRecord(t=0.0, s=0.0, n=0.0, e=0.0, v=30.0, kappa=0.005, width_left=6.0, width_right=6.0, beta=0.01,
-                        yaw_rate=0.15, accel=0.0, mpc_status="solved", plan_n_end=0.0, plan_room=3.0, nearest=80.0,
-                        following=False)
+                        yaw_rate=0.15, accel=0.0, lat_slack=0.0, mpc_status="solved", plan_n_end=0.0, plan_room=3.0,
+                        nearest=80.0, following=False)
 
 
 def _window(n: int = 40, **changes) -> list[ot.OffTrackRecord]:
