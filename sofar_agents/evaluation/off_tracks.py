@@ -35,7 +35,7 @@ from dataclasses import asdict, dataclass, field, fields
 import numpy as np
 
 from sofar_agents.evaluation.episode import make_env, run_episode
-from sofar_agents.evaluation.protocol import LEGACY_STACK, EpisodeTask, Strategy
+from sofar_agents.evaluation.protocol import EpisodeTask, ended_tasks
 from sofar_agents.evaluation.results import EpisodeResult
 
 __all__ = ["OffTrackRecord", "OffTrackReport", "CLASSES", "RECORD_SECONDS", "WINDOW", "SPIN_SLIP",
@@ -103,20 +103,7 @@ class OffTrackReport:
 
 def off_track_tasks(rows: Iterable[Mapping], stacks: Sequence[str] | None = None) -> list[EpisodeTask]:
     """The fixed-gamma episodes of per-episode CSV rows (typed, ``read_episode_csv``) that ended off the track."""
-    out = []
-    for r in rows:
-        if not r.get("off_track") or not str(r["strategy"]).startswith("gamma="):
-            continue
-        stack = str(r.get("stack") or LEGACY_STACK)
-        if stacks is not None and stack not in stacks:
-            continue
-        n_opp = r.get("n_opponents", "")
-        out.append(EpisodeTask(
-            track=str(r["track"]), strategy=Strategy.fixed(float(str(r["strategy"])[6:])), rho=float(r["rho"]),
-            episode=int(r.get("episode", 0)), seed=int(r["seed"]), use_miqp=bool(r["use_miqp"]),
-            duration=float(r["duration"]), n_opponents=None if n_opp in ("", None) else int(float(n_opp)),
-            stack=stack, scenario=str(r.get("scenario") or "paper")))
-    return out
+    return ended_tasks(rows, "off_track", stacks)
 
 
 def _plan_room(track, ego_s: float, x_pred: np.ndarray, vehicle) -> float:

@@ -25,7 +25,7 @@ import hashlib
 import os
 import warnings
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -322,3 +322,22 @@ def miqp_ablation_tasks(strategies: Sequence[Strategy], episodes: int = 10, rhos
 
 FULL_TABLE1_STEPS = len(TRACKS) * len(RHOS) * 5 * (1 + len(FIXED_GAMMAS)) * int(DEFAULT_DURATION / 0.1)
 """Control steps of a full Table I if every episode lasted 200 s (700 episodes x 2000 = 1.4 M)."""
+
+
+def ended_tasks(rows: Iterable[Mapping], outcome: str, stacks: Sequence[str] | None = None) -> list[EpisodeTask]:
+    """The fixed-gamma episodes of per-episode CSV rows (typed, ``read_episode_csv``) whose ``outcome`` column
+    (``"stalled"``, ``"off_track"``, ...) is true, as tasks to replay; only those of ``stacks`` when given."""
+    out = []
+    for r in rows:
+        if not r.get(outcome) or not str(r["strategy"]).startswith("gamma="):
+            continue
+        stack = str(r.get("stack") or LEGACY_STACK)
+        if stacks is not None and stack not in stacks:
+            continue
+        n_opp = r.get("n_opponents", "")
+        out.append(EpisodeTask(
+            track=str(r["track"]), strategy=Strategy.fixed(float(str(r["strategy"])[6:])), rho=float(r["rho"]),
+            episode=int(r.get("episode", 0)), seed=int(r["seed"]), use_miqp=bool(r["use_miqp"]),
+            duration=float(r["duration"]), n_opponents=None if n_opp in ("", None) else int(float(n_opp)),
+            stack=stack, scenario=str(r.get("scenario") or "paper")))
+    return out

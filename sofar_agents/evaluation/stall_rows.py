@@ -12,7 +12,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, fields
 
 from sofar_agents.evaluation.interventions import _outcome
-from sofar_agents.evaluation.protocol import LEGACY_STACK, EpisodeTask, Strategy, table1_tasks
+from sofar_agents.evaluation.protocol import EpisodeTask, Strategy, ended_tasks, table1_tasks
 from sofar_agents.evaluation.stalls import StallReport, StepRecord, rooms
 
 __all__ = ["stalled_tasks", "fresh_tasks", "report_rows", "record_rows", "records_from_rows", "REPORT_COLUMNS",
@@ -21,19 +21,7 @@ __all__ = ["stalled_tasks", "fresh_tasks", "report_rows", "record_rows", "record
 
 def stalled_tasks(rows: Iterable[Mapping], stacks: Sequence[str] | None = None) -> list[EpisodeTask]:
     """The stalled fixed-gamma episodes of per-episode CSV rows (typed, :func:`read_episode_csv`) as tasks."""
-    out = []
-    for r in rows:
-        if not r.get("stalled") or not str(r["strategy"]).startswith("gamma="):
-            continue
-        if stacks is not None and str(r.get("stack") or LEGACY_STACK) not in stacks:
-            continue
-        n_opp = r.get("n_opponents", "")
-        out.append(EpisodeTask(
-            track=str(r["track"]), strategy=Strategy.fixed(float(str(r["strategy"])[6:])), rho=float(r["rho"]),
-            episode=int(r.get("episode", 0)), seed=int(r["seed"]), use_miqp=bool(r["use_miqp"]),
-            duration=float(r["duration"]), n_opponents=None if n_opp in ("", None) else int(float(n_opp)),
-            stack=str(r.get("stack") or LEGACY_STACK), scenario=str(r.get("scenario") or "paper")))
-    return out
+    return ended_tasks(rows, "stalled", stacks)
 
 
 def fresh_tasks(stacks: Sequence[str], gammas: Sequence[float], tracks: Sequence[str], rhos: Sequence[float],
