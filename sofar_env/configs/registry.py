@@ -173,6 +173,10 @@ def _sofar_12() -> StackConfig:
     return dataclasses.replace(base, miqp=dataclasses.replace(base.miqp, free_plan="smooth"))
 
 
+def _sofar_13() -> StackConfig:
+    return dataclasses.replace(_sofar_12(), restart_buffer_scale=0.25)
+
+
 DEFAULT_STACK_PRESET = "sofar-6"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
@@ -279,6 +283,12 @@ takes at its lateral-acceleration limit while braking; on the dynamic world's si
 spins the car or runs it wide (``docs/decisions/dynamic-world-settings.md``, "The departures"). The smooth free
 plan is the planner's problem without side constraints: the return keeps the continuity and smoothness of every
 other plan."""),
+    "sofar-13": Entry(_sofar_13(), """A candidate default, not the default: ``"sofar-12"`` with ``"sofar-9"``'s restart
+weights (``restart_buffer_scale = 0.25``), so every candidate change since ``"sofar-6"`` in one preset: following the
+queue, the heading-widened barrier, the smooth free plan and the restart mode's quarter-weight buffer slack. The
+restart weights remove the free-road stall of ``"sofar-12"`` in the dynamic world (a car at rest on the inside of a
+tight corner finding standing cheaper than starting; ``docs/decisions/stall-fixes.md``, "Standing in a tight
+corner")."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

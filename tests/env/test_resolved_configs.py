@@ -8,7 +8,7 @@ else, each ``"sofar-1"`` entry equals the former ``"sofar"`` one and each new ``
 ``mpc.qp_fallback = "daqp"`` and ``restart_buffer_edge = 0.05`` and nothing else, each new ``"sofar"`` entry
 equal to the former ``"sofar-6"`` one. A new preset adds its entries (``"sofar-5"``: 7, every other entry
 unchanged; ``"sofar-7"`` and ``"sofar-8"``: 7 each, every other entry unchanged; ``"sofar-9"``, ``"sofar-10"``,
-``"sofar-11"`` and ``"sofar-12"``: 11 each, one per world in each group), a new world its own (``"interactive-2"``
+``"sofar-11"``, ``"sofar-12"`` and ``"sofar-13"``: 11 each, one per world in each group), a new world its own (``"interactive-2"``
 and ``"dynamic-2"``: 32 each, every other entry unchanged)."""
 
 from __future__ import annotations
