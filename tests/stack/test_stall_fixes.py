@@ -251,7 +251,7 @@ def test_sofar_9_drives_off_from_the_inside_of_a_tight_corner(tracks):
     along the corner takes the end deeper into the band; over 1.5 s ``"sofar-6"`` stands for 0.9 s and starts only
     near the horizon's end, in every real-time iteration at this state and in the converged solution alike (so it
     stands again at the next step); ``"sofar-9"``, whose band costs a quarter as much, starts at once, and keeps
-    the end inside the band."""
+    the end inside the band; so does ``"sofar-13"``, which carries those weights with the other candidate changes."""
     from sofar_env.control.mpc.types import MPCStageData
 
     k = 21
@@ -259,7 +259,7 @@ def test_sofar_9_drives_off_from_the_inside_of_a_tight_corner(tracks):
                          n_min=np.full(k, -10.4), n_max=np.full(k, 2.656))
     x0 = np.array([0.0, 1.559, 0.0, 0.0, 0.119])
     first = {}
-    for preset in ("sofar-6", "sofar-9"):
+    for preset in ("sofar-6", "sofar-9", "sofar-13"):
         stack = OvertakingStack(tracks["LagunaSeca"], stack_preset(preset))
         mpc = stack._restart_mpc
         assert mpc.config.track_buffer == pytest.approx(0.2)
@@ -268,10 +268,11 @@ def test_sofar_9_drives_off_from_the_inside_of_a_tight_corner(tracks):
         first[preset] = [float(p.x_pred[1, 3]) for p in plans]
         converged = mpc.solve_converged(x0, stage, np.zeros((0, 3)), 0.5)
         first[preset].append(float(converged.x_pred[1, 3]))
-        if preset == "sofar-9":
+        if preset != "sofar-6":
             assert mpc.config.track_buffer_slack == (500.0, 5000.0)
             assert converged.slack["track"] <= 0.2 + 1e-6  # the end stays inside the band
         else:
             assert float(converged.x_pred[-1, 3]) > 1.0  # it does plan to move, only later
     assert max(first["sofar-6"]) < 0.01
     assert min(first["sofar-9"][1:]) > 0.2  # from the second iteration on it accelerates at once
+    assert first["sofar-13"] == first["sofar-9"]  # no opponent, no plan: only the restart weights matter here
