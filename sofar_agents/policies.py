@@ -154,6 +154,8 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
 
 
 SHIPPED_POLICIES: dict[tuple[str, str], str] = {
+    ("sofar-13", "paper"): "pasta_lagunaseca_sofar13.json",
+    ("sofar-13", "interactive"): "pasta_lagunaseca_interactive_sofar13.json",
     ("sofar-6", "paper"): "pasta_lagunaseca_sofar6.json",
     ("sofar-6", "interactive"): "pasta_lagunaseca_interactive_sofar6.json",
     ("sofar-4", "paper"): "pasta_lagunaseca_sofar4.json",
@@ -163,18 +165,20 @@ SHIPPED_POLICIES: dict[tuple[str, str], str] = {
     ("paper", "paper"): "pasta_lagunaseca_paper.json",
 }
 """The shipped PASTA policies, by (controller preset they were trained with, world scenario): all trained on
-Laguna Seca only; ``"sofar"`` looks up the default controller's version (``"sofar-6"``). The interactive ones were
-trained with a field of 8 opponents (``n_opponents=8``), the dense field of the interactive world, and observe
-the interactive world's 16 values. The ``"sofar-4"`` and ``"sofar-1"`` ones were trained with the former defaults
-and made their tables, by the same recipes."""
+Laguna Seca only; ``"sofar"`` looks up the default controller's version (``"sofar-13"``). The interactive ones
+were trained with a field of 8 opponents (``n_opponents=8``), the dense field of the interactive world, and observe
+the interactive world's 16 values. The ``"sofar-6"``, ``"sofar-4"`` and ``"sofar-1"`` ones were trained with the
+former defaults and made their tables, by the same recipes."""
 
 
 NAMED_POLICIES: dict[str, str] = {
     "lagunaseca": "pasta_lagunaseca.json",
+    "lagunaseca-sofar-13": "pasta_lagunaseca_sofar13.json",
     "lagunaseca-sofar-6": "pasta_lagunaseca_sofar6.json",
     "lagunaseca-sofar-4": "pasta_lagunaseca_sofar4.json",
     "lagunaseca-paper": "pasta_lagunaseca_paper.json",
     "lagunaseca-interactive": "pasta_lagunaseca_interactive.json",
+    "lagunaseca-interactive-sofar-13": "pasta_lagunaseca_interactive_sofar13.json",
     "lagunaseca-interactive-sofar-6": "pasta_lagunaseca_interactive_sofar6.json",
     "lagunaseca-interactive-sofar-4": "pasta_lagunaseca_interactive_sofar4.json",
     "morl-dynamic": "pasta_morl_dynamic.json",
@@ -186,12 +190,13 @@ NAMED_POLICIES: dict[str, str] = {
 """The shipped PASTA policies by name (:func:`named_policy_path`, :func:`load_policy`). ``lagunaseca`` and
 ``lagunaseca-interactive``: trained with ``"sofar-1"``, the first default; ``lagunaseca-sofar-4`` and
 ``lagunaseca-interactive-sofar-4``: the same recipes with ``"sofar-4"``, the second; ``lagunaseca-sofar-6`` and
-``lagunaseca-interactive-sofar-6``: the same recipes with the default controller. ``morl-dynamic-sofar-6`` and
+``lagunaseca-interactive-sofar-6``: with ``"sofar-6"``, the third; ``lagunaseca-sofar-13`` and
+``lagunaseca-interactive-sofar-13``: the same recipes with the default controller. ``morl-dynamic-sofar-6`` and
 ``morl-interactive-sofar-6``: the preference-conditioned policies of the dynamic and the dense interactive world
-(8 opponents), trained with the default controller on Laguna Seca, started at the cautious end of the gamma range
-with a preference drawn every 64 decisions along the safety-overtakes path (``preference_sampling="trade-off"``);
-``morl-dynamic-sofar-4`` and ``morl-interactive-sofar-4``: the same recipes with ``"sofar-4"``. Their gamma falls
-as the safety weight grows (``tests/agents/test_policies.py``,
+(8 opponents), trained with ``"sofar-6"`` (the default before ``"sofar-13"``) on Laguna Seca, started at the
+cautious end of the gamma range with a preference drawn every 64 decisions along the safety-overtakes path
+(``preference_sampling="trade-off"``); ``morl-dynamic-sofar-4`` and ``morl-interactive-sofar-4``: the same
+recipes with ``"sofar-4"``. Their gamma falls as the safety weight grows (``tests/agents/test_policies.py``,
 ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic world's first such policy, trained with
 ``"sofar-1"`` from the middle of the range."""
 
@@ -208,8 +213,8 @@ def named_policy_path(name: str) -> Path:
 def default_policy_path(stack: str = "sofar", scenario: str = "paper") -> Path:
     """Path of the PASTA policy shipped for a controller preset and a world (trained on Laguna Seca).
 
-    ``stack="sofar"`` (default) or ``"sofar-6"``: trained with the default controller; ``stack="sofar-4"``
-    and ``"sofar-1"``: trained with the defaults before it; ``stack="paper"``: trained with the paper's
+    ``stack="sofar"`` (default) or ``"sofar-13"``: trained with the default controller; ``stack="sofar-6"``,
+    ``"sofar-4"`` and ``"sofar-1"``: trained with the defaults before it; ``stack="paper"``: trained with the paper's
     Algorithm 1 as written (``gym.make(..., stack="paper")``). Raises ``ValueError`` for a combination without
     a shipped policy and ``FileNotFoundError`` (with instructions) when its files are missing.
     """

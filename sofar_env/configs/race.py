@@ -97,9 +97,11 @@ class RaceConfig:
     """Multi-car races: the controlled cars' barrier widens its lateral semi-axis with the car's own heading
     error to the track and the other car's course angle (from its lateral rate; ``stack.mpc.barrier.
     heading_extent``, see :mod:`sofar_env.control.barrier`), unless the user's keys set
-    ``stack.mpc.barrier.heading_extent``; 0 turns it off. The rewards and the observation measure the barrier
-    without this widening (:class:`~sofar_env.core.ControlledRace`). No effect in single-car races [m], >= 0.
-    Decision: ``docs/decisions/multi-car-defaults.md``."""
+    ``stack.mpc.barrier.heading_extent``; 0 adds nothing, so the controller keeps its own value (2.45 m in
+    the default ``"sofar-13"``, which widens the barrier in every race; 0 in ``"sofar-6"`` and before). The
+    rewards and the observation measure the barrier without this widening
+    (:class:`~sofar_env.core.ControlledRace`). No effect in single-car races [m], >= 0. Decision:
+    ``docs/decisions/multi-car-defaults.md``."""
     vehicle: VehicleParams = nested(VehicleParams, default=AV21)
     """Parameters of every car."""
     opponents: OpponentConfig = nested(OpponentConfig)

@@ -177,15 +177,16 @@ def _sofar_13() -> StackConfig:
     return dataclasses.replace(_sofar_12(), restart_buffer_scale=0.25)
 
 
-DEFAULT_STACK_PRESET = "sofar-6"
+DEFAULT_STACK_PRESET = "sofar-13"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
 longer match their rows until they are re-made (``tests/eval/test_manifests.py``)."""
 
 _DEFAULT_DOC = """The default controller of every environment, whichever version is current:
-now ``"sofar-6"`` (:data:`DEFAULT_STACK_PRESET`), the same value and config hash. Scripts that mean "the
+now ``"sofar-13"`` (:data:`DEFAULT_STACK_PRESET`), the same value and config hash. Scripts that mean "the
 project's controller" name it; a result row records its config hash, so rows of two versions are never mixed
-under this name. A fixed version is named by its number (``"sofar-1"``, ``"sofar-4"``, ``"sofar-6"``)."""
+under this name. A fixed version is named by its number (``"sofar-1"``, ``"sofar-4"``, ``"sofar-6"``,
+``"sofar-13"``)."""
 
 STACK_PRESET_REGISTRY: dict[str, Entry] = {
     "sofar-1": Entry(StackConfig(), """The default controller until ``"sofar-4"`` replaced it (version 1, called
@@ -241,11 +242,13 @@ decision lets a turned car creep. The stall fixes of ``docs/decisions/stall-fixe
 the QPs PIQP fails on (``mpc.qp_fallback = "daqp"``, every MPC of the stack). PIQP can fail on a feasible QP far
 outside its soft track rows, such as a start from rest deep inside the dynamic world's 2.2 m track margin, and a
 failed QP makes the MPC brake. Measured against ``"sofar-4"`` in ``docs/decisions/qp-backend.md``."""),
-    "sofar-6": Entry(_sofar_6(), """The default controller (version 6, also named ``"sofar"``): ``"sofar-5"`` with
-the restart mode's buffer slack (``restart_buffer_edge = 0.05``): while the car restarts from below 1 m/s (until
-3 m/s) a violation of the track margin costs ``mpc.track_buffer_slack`` instead of ``mpc.track_slack`` until the car's
-side comes within 0.05 m of the edge (0.2 m of the paper worlds' 0.25 m buffer), so that a car standing inside the
-margin drives off along it instead of standing (the standing-start defect of ``docs/decisions/stall-fixes.md``)."""),
+    "sofar-6": Entry(_sofar_6(), """The default controller after ``"sofar-4"``, until ``"sofar-13"`` replaced it
+(version 6, called ``"sofar"`` in the tables made with it; kept so that they re-make from their manifests):
+``"sofar-5"`` with the restart mode's buffer slack (``restart_buffer_edge = 0.05``): while the car restarts from
+below 1 m/s (until 3 m/s) a violation of the track margin costs ``mpc.track_buffer_slack`` instead of
+``mpc.track_slack`` until the car's side comes within 0.05 m of the edge (0.2 m of the paper worlds' 0.25 m
+buffer), so that a car standing inside the margin drives off along it instead of standing (the standing-start
+defect of ``docs/decisions/stall-fixes.md``)."""),
     "sofar-7": Entry(_sofar_7(), """A candidate default, not the default: ``"sofar-6"`` with a 6 s horizon in the restart
 mode (``restart_horizon = 80`` stages against the MPC's 20, 1.5 s). In a jam (a car stopped a few metres ahead, its
 barrier already violated) every forward move first goes deeper into the barrier, and over 1.5 s standing is the
@@ -283,12 +286,13 @@ takes at its lateral-acceleration limit while braking; on the dynamic world's si
 spins the car or runs it wide (``docs/decisions/dynamic-world-settings.md``, "The departures"). The smooth free
 plan is the planner's problem without side constraints: the return keeps the continuity and smoothness of every
 other plan."""),
-    "sofar-13": Entry(_sofar_13(), """A candidate default, not the default: ``"sofar-12"`` with ``"sofar-9"``'s restart
-weights (``restart_buffer_scale = 0.25``), so every candidate change since ``"sofar-6"`` in one preset: following the
-queue, the heading-widened barrier, the smooth free plan and the restart mode's quarter-weight buffer slack. The
-restart weights remove the free-road stall of ``"sofar-12"`` in the dynamic world (a car at rest on the inside of a
-tight corner finding standing cheaper than starting; ``docs/decisions/stall-fixes.md``, "Standing in a tight
-corner")."""),
+    "sofar-13": Entry(_sofar_13(), """The default controller (version 13, also named ``"sofar"``): ``"sofar-12"`` with
+``"sofar-9"``'s restart weights (``restart_buffer_scale = 0.25``), so every candidate change since ``"sofar-6"`` in
+one preset: following the queue, the heading-widened barrier, the smooth free plan and the restart mode's
+quarter-weight buffer slack. The restart weights remove the free-road stall of ``"sofar-12"`` in the dynamic
+world (a car at rest on the inside of a tight corner finding standing cheaper than starting;
+``docs/decisions/stall-fixes.md``, "Standing in a tight corner"). The measurements behind the move:
+``docs/decisions/default-controller.md``, "The move to ``"sofar-13"``"."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

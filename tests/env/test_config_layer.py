@@ -150,8 +150,10 @@ def test_the_pettingzoo_env_runs_the_resolved_config_and_the_core_rewrites_nothi
     with mock.patch.object(stack_module, "OvertakingStack", lambda track, c, vehicle=None: seen.append(c) or c):
         core._make_stacks(None)
     assert seen == [default_stack()] * 3
-    # the rewards and the observation measure the barrier without the multi-car widening, as before
+    # the rewards and the observation measure the controller's own barrier, without the multi-car widening: the
+    # default's (widened with the heading error itself since "sofar-13", 0 before), or the user's
     assert env.core.measured_barrier.heading_extent == 0.0
-    assert SOfARParallelEnv(n_agents=2).core.measured_barrier.heading_extent == 0.0
+    assert SOfARParallelEnv(n_agents=2).core.measured_barrier == default_stack().mpc.barrier
+    assert SOfARParallelEnv(n_agents=2, stack="sofar-6").core.measured_barrier.heading_extent == 0.0
     assert sofar_env.parallel_env(n_agents=2, stack={"mpc": {"barrier": {"heading_extent": 1.0}}}
                                   ).core.measured_barrier.heading_extent == 1.0

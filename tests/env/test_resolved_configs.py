@@ -6,10 +6,14 @@ The snapshot was re-written on purpose when the default moved, and only then. To
 else, each ``"sofar-1"`` entry equals the former ``"sofar"`` one and each new ``"sofar"`` entry the former
 ``"sofar-4"`` one, in every world, single-car and multi-car. To ``"sofar-6"``: the same entries gained
 ``mpc.qp_fallback = "daqp"`` and ``restart_buffer_edge = 0.05`` and nothing else, each new ``"sofar"`` entry
-equal to the former ``"sofar-6"`` one. A new preset adds its entries (``"sofar-5"``: 7, every other entry
+equal to the former ``"sofar-6"`` one. To ``"sofar-13"``: the same entries gained ``follow_queue = True``,
+``miqp.free_plan = "smooth"`` and ``restart_buffer_scale = 0.25`` (and ``mpc.barrier.heading_extent = 2.45`` where
+a case had turned the multi-car widening off, ``heading0``: the controller's own value now) and nothing else, each
+new ``"sofar"`` entry and each default world entry equal to the former ``"sofar-13"`` one. A new preset adds its
+entries (``"sofar-5"``: 7, every other entry
 unchanged; ``"sofar-7"`` and ``"sofar-8"``: 7 each, every other entry unchanged; ``"sofar-9"``, ``"sofar-10"``,
-``"sofar-11"``, ``"sofar-12"`` and ``"sofar-13"``: 11 each, one per world in each group), a new world its own (``"interactive-2"``
-and ``"dynamic-2"``: 32 each, every other entry unchanged)."""
+``"sofar-11"``, ``"sofar-12"`` and ``"sofar-13"``: 11 each, one per world in each group), a new world its own
+(``"interactive-2"`` and ``"dynamic-2"``: 32 each, every other entry unchanged)."""
 
 from __future__ import annotations
 

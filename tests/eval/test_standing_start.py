@@ -90,8 +90,8 @@ def test_the_former_default_drives_off_from_rest_near_an_edge(laguna):
 
 
 def test_the_default_drives_off_from_rest_near_an_edge(laguna):
-    """The default (``"sofar-6"``: the restart mode's buffer slack) drives off from the scene where ``"sofar-4"``
-    stands."""
+    """The default (``"sofar-13"``, with ``"sofar-6"``'s restart mode's buffer slack) drives off from the scene
+    where ``"sofar-4"`` stands."""
     distance, speed, off, failures, ok = _start_near_the_edge(laguna, "sofar")
     assert ok and not off and distance > 10.0 and failures == 0
 
