@@ -266,22 +266,30 @@ def test_mpc_restart_is_on_in_multi_car_races_only():
 
 def test_heading_extent_is_on_in_multi_car_races_only():
     """race.heading_extent (2.45 m) widens each controller's barrier with its heading error in multi-car
-    races, unless the stack sets its own value; 0 turns it off; single-car worlds are untouched."""
+    races, unless the stack sets its own value; 0 adds nothing (the controller keeps its own); single-car
+    worlds are untouched. The default ``"sofar-13"`` widens its barrier itself, in every world; ``"sofar-6"``
+    does not."""
     import gymnasium as gym
 
-    env = sofar_env.parallel_env(track="Monza", n_agents=2)
+    env = sofar_env.parallel_env(track="Monza", n_agents=2, stack="sofar-6")
     env.reset(seed=0)
     assert [s.config.mpc.barrier.heading_extent for s in env.stacks] == [2.45, 2.45]
     assert [s.config.mpc.restart_slack for s in env.stacks] == [0.05, 0.05]  # merged with the restart
-    off = sofar_env.parallel_env(track="Monza", n_agents=2, race={"heading_extent": 0.0})
+    off = sofar_env.parallel_env(track="Monza", n_agents=2, stack="sofar-6", race={"heading_extent": 0.0})
     off.reset(seed=0)
     assert [s.config.mpc.barrier.heading_extent for s in off.stacks] == [0.0, 0.0]
+    default_off = sofar_env.parallel_env(track="Monza", n_agents=2, race={"heading_extent": 0.0})
+    default_off.reset(seed=0)
+    assert [s.config.mpc.barrier.heading_extent for s in default_off.stacks] == [2.45, 2.45]  # its own
     own = sofar_env.parallel_env(track="Monza", n_agents=2, stack={"mpc": {"barrier": {"heading_extent": 1.0}}})
     own.reset(seed=0)
     assert [s.config.mpc.barrier.heading_extent for s in own.stacks] == [1.0, 1.0]
-    single = gym.make("SOfAR-Monza-v0").unwrapped
+    single = gym.make("SOfAR-Monza-v0", stack="sofar-6").unwrapped
     single.reset(seed=0)
     assert single.stack.config.mpc.barrier.heading_extent == 0.0
+    default_single = gym.make("SOfAR-Monza-v0").unwrapped
+    default_single.reset(seed=0)
+    assert default_single.stack.config.mpc.barrier.heading_extent == 2.45
     for bad in (-1.0, float("nan"), float("inf"), "2"):
         with pytest.raises(ValueError, match="race.heading_extent must be a finite number >= 0"):
             sofar_env.parallel_env(track="Monza", n_agents=2, race={"heading_extent": bad})
