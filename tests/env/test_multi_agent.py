@@ -316,11 +316,12 @@ def test_mpc_restart_avoids_a_collision_after_a_change_of_side():
 
     seed = 4193085697
     # the cars' lateral rates and the heading-aware barrier (which avoid this collision too) are off, to
-    # see the restart alone
-    off = sofar_env.parallel_env(track="Indianapolis", n_agents=4,
+    # see the restart alone: "sofar-6", whose own barrier is the aligned one (the default widens it itself)
+    off = sofar_env.parallel_env(track="Indianapolis", n_agents=4, stack="sofar-6",
                                  race={"mpc_restart_slack": math.inf, "lateral_rates": "off", "heading_extent": 0.0})
     assert _first_collision(off, seed, 0.5, 5.0) == (4.1, ["car_2", "car_3"])
-    on = sofar_env.parallel_env(track="Indianapolis", n_agents=4, race={"lateral_rates": "off", "heading_extent": 0.0})
+    on = sofar_env.parallel_env(track="Indianapolis", n_agents=4, stack="sofar-6",
+                                race={"lateral_rates": "off", "heading_extent": 0.0})
     assert _first_collision(on, seed, 0.5, 5.0) is None
     assert on.stacks[2].counters["mpc_restarts_taken"] >= 1
     assert all(s.counters["mpc_restarts_taken"] <= s.counters["mpc_restarts"] for s in on.stacks)

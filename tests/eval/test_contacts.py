@@ -24,7 +24,7 @@ def _script():
 
 def _row(**kw) -> RaceResult:
     base = dict(track="Monza", strategy="gamma=0.50", policy_id="", seed=2286877623, cars=4, duration=200.0,
-                stack="sofar", scenario="paper", overtakes=0, collided=2, off_track=0, stalled=0, success=2,
+                stack="sofar-6", scenario="paper", overtakes=0, collided=2, off_track=0, stalled=0, success=2,
                 driven=0.1, mean_gamma=0.5, speed_factors="", wall_time=0.0, opponents=0)
     base.update(kw)
     return RaceResult(**base)
@@ -34,7 +34,8 @@ def test_a_contact_at_a_chicane_with_the_cars_turned_is_inside_the_aligned_ellip
     """Monza, a race of an earlier multi-agent table (gamma 0.5): without the heading-aware barrier, at the
     first chicane car 0 touches car 2, both turned 0.4-0.7 rad to the track at 10-17 m/s; the barrier, whose
     ellipse assumes aligned cars, has h > 0 there. With the multi-car default (the ellipse widened by both
-    cars' rotation) the race has no contact."""
+    cars' rotation) the race has no contact. The controller is ``"sofar-6"``, whose own barrier is the aligned
+    one (the default ``"sofar-13"`` widens it itself)."""
     script = _script()
     contact = script.first_contact(_row(), {"heading_extent": 0.0})
     assert contact is not None
