@@ -182,8 +182,10 @@ NAMED_POLICIES: dict[str, str] = {
     "lagunaseca-interactive-sofar-6": "pasta_lagunaseca_interactive_sofar6.json",
     "lagunaseca-interactive-sofar-4": "pasta_lagunaseca_interactive_sofar4.json",
     "morl-dynamic": "pasta_morl_dynamic.json",
+    "morl-dynamic-sofar-13": "pasta_morl_dynamic_sofar13.json",
     "morl-dynamic-sofar-6": "pasta_morl_dynamic_sofar6.json",
     "morl-dynamic-sofar-4": "pasta_morl_dynamic_sofar4.json",
+    "morl-interactive-sofar-13": "pasta_morl_interactive_sofar13.json",
     "morl-interactive-sofar-6": "pasta_morl_interactive_sofar6.json",
     "morl-interactive-sofar-4": "pasta_morl_interactive_sofar4.json",
 }
@@ -196,9 +198,10 @@ NAMED_POLICIES: dict[str, str] = {
 (8 opponents), trained with ``"sofar-6"`` (the default before ``"sofar-13"``) on Laguna Seca, started at the
 cautious end of the gamma range with a preference drawn every 64 decisions along the safety-overtakes path
 (``preference_sampling="trade-off"``); ``morl-dynamic-sofar-4`` and ``morl-interactive-sofar-4``: the same
-recipes with ``"sofar-4"``. Their gamma falls as the safety weight grows (``tests/agents/test_policies.py``,
-``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic world's first such policy, trained with
-``"sofar-1"`` from the middle of the range."""
+recipes with ``"sofar-4"``; ``morl-dynamic-sofar-13`` and ``morl-interactive-sofar-13``: with the default
+``"sofar-13"`` (trained, their fronts not yet measured). Their gamma falls as the safety weight grows
+(``tests/agents/test_policies.py``, ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic
+world's first such policy, trained with ``"sofar-1"`` from the middle of the range."""
 
 
 def named_policy_path(name: str) -> Path:
