@@ -267,7 +267,7 @@ _OLDER_EPISODE_COLUMNS = {"stack": LEGACY_STACK, "n_opponents": "", "scenario": 
                           "config_hash": ""}
 """Episode columns that CSVs of older formats lack, with the value their rows stand for (as the table reader has
 them; "" of ``stalled``: unknown)."""
-_OLDER_RACE_COLUMNS = {"opponents": "0", "config_hash": ""}
+_OLDER_RACE_COLUMNS = {"opponents": "0", "config_hash": "", "miqp_failures": "-1"}
 
 
 def raw_rows(path: str | os.PathLike, kind: str = "table1") -> list[dict[str, str]]:

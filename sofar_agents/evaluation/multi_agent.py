@@ -118,6 +118,9 @@ class RaceResult:
     """Scripted opponents in the race (0: controlled cars only; absent in CSVs written before the column)."""
     config_hash: str = ""
     """The hash of the race environment's configuration ("": CSVs written before the column)."""
+    miqp_failures: int = -1
+    """Passing-planner fallbacks (its solver failed and the previous plan was taken, counted by each car's stack),
+    summed over the controlled cars (-1: not recorded, CSVs written before the column)."""
 
     @property
     def key(self) -> tuple:
@@ -129,7 +132,7 @@ _FIELD_NAMES = [f.name for f in fields(RaceResult) if f.name != "config_hash"]
 RACE_COLUMNS: tuple[str, ...] = tuple(_FIELD_NAMES[:_FIELD_NAMES.index("stack") + 1] + ["config_hash"]
                                       + _FIELD_NAMES[_FIELD_NAMES.index("stack") + 1:])
 """Columns of the per-race CSV (``config_hash`` next to ``stack``)."""
-_RACE_ADDED = {"opponents": "0", "config_hash": ""}
+_RACE_ADDED = {"opponents": "0", "config_hash": "", "miqp_failures": "-1"}
 """Columns that CSVs of older layouts lack, with the value their rows stand for."""
 
 
@@ -196,6 +199,7 @@ def run_race(task: RaceTask, policy: Any = None, race_overrides: dict[str, Any] 
         driven=sum(float(info["sim_time"]) for info in last.values()) / (task.cars * task.duration),
         mean_gamma=gamma_sum / max(decisions, 1), speed_factors=" ".join(f"{f:.4f}" for f in factors),
         wall_time=time.perf_counter() - t0, opponents=int(task.opponents), config_hash=env_hash,
+        miqp_failures=sum(int(info.get("miqp_failures", 0)) for info in last.values()),
     )
 
 

@@ -91,6 +91,14 @@ class MIQPConfig:
     side pattern's side of the clearance, bounds the optimum (DAQP's ``fval_bound``), so that nodes which
     cannot beat it end early (:mod:`sofar_env.planning.solvers`). The same plan to the bit, in less time;
     False searches without it (for comparison). Only with ``solver="daqp"``."""
+    daqp_cycle_tol: int = neutral(integer(10, ge=1))
+    """DAQP's ``cycle_tol`` in every QP of the passing planner (branch-and-bound and enumeration): how many
+    consecutive active-set iterations without progress DAQP allows before it exits with its cycling flag, upon
+    which the planner falls back to its previous plan (counted). 10, DAQP's own default, is the default. With a
+    car alongside over the whole horizon (multi-car races at equal pace) the planner's QP has a clearance row at
+    every node and DAQP's degenerate steps exceed 10: it exits at QPs whose optimum it reaches with 100. A QP
+    that never reaches the limit is solved to the same bits under any value [-], >= 1. Decision:
+    ``docs/decisions/planner-cycling.md``."""
 
     def __post_init__(self) -> None:
         check_fields(self, "stack.miqp")

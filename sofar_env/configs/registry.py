@@ -177,6 +177,11 @@ def _sofar_13() -> StackConfig:
     return dataclasses.replace(_sofar_12(), restart_buffer_scale=0.25)
 
 
+def _sofar_14() -> StackConfig:
+    base = _sofar_13()
+    return dataclasses.replace(base, miqp=dataclasses.replace(base.miqp, daqp_cycle_tol=100))
+
+
 DEFAULT_STACK_PRESET = "sofar-13"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
@@ -293,6 +298,12 @@ quarter-weight buffer slack. The restart weights remove the free-road stall of `
 world (a car at rest on the inside of a tight corner finding standing cheaper than starting;
 ``docs/decisions/stall-fixes.md``, "Standing in a tight corner"). The measurements behind the move:
 ``docs/decisions/default-controller.md``, "The move to ``"sofar-13"``"."""),
+    "sofar-14": Entry(_sofar_14(), """A candidate default, not the default: ``"sofar-13"`` with the passing planner's
+DAQP allowed 100 steps without progress instead of 10 (``miqp.daqp_cycle_tol = 100``). With a car alongside over
+the whole horizon, as in multi-car races at equal pace, the planner's QP has a clearance row at nearly every node
+and DAQP exits with its cycling flag at QPs whose optimum it reaches with the higher limit; the planner then fell
+back to its previous plan, about once per 2,700 car-steps of the default's multi-car races. A QP that never reaches
+10 is solved to the same bits (``docs/decisions/planner-cycling.md``)."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

@@ -124,7 +124,8 @@ class Workspace:
 @kernel
 def quadprog(H, f, A, bupper, blower, sense, fval_bound, presolve, records, buffers):
     """``daqp.solve(H, f, A, bupper, blower, sense, fval_bound=fval_bound, presolve=presolve)`` of the pinned
-    DAQP (the other settings its defaults) in a kernel: returns ``(exitflag, fval)``; the solution is in
+    DAQP (the other settings as ``records`` hold them: its defaults, but where a caller set one, such as the
+    planner's ``cycle_tol``) in a kernel: returns ``(exitflag, fval)``; the solution is in
     ``buffers[0][:n]``. ``sense`` is copied to ``buffers[2]`` first (DAQP writes its working set into it),
     so it is left as given. ``H`` (n, n), ``A`` (m - ms, n) C-contiguous; ``bupper``, ``blower`` (m,) with the
     ``ms`` simple bounds first. Only with :data:`AVAILABLE` (module docstring)."""

@@ -309,11 +309,11 @@ class PassingSidePlanner:
     # ------------------------------------------------------------- solvers
     def _solve_bnb(self, prob: SideProblem) -> tuple[np.ndarray, np.ndarray] | None:
         """DAQP branch-and-bound (its per-(C, P) set-up cached by this planner)."""
-        return solve_branch_and_bound(prob, self.config.w_slack, self._bnb_cache)
+        return solve_branch_and_bound(prob, self.config.w_slack, self._bnb_cache, self.config.daqp_cycle_tol)
 
     def _solve_enumerate(self, prob: SideProblem) -> tuple[np.ndarray, np.ndarray] | None:
         """One QP per side pattern."""
-        return solve_enumeration(prob, self.config.w_slack)
+        return solve_enumeration(prob, self.config.w_slack, self.config.daqp_cycle_tol)
 
     # ------------------------------------------------------------- helpers
     def _remember(self, s_nodes, d, opp, sides) -> None:

@@ -73,6 +73,7 @@ _Q_BIN = 1.0         # curvature added to each binary; cancelled at 0/1 by a lin
 _Q_SLACK = 1e-2      # curvature added to each slack [1/m^2] (DAQP needs H > 0)
 _DAQP_OK = (1, 2)    # DAQP exit flags that mean "optimal" (2: optimal with soft constraints)
 _DAQP_INFEASIBLE = -1  # DAQP's exit flag when no node beats fval_bound (or the problem is infeasible)
+DAQP_CYCLE_TOL = 10  # DAQP's default cycle_tol (MIQPConfig.daqp_cycle_tol)
 _BOUND_MARGIN = 1e-6  # relative (and absolute) margin on the incumbent's objective [-]
 _BOUND_MAX_CLUSTERS = 8  # the incumbent tries every side pattern: up to 2^8 of them, else no incumbent
 _SENSE_BINARY = 16
@@ -85,11 +86,13 @@ NATIVE = daqp_c.AVAILABLE
 instead of building the data and calling ``daqp.solve`` from Python; the two give the same values to the bit."""
 
 
-def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tuple[np.ndarray, np.ndarray] | None:
+def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict,
+                           cycle_tol: int = DAQP_CYCLE_TOL) -> tuple[np.ndarray, np.ndarray] | None:
     """DAQP branch-and-bound over x = [b (C), xi (P), u (N)], d = Rinv u.
 
     Simple bounds: b in [0, 1] (binary), xi >= 0. General rows: the corridor
-    lo <= Rinv u <= hi, then the two Big-M rows of every active pair.
+    lo <= Rinv u <= hi, then the two Big-M rows of every active pair. ``cycle_tol``: DAQP's setting
+    (``MIQPConfig.daqp_cycle_tol``). None when DAQP exits with any flag but optimal.
     """
     if daqp is None:
         return None
@@ -117,6 +120,7 @@ def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tu
         work = cache.get(_WORKSPACE)
         if work is None:
             work = cache[_WORKSPACE] = daqp_c.Workspace()
+        work.records[1][0]["cycle_tol"] = cycle_tol
         start = prob.d_prev if prob.d_prev is not None else prob.n_ref
         lateral = (prob.f_d, start, prob.w_diag is not None, prob.w_diag or 0.0, float(prob.w_smooth))
         flag, x = _bnb_solve(C, prob.Rinv, prob.RinvT @ prob.f_d, prob.f_b, float(w_slack), (prob.lo, prob.hi),
@@ -133,10 +137,11 @@ def solve_branch_and_bound(prob: SideProblem, w_slack: float, cache: dict) -> tu
         start = prob.d_prev if prob.d_prev is not None else prob.n_ref
         bound = _incumbent_bound(C, f, prob.f_d, prob.w_diag, prob.w_smooth, prob.lo, prob.hi, start, prob.pair_k,
                                  prob.pair_c, prob.pair_n, prob.pair_w, b_fixed)
-    x, _, flag, _ = daqp.solve(H, f, A, bupper, blower, sense.copy(), presolve=0, fval_bound=bound)
+    x, _, flag, _ = daqp.solve(H, f, A, bupper, blower, sense.copy(), presolve=0, fval_bound=bound,
+                               cycle_tol=cycle_tol)
     if flag == _DAQP_INFEASIBLE and bound < _INF:
         # the incumbent pruned every node (it was optimal to within the margin): once more without it
-        x, _, flag, _ = daqp.solve(H, f, A, bupper, blower, sense.copy(), presolve=0)
+        x, _, flag, _ = daqp.solve(H, f, A, bupper, blower, sense.copy(), presolve=0, cycle_tol=cycle_tol)
     if flag not in _DAQP_OK:
         logger.debug("DAQP branch-and-bound exit flag %d", flag)
         return None
@@ -213,8 +218,10 @@ def _bnb_data(C, Rinv, f_u, f_b, w_slack, lo, hi, pair_k, pair_c, pair_n, pair_w
     return f, A, bupper, blower
 
 
-def solve_enumeration(prob: SideProblem, w_slack: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """One QP over x = [xi (P), u (N)] per side pattern (2^C of them)."""
+def solve_enumeration(prob: SideProblem, w_slack: float,
+                      cycle_tol: int = DAQP_CYCLE_TOL) -> tuple[np.ndarray, np.ndarray] | None:
+    """One QP over x = [xi (P), u (N)] per side pattern (2^C of them); ``cycle_tol`` as in
+    :func:`solve_branch_and_bound`. None when any pattern's QP exits with a flag but optimal."""
     if daqp is None:
         return None
     C, N, P = prob.n_clusters, prob.lo.size, prob.pair_k.size
@@ -241,7 +248,7 @@ def solve_enumeration(prob: SideProblem, w_slack: float) -> tuple[np.ndarray, np
         A[N + r, r] = np.where(left, 1.0, -1.0)
         bup[P + N:] = np.where(left, _INF, prob.pair_n - sl)
         blo[P + N:] = np.where(left, prob.pair_n + sl, -_INF)
-        x, fval, flag, _ = daqp.solve(H, f, A, bup, blo, sense)
+        x, fval, flag, _ = daqp.solve(H, f, A, bup, blo, sense, cycle_tol=cycle_tol)
         if flag not in _DAQP_OK:
             logger.debug("DAQP exit flag %d for side pattern %d", flag, pattern)
             return None

@@ -12,7 +12,8 @@ a case had turned the multi-car widening off, ``heading0``: the controller's own
 new ``"sofar"`` entry and each default world entry equal to the former ``"sofar-13"`` one. A new preset adds its
 entries (``"sofar-5"``: 7, every other entry
 unchanged; ``"sofar-7"`` and ``"sofar-8"``: 7 each, every other entry unchanged; ``"sofar-9"``, ``"sofar-10"``,
-``"sofar-11"``, ``"sofar-12"`` and ``"sofar-13"``: 11 each, one per world in each group), a new world its own
+``"sofar-11"``, ``"sofar-12"``, ``"sofar-13"`` and ``"sofar-14"``: 11 each, one per world in each group), a new
+world its own
 (``"interactive-2"`` and ``"dynamic-2"``: 32 each, every other entry unchanged)."""
 
 from __future__ import annotations

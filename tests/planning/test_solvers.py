@@ -110,9 +110,9 @@ def test_the_compiled_branch_and_bound_data_are_the_numpy_form(monkeypatch):
     problems = []
     original_solve = solvers.solve_branch_and_bound
 
-    def keep(prob, w_slack, cache):
+    def keep(prob, w_slack, cache, *settings):
         problems.append((prob, w_slack))
-        return original_solve(prob, w_slack, cache)
+        return original_solve(prob, w_slack, cache, *settings)
 
     solvers._bnb_data = spy
     try:
@@ -146,8 +146,8 @@ def _closed_loop_problems(seed: int, alongside_gap: float = 0.0, calls: int = 6)
     seen = []
     original = solvers.solve_branch_and_bound
 
-    def keep(prob, w_slack, cache):
-        out = original(prob, w_slack, cache)
+    def keep(prob, w_slack, cache, *settings):
+        out = original(prob, w_slack, cache, *settings)
         seen.append((prob, w_slack, out))
         return out
 
