@@ -22,7 +22,14 @@ is run. The logic is in sofar_agents.evaluation.paired.
 
 With `--before-after BEFORE AFTER` the two CSVs are one seed set run by two controllers: per strategy and for
 all fixed gammas together, success with the paired test and collisions, off-tracks, stalls and overtakes per
-hour, each as before -> after (sofar_agents.evaluation.before_after).
+hour, each as before -> after (sofar_agents.evaluation.before_after). With `--races` as well, the two CSVs are
+per-race CSVs of the multi-agent table (`multi_agent_races.csv`) of the same races: per strategy, success per car,
+races with a collision (exact McNemar on the races that have one on one side only), off-track and stalled cars,
+overtakes per race and the plans in force that were the passing planner's fallback
+(sofar_agents.evaluation.races_before_after):
+
+    python eval/paired.py --before-after --races results/multi_agent/multi_agent_races.csv \
+        results/multi_agent/candidate_sofar_14/multi_agent_races.csv
 
 With `--pareto CSV [CSV ...]` (a `pareto_episodes.csv` of `eval/pareto.py`, or several seed sets of one
 front, their episodes pooled) every point that is not a fixed gamma (a
@@ -51,6 +58,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "controller presets run on the same episodes")
     p.add_argument("--before-after", action="store_true",
                    help="compare two CSVs of the same episodes run by two controllers, on every outcome")
+    p.add_argument("--races", action="store_true",
+                   help="with --before-after: the two CSVs are per-race CSVs of the multi-agent table")
     p.add_argument("--pareto", action="store_true",
                    help="pareto_episodes.csv files (one front's seed sets, pooled): each policy point against the "
                         "nearest and the best fixed gamma")
@@ -61,6 +70,9 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     args = parse_args(argv)
     mode = _before_after if args.before_after else _pareto if args.pareto else _paired
+    if args.races and not args.before_after:
+        print("error: --races goes with --before-after", file=sys.stderr)
+        return 2
     try:
         text = mode(args)
     except ValueError as exc:
@@ -95,6 +107,13 @@ def _before_after(args: argparse.Namespace) -> str:
 
     if len(args.csv) != 2:
         raise ValueError(f"--before-after takes two CSVs (before, after), got {len(args.csv)}")
+    if args.races:
+        from sofar_agents.evaluation.manifest import raw_rows
+        from sofar_agents.evaluation.races_before_after import format_races_before_after, races_before_after
+
+        before, after = (raw_rows(path, kind="multi-agent") for path in args.csv)
+        return (f"Before: {args.csv[0]}; after: {args.csv[1]}.\n\n"
+                + format_races_before_after(races_before_after(before, after)))
     (b_name, before), (a_name, after) = ev.read_seed_sets(args.csv).items()
     return f"Before: {b_name}; after: {a_name}.\n\n" + format_before_after(before_after(before, after))
 

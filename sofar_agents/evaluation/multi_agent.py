@@ -119,8 +119,9 @@ class RaceResult:
     config_hash: str = ""
     """The hash of the race environment's configuration ("": CSVs written before the column)."""
     miqp_failures: int = -1
-    """Passing-planner fallbacks (its solver failed and the previous plan was taken, counted by each car's stack),
-    summed over the controlled cars (-1: not recorded, CSVs written before the column)."""
+    """Lateral plans in force that were the passing planner's fallback (its solver failed, the previous plan was
+    taken; each car's ``miqp_failures`` counter), summed over the controlled cars (-1: not recorded, CSVs written
+    before the column)."""
 
     @property
     def key(self) -> tuple:
