@@ -199,7 +199,7 @@ NAMED_POLICIES: dict[str, str] = {
 cautious end of the gamma range with a preference drawn every 64 decisions along the safety-overtakes path
 (``preference_sampling="trade-off"``); ``morl-dynamic-sofar-4`` and ``morl-interactive-sofar-4``: the same
 recipes with ``"sofar-4"``; ``morl-dynamic-sofar-13`` and ``morl-interactive-sofar-13``: with the default
-``"sofar-13"`` (trained, their fronts not yet measured). Their gamma falls as the safety weight grows
+``"sofar-13"`` (fronts: ``results/interactive_dense/morl_sofar13/``, ``results/dynamic/morl_sofar13/``). Their gamma falls as the safety weight grows
 (``tests/agents/test_policies.py``, ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic
 world's first such policy, trained with ``"sofar-1"`` from the middle of the range."""
 
