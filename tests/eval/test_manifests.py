@@ -37,7 +37,10 @@ EXTRA_STRATEGIES: dict[str, set[str]] = {
                                      "interactive_dense_morl_pareto_seed10500",
                                      "interactive_dense_morl_pareto_seed10300_sofar_6",
                                      "interactive_dense_morl_pareto_seed10500_sofar_6",
-                                     "dynamic_morl_pareto_seed10300_sofar_6", "dynamic_morl_pareto_seed10500_sofar_6")
+                                     "dynamic_morl_pareto_seed10300_sofar_6", "dynamic_morl_pareto_seed10500_sofar_6",
+                                     "interactive_dense_morl_pareto_seed10300_sofar_13",
+                                     "interactive_dense_morl_pareto_seed10500_sofar_13",
+                                     "dynamic_morl_pareto_seed10300_sofar_13", "dynamic_morl_pareto_seed10500_sofar_13")
 }
 """Rows of a pareto file that are not its manifest's episodes (same configuration hash; the SB3 zip that made them is
 not committed), documented in the manifest."""
