@@ -10,13 +10,13 @@ one configuration (one ``config_hash``; :func:`~sofar_agents.evaluation.configs.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from .paired import PairedComparison
 
-__all__ = ["Outcomes", "BeforeAfter", "before_after", "format_before_after"]
+__all__ = ["Outcomes", "BeforeAfter", "paired_rows", "before_after", "format_before_after"]
 
 FIXED = "all fixed gammas"
 """The label of the line that pools every ``gamma=...`` strategy."""
@@ -57,18 +57,34 @@ def _flag(value: Any) -> int:
     return int(float(value)) if value not in ("", None) else 0
 
 
-def _index(rows: Iterable[Mapping[str, Any]], side: str) -> dict[tuple, Mapping[str, Any]]:
+def _index(rows: Iterable[Mapping[str, Any]], side: str, key: Callable[[Mapping[str, Any]], tuple],
+           what: str) -> dict[tuple, Mapping[str, Any]]:
     from sofar_agents.evaluation.configs import check_one_config
 
     rows = list(rows)
     check_one_config(rows, lambda r: str(r["strategy"]), f"the {side} rows")
     out: dict[tuple, Mapping[str, Any]] = {}
     for r in rows:
-        k = _key(r)
+        k = key(r)
         if k in out:
-            raise ValueError(f"the {side} rows hold episode {k[:4]} of strategy {k[4]!r} twice")
+            raise ValueError(f"the {side} rows hold {what} {k[:-1]} of strategy {k[-1]!r} twice")
         out[k] = r
     return out
+
+
+def paired_rows(before: Iterable[Mapping[str, Any]], after: Iterable[Mapping[str, Any]],
+                key: Callable[[Mapping[str, Any]], tuple] = _key, what: str = "episode") -> dict[str, list[tuple]]:
+    """The ``(before, after)`` row pairs with the same ``key`` (a tuple ending with the strategy), grouped by strategy
+    (sorted). ``what`` names a row in the messages. Raises ``ValueError`` when a side mixes configurations or holds a
+    key twice, or when the two share none."""
+    b, a = _index(before, "before", key, what), _index(after, "after", key, what)
+    common = sorted(b.keys() & a.keys())
+    if not common:
+        raise ValueError(f"the before and after rows share no {what} (different seeds, circuits or strategies)")
+    by_strategy: dict[str, list[tuple]] = {}
+    for k in common:
+        by_strategy.setdefault(k[-1], []).append((b[k], a[k]))
+    return dict(sorted(by_strategy.items()))
 
 
 def _outcomes(rows: Sequence[Mapping[str, Any]]) -> Outcomes:
@@ -96,15 +112,9 @@ def before_after(before: Iterable[Mapping[str, Any]], after: Iterable[Mapping[st
 
     Raises ``ValueError`` when a side mixes configurations or holds an episode twice, or when the two share no
     episode."""
-    b, a = _index(before, "before"), _index(after, "after")
-    common = sorted(b.keys() & a.keys())
-    if not common:
-        raise ValueError("the before and after rows share no episode (different seeds, circuits or strategies)")
-    by_strategy: dict[str, list] = {}
-    for k in common:
-        by_strategy.setdefault(k[4], []).append((b[k], a[k]))
-    out = [_line(s, pairs) for s, pairs in sorted(by_strategy.items())]
-    fixed = [p for s, pairs in sorted(by_strategy.items()) if s.startswith("gamma=") for p in pairs]
+    by_strategy = paired_rows(before, after)
+    out = [_line(s, pairs) for s, pairs in by_strategy.items()]
+    fixed = [p for s, pairs in by_strategy.items() if s.startswith("gamma=") for p in pairs]
     if fixed:
         out.append(_line(FIXED, fixed))
     return out

@@ -16,6 +16,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from .before_after import paired_rows
 from .paired import PairedComparison
 
 __all__ = ["RaceOutcomes", "RacesBeforeAfter", "races_before_after", "format_races_before_after"]
@@ -54,20 +55,6 @@ def _key(r: Mapping[str, Any]) -> tuple:
             str(r.get("opponents", "0") or "0"), str(r["strategy"]))
 
 
-def _index(rows: Iterable[Mapping[str, Any]], side: str) -> dict[tuple, Mapping[str, Any]]:
-    from sofar_agents.evaluation.configs import check_one_config
-
-    rows = list(rows)
-    check_one_config(rows, lambda r: str(r["strategy"]), f"the {side} races")
-    out: dict[tuple, Mapping[str, Any]] = {}
-    for r in rows:
-        k = _key(r)
-        if k in out:
-            raise ValueError(f"the {side} rows hold race {k[:2]} of strategy {k[-1]!r} twice")
-        out[k] = r
-    return out
-
-
 def _outcomes(rows: Sequence[Mapping[str, Any]]) -> RaceOutcomes:
     fallbacks = [int(r.get("miqp_failures", -1) or -1) for r in rows]
     return RaceOutcomes(cars=sum(int(r["cars"]) for r in rows), success=sum(int(r["success"]) for r in rows),
@@ -92,16 +79,10 @@ def races_before_after(before: Iterable[Mapping[str, Any]],
     """Per strategy (sorted), then all strategies pooled: the paired races of ``before`` and ``after``.
 
     Raises ``ValueError`` when a side mixes configurations or holds a race twice, or when the two share no race."""
-    b, a = _index(before, "before"), _index(after, "after")
-    common = sorted(b.keys() & a.keys())
-    if not common:
-        raise ValueError("the before and after rows share no race (different seeds, circuits or strategies)")
-    by_strategy: dict[str, list] = {}
-    for k in common:
-        by_strategy.setdefault(k[-1], []).append((b[k], a[k]))
-    out = [_line(s, pairs) for s, pairs in sorted(by_strategy.items())]
+    by_strategy = paired_rows(before, after, _key, "race")
+    out = [_line(s, pairs) for s, pairs in by_strategy.items()]
     if len(by_strategy) > 1:
-        out.append(_line(ALL, [p for _, pairs in sorted(by_strategy.items()) for p in pairs]))
+        out.append(_line(ALL, [p for pairs in by_strategy.values() for p in pairs]))
     return out
 
 
