@@ -34,6 +34,14 @@ class BarrierParams:
     ``|x|_eps = sqrt(x^2 + eps^2) - eps``, eps = 0.01 (the opponent's course angle where it is known, see
     :func:`barrier_expr`). 0 (the default): the ellipse of aligned cars [m], >= 0. Multi-car races set it
     through ``race.heading_extent``; decision: ``docs/decisions/multi-car-defaults.md``."""
+    heading_sides: str = neutral(choice("both", ("both", "toward")))
+    """Which turns of the ego widen the lateral semi-axis (only with ``heading_extent`` > 0). ``"both"`` (the
+    default): every turn, by ``|sin e|_eps``, whichever way the car points. ``"toward"``: with the opponent ahead
+    only as far as the ego's front end swings towards it, with the opponent behind only as far as its rear end
+    does; alongside (within about ``heading_extent`` of the opponent's reference point) every turn as with
+    ``"both"``, blended smoothly (:func:`~sofar_env.control.barrier.barrier_expr`). A car behind another and
+    turned away from it reaches no closer to it than an aligned one. Decision:
+    ``docs/decisions/heading-sides.md``."""
 
     def __post_init__(self) -> None:
         check_fields(self, "stack.mpc.barrier")

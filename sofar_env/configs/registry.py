@@ -182,6 +182,12 @@ def _sofar_14() -> StackConfig:
     return dataclasses.replace(base, miqp=dataclasses.replace(base.miqp, daqp_cycle_tol=100))
 
 
+def _sofar_15() -> StackConfig:
+    base = _sofar_13()
+    barrier = dataclasses.replace(base.mpc.barrier, heading_sides="toward")
+    return dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, barrier=barrier))
+
+
 DEFAULT_STACK_PRESET = "sofar-13"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
@@ -304,6 +310,11 @@ the whole horizon, as in multi-car races at equal pace, the planner's QP has a c
 and DAQP exits with its cycling flag at QPs whose optimum it reaches with the higher limit; the planner then fell
 back to its previous plan, about once per 2,700 car-steps of the default's multi-car races. A QP that never reaches
 10 is solved to the same bits (``docs/decisions/planner-cycling.md``)."""),
+    "sofar-15": Entry(_sofar_15(), """A candidate default, not the default: ``"sofar-13"`` with the barrier widened
+only by the turns that bring the ego closer (``mpc.barrier.heading_sides = "toward"``). ``"sofar-13"`` widens it by
+every turn of the ego, also when the car is behind another and points away from it, where its front end reaches no
+closer: in a parked field it then stands turned away from the car it passes, the widened ellipse holding it back
+and the edge it points at holding it in (``docs/decisions/heading-sides.md``)."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

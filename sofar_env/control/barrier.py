@@ -36,7 +36,11 @@ Choices and why
   0.4 rad), which happens in slow corners and chicanes. ``heading_extent`` widens ``b`` by that much
   times a smooth ``|sin e|`` of the ego's own heading error, plus as much for the opponent's rotation
   where the controller knows it: ``sin_course_o``, the sine of the opponent's course angle to the track
-  (its lateral rate over its speed, ``n_dot / v``), 0 where unknown.
+  (its lateral rate over its speed, ``n_dot / v``), 0 where unknown. That is what the end of a car
+  facing the other one needs when it swings towards it; a car well behind another and turned *away*
+  from it reaches no closer with its front end. ``heading_sides = "toward"`` widens by the ego's turn
+  only as far as the facing end swings towards the opponent, and by every turn alongside
+  (:func:`_toward`); ``"both"`` (the default) by every turn everywhere.
 * **Smooth max.** ``max(0, v_close)`` is replaced by the softplus
   ``softplus_k(x) = log(1 + exp(k x)) / k`` with sharpness ``k = 4 s/m``. It is an
   upper bound of ``max(0, x)`` (so the ellipse only gets longer), differs from it by
@@ -64,7 +68,11 @@ __all__ = ["BarrierParams", "barrier_expr", "barrier", "barrier_table", "casadi_
 
 
 _NUMPY_OPS = SimpleNamespace(abs=np.abs, exp=np.exp, log1p=np.log1p, tanh=np.tanh, sin=np.sin, sqrt=np.sqrt)
+_MATH_OPS = SimpleNamespace(abs=abs, exp=math.exp, log1p=math.log1p, tanh=math.tanh, sin=math.sin, sqrt=math.sqrt)
 _HEADING_EPS = 0.01
+_SIDE_SCALE = 0.5
+"""Lateral scale [m] of the smooth side ``tanh(dn / _SIDE_SCALE)`` of ``heading_sides = "toward"``: 0.96 of the
+full side at 1 m, where ``(dn / b)^2`` starts to matter."""
 
 
 def casadi_ops() -> SimpleNamespace:
@@ -101,9 +109,33 @@ def barrier_expr(s: Any, n: Any, v: Any, s_o: Any, n_o: Any, v_o: Any, p: Barrie
         return (ds / a) ** 2 + (dn / p.b) ** 2 - 1.0
     sin_e = ops.sin(e)
     eps2 = _HEADING_EPS ** 2
-    turned = ops.sqrt(sin_e * sin_e + eps2) + ops.sqrt(sin_course_o * sin_course_o + eps2) - 2.0 * _HEADING_EPS
+    if p.heading_sides == "both":
+        turned = ops.sqrt(sin_e * sin_e + eps2) + ops.sqrt(sin_course_o * sin_course_o + eps2) - 2.0 * _HEADING_EPS
+    else:
+        turned = _toward(ds, dn, sin_e, p.heading_extent, ops) + ops.sqrt(sin_course_o * sin_course_o + eps2) \
+            - _HEADING_EPS
     b = p.b + p.heading_extent * turned
     return (ds / a) ** 2 + (dn / b) ** 2 - 1.0
+
+
+def _toward(ds: Any, dn: Any, sin_e: Any, length: float, ops: Any = _NUMPY_OPS) -> Any:
+    """The ego's share of the widening with ``BarrierParams.heading_sides = "toward"`` [-].
+
+    ``end = tanh(ds / length)`` is +1 with the opponent well ahead (the ego's front end faces it), -1 well
+    behind (the rear end does); ``side = tanh(dn / SIDE_SCALE)`` the side the opponent is on. The end facing
+    the opponent swings towards it by ``length * sin(e) * side * end`` when that is > 0, and away otherwise,
+    so far from alongside the share is the smooth ``max(0, sin(e) * side * end)``. Alongside, a turn in either
+    direction brings one end closer (an end behind the opponent's near end, or the side between), so the
+    share blends to ``"both"``'s ``|sin e|_eps`` with weight ``1 - end^2``. With ``length`` half the car's
+    length that weight covers what a turned-away car needs: its side reaches ``(length - |ds|) |sin e|``
+    closer at ``|ds| < length``, and ``length (1 - tanh^2(ds / length)) |sin e|`` is at least that. The
+    smooth max is ``(x + |x|_eps) / 2``, within ``_HEADING_EPS / 2`` below 0 for x < 0."""
+    eps = _HEADING_EPS
+    end = ops.tanh(ds / length)
+    side = ops.tanh(dn / _SIDE_SCALE)
+    x = sin_e * side * end
+    both = ops.sqrt(sin_e * sin_e + eps * eps) - eps
+    return (1.0 - end * end) * both + end * end * 0.5 * (x + ops.sqrt(x * x + eps * eps) - eps)
 
 
 def barrier(ego: Any, opponents: Any, p: BarrierParams = BarrierParams()) -> np.ndarray:
@@ -219,6 +251,7 @@ def min_barrier(track, ego_frenet: np.ndarray, opponents: np.ndarray, params: Ba
     s, n, v, e = float(ego_frenet[0]), float(ego_frenet[1]), float(ego_frenet[3]), float(ego_frenet[2])
     p = params
     k, sigma, a0, two_brake = p.sharpness, p.sigma, p.a0, 2.0 * p.a_brake
+    toward = p.heading_extent != 0.0 and p.heading_sides == "toward"
     if p.heading_extent == 0.0:
         b = p.b
     else:  # sin_course_o = 0.0, as barrier_expr's default
@@ -229,6 +262,9 @@ def min_barrier(track, ego_frenet: np.ndarray, opponents: np.ndarray, params: Ba
     for row in np.asarray(opponents, float).tolist():
         ds = track.gap(row[0], s) - 0.0
         dn = row[1] - n
+        if toward:  # the widening depends on where the opponent is (_toward)
+            b = p.b + p.heading_extent * (_toward(ds, dn, sin_e, p.heading_extent, _MATH_OPS)
+                                          + math.sqrt(0.0 * 0.0 + eps2) - _HEADING_EPS)
         x = (v - row[2]) * math.tanh(ds / sigma)
         ax = abs(x)
         sp = 0.5 * (x + ax) + math.log1p(math.exp(-k * ax)) / k
