@@ -155,6 +155,61 @@ def test_heading_extent_certifies_no_contact_for_a_turned_ego():
     assert float(barrier(ego, opp, wide)) < -0.4
 
 
+def test_toward_widens_only_by_the_turn_of_the_end_that_faces_the_opponent():
+    """``heading_sides = "toward"``: with the opponent well ahead (10 m), a turn towards it widens the ellipse as
+    ``"both"`` does and a turn away from it not at all; with the opponent well behind, the other way round (the
+    rear end swings the other way); alongside, every turn widens it as ``"both"`` does. The same in numpy,
+    CasADi and min_barrier."""
+    from sofar_env.control.barrier import min_barrier
+
+    both, toward = BarrierParams(heading_extent=2.45), BarrierParams(heading_extent=2.45, heading_sides="toward")
+
+    def h(ds, dn, e, p):
+        return float(barrier(np.array([0.0, 0.0, e, 30.0, 0.0]), np.array([ds, dn, 30.0]), p))
+
+    for ds, dn in ((10.0, -2.5), (10.0, 2.5), (-10.0, -2.5), (-10.0, 2.5)):
+        closer = 0.3 * np.sign(dn) * np.sign(ds)  # the facing end swings towards the opponent
+        assert h(ds, dn, closer, toward) == pytest.approx(h(ds, dn, closer, both), abs=1e-2)
+        assert h(ds, dn, -closer, toward) == pytest.approx(h(ds, dn, 0.0, P), abs=1e-2)
+        assert h(ds, dn, -closer, toward) > h(ds, dn, -closer, both) + 0.05
+    for e in (-0.3, 0.3):
+        assert h(0.0, 2.5, e, toward) == pytest.approx(h(0.0, 2.5, e, both), abs=1e-12)
+    assert h(10.0, 2.5, 0.0, toward) == pytest.approx(h(10.0, 2.5, 0.0, both), abs=1e-12)
+    ego, opp = np.array([0.0, 0.4, 0.3, 12.0, 0.0]), np.array([6.6, -1.5, 2.0])
+    assert float(casadi_barrier(toward)(ego, opp)) == pytest.approx(float(barrier(ego, opp, toward)), abs=1e-12)
+
+    class _Straight:
+        @staticmethod
+        def gap(a, b):
+            return a - b
+
+    assert min_barrier(_Straight(), ego, opp[None], toward) == pytest.approx(float(barrier(ego, opp, toward)),
+                                                                            abs=1e-12)
+    with pytest.raises(ValueError, match="heading_sides"):
+        BarrierParams(heading_extent=2.45, heading_sides="away")
+
+
+def test_toward_still_certifies_no_contact_for_a_turned_ego():
+    """Widened only by the turns that bring a car's end closer, h < 0 still holds wherever the two footprints
+    touch, for any heading up to 1 rad (as for ``"both"``), while more of the states where they do not touch
+    read h >= 0: a car behind another and turned away from it is not held back."""
+    from sofar_env.configs.vehicle import AV21
+    from sofar_env.geometry import footprint_corners, rectangles_intersect
+
+    rng = np.random.default_rng(11)
+    n = 100_000
+    e, ds, dn = rng.uniform(-1.0, 1.0, n), rng.uniform(-8.0, 8.0, n), rng.uniform(-4.5, 4.5, n)
+    touch = rectangles_intersect(footprint_corners(np.zeros(n), np.zeros(n), e, AV21),
+                                 footprint_corners(ds, dn, np.zeros(n), AV21))
+    ego = np.stack([np.zeros(n), np.zeros(n), e, np.full(n, 5.0), np.zeros(n)], axis=-1)
+    opp = np.stack([ds, dn, np.full(n, 5.0)], axis=-1)
+    toward = barrier(ego, opp, BarrierParams(heading_extent=2.45, heading_sides="toward"))
+    both = barrier(ego, opp, BarrierParams(heading_extent=2.45))
+    assert touch.sum() > 10_000 and np.all(toward[touch] < 0.0)
+    assert np.all(toward >= both - 0.02)  # never much narrower than "both" (the smooth max dips by eps / 2)
+    assert np.sum(toward >= 0.0) > 1.1 * np.sum(both >= 0.0)
+
+
 def test_heading_extent_also_covers_the_opponents_course():
     """Rows (s, n, v, sin_course): the semi-axis widens by heading_extent |sin c|_eps for the opponent's
     course c as for the ego's heading; a course of 0 is the three-column row; without the option the course
@@ -181,11 +236,11 @@ def _table_numpy(xs, opp, p):
     return h, h.min(axis=0), float(h.min())
 
 
-@pytest.mark.parametrize("heading", [0.0, 2.45])
-def test_barrier_table_is_the_numpy_barrier_to_the_bit(heading):
+@pytest.mark.parametrize("heading,sides", [(0.0, "both"), (2.45, "both"), (2.45, "toward")])
+def test_barrier_table_is_the_numpy_barrier_to_the_bit(heading, sides):
     from sofar_env.control.barrier import barrier_table
 
-    p = BarrierParams(heading_extent=heading)
+    p = BarrierParams(heading_extent=heading, heading_sides=sides)
     rng = np.random.default_rng(3)
     for trial in range(300):
         k, m = int(rng.integers(1, 23)), int(rng.integers(1, 9))
@@ -212,8 +267,8 @@ def test_barrier_table_is_the_numpy_barrier_to_the_bit(heading):
     assert np.isnan(got[1]).all() and np.isnan(got[2]) and np.isnan(want[2])
 
 
-@pytest.mark.parametrize("heading", [0.0, 2.45])
-def test_min_barrier_is_barrier_expr_on_floats(heading):
+@pytest.mark.parametrize("heading,sides", [(0.0, "both"), (2.45, "both"), (2.45, "toward")])
+def test_min_barrier_is_barrier_expr_on_floats(heading, sides):
     """The inlined min_barrier against the generic expression evaluated with math's functions, to the bit."""
     import math
     from types import SimpleNamespace
@@ -226,7 +281,7 @@ def test_min_barrier_is_barrier_expr_on_floats(heading):
         def gap(self, s_o, s):
             return (s_o - s + 500.0) % 1000.0 - 500.0
 
-    p = BarrierParams(heading_extent=heading)
+    p = BarrierParams(heading_extent=heading, heading_sides=sides)
     rng = np.random.default_rng(9)
     for trial in range(300):
         ego = np.array([rng.uniform(0, 1000), rng.uniform(-5, 5), rng.uniform(-0.5, 0.5), rng.uniform(0, 80), 0.0])

@@ -38,6 +38,7 @@ PARKED_CASES = [
         "stalls at 36 s, where \"sofar-6\" passes all four; the barrier widened by the heading error (from "
         "\"sofar-11\" on) alone makes the difference, both ways (docs/decisions/default-controller.md)"))),
     ("sofar", "Monza", 1),
+    ("sofar-15", "LagunaSeca", 0),  # the candidate that widens the barrier only by the turns that bring it closer
 ]
 
 
