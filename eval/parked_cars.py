@@ -1,4 +1,4 @@
-"""Race the default stack against a parked field (rho = 0) and report who stops behind a parked car.
+"""Race a controller preset (default: the default) against a parked field (rho = 0); report who stops behind a car.
 
 With ``rho = 0`` the four opponents stand on their lines. Each run is one seeded episode of
 ``SOfAR-<Circuit>-v0`` with a fixed gamma for ``--duration`` seconds. Per run it prints a Markdown
@@ -8,7 +8,7 @@ planned the pass of near-stationary opponents (``parked_checks``) and took it (`
 longest standstill (slower than 1 m/s without interruption; a stop late in the race does not reach the
 stall rule's 20 s), the nearest approach to an opponent (reference points) and the smallest barrier
 value while an opponent is within 10 m (< 0: inside its barrier ellipse).
-Example (the 24 runs of the parked-car check)::
+Example (the 24 runs of the parked-car check; ``--stack NAME`` races another controller preset)::
 
     python eval/parked_cars.py --tracks LagunaSeca Monza Indianapolis Kentucky --seeds 0 1 2 3 4 5
 """
@@ -23,6 +23,7 @@ import numpy as np
 
 from sofar_agents.cli_types import gamma_value, nonneg_int, positive_float
 from sofar_env.constants import CIRCUITS
+from sofar_env.stack.config import STACK_PRESETS
 
 
 @dataclass(frozen=True)
@@ -50,13 +51,17 @@ class ParkedRun:
     ellipse; far away the closing-speed ellipse of the start dominates h); inf if none came that close."""
 
 
-def run(track: str, seed: int, duration: float, gamma: float, stack: dict | None = None) -> ParkedRun:
-    """One seeded race of the default stack (with ``stack`` overrides) against a parked field."""
+def run(track: str, seed: int, duration: float, gamma: float, stack: dict | str | None = None) -> ParkedRun:
+    """One seeded race against a parked field: of the default stack with the overrides ``stack`` (a dict), or of
+    the controller preset named ``stack``."""
     import gymnasium as gym
 
     import sofar_env  # noqa: F401  (registers the environments)
 
-    env = gym.make(f"SOfAR-{track}-v0", config={"race": {"duration": duration}, "stack": stack or {}})
+    if isinstance(stack, str):
+        env = gym.make(f"SOfAR-{track}-v0", config={"race": {"duration": duration}}, stack=stack)
+    else:
+        env = gym.make(f"SOfAR-{track}-v0", config={"race": {"duration": duration}, "stack": stack or {}})
     env.reset(seed=seed, options={"rho": 0.0})
     action = np.array([gamma], np.float32)
     info, terminated, truncated = {}, False, False
@@ -84,6 +89,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", nargs="+", type=nonneg_int, default=list(range(6)))
     parser.add_argument("--duration", type=positive_float, default=60.0, help="race duration [s]")
     parser.add_argument("--gamma", type=gamma_value, default=0.5, help="fixed barrier decay")
+    parser.add_argument("--stack", default="sofar", choices=STACK_PRESETS,
+                        help=f"controller preset, one of {', '.join(STACK_PRESETS)} (default sofar)")
     args = parser.parse_args(argv)
     print("| circuit | seed | end | time [s] | driven [m] | overtakes | parked checks | parked passes "
           "| standstill [s] | nearest [m] | min h within 10 m |")
@@ -91,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = []
     for track in args.tracks:
         for seed in args.seeds:
-            r = run(track, seed, args.duration, args.gamma)
+            r = run(track, seed, args.duration, args.gamma, args.stack)
             runs.append(r)
             print(f"| {r.track} | {r.seed} | {r.end} | {r.sim_time:.1f} | {r.distance:.0f} | {r.overtakes} "
                   f"| {r.parked_checks} | {r.parked_passes} | {r.standstill:.1f} | {r.nearest:.1f} "

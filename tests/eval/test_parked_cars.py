@@ -24,7 +24,8 @@ def test_parked_cars_reports_a_row_per_run():
 
 
 @pytest.mark.parametrize("args,words", [(["--duration", "0"], "argument --duration: must be a number > 0"),
-                                        (["--gamma", "2"], "argument --gamma: must lie in")])
+                                        (["--gamma", "2"], "argument --gamma: must lie in"),
+                                        (["--stack", "sofar-99"], "argument --stack: invalid choice")])
 def test_parked_cars_refuses_bad_options(args, words):
     proc = subprocess.run([sys.executable, str(ROOT / "eval" / "parked_cars.py"), *args],
                           capture_output=True, text=True, timeout=120)

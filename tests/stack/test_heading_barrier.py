@@ -45,3 +45,16 @@ def test_the_heading_widened_barrier_keeps_the_turned_car_away():
     info, terminated = _race("sofar-11")
     assert not terminated and info["is_success"] and not info["collision"] and not info["off_track"]
     assert info["sim_time"] >= 200.0 - 1e-6
+
+
+def test_sofar_15_is_sofar_13_with_the_toward_widening():
+    a, b = stack_preset("sofar-13"), stack_preset("sofar-15")
+    assert a.mpc.barrier.heading_sides == "both" and b.mpc.barrier.heading_sides == "toward"
+    toward = dataclasses.replace(a.mpc.barrier, heading_sides="toward")
+    assert b == dataclasses.replace(a, mpc=dataclasses.replace(a.mpc, barrier=toward))
+
+
+def test_the_toward_widening_keeps_the_turned_in_car_away():
+    """The turn-in scene is a turn *towards* the car beside the ego: ``"sofar-15"`` keeps its widening there."""
+    info, terminated = _race("sofar-15")
+    assert not terminated and info["is_success"] and not info["collision"] and not info["off_track"]
