@@ -122,7 +122,7 @@ def _toward(ds: Any, dn: Any, sin_e: Any, length: float, ops: Any = _NUMPY_OPS) 
     """The ego's share of the widening with ``BarrierParams.heading_sides = "toward"`` [-].
 
     ``end = tanh(ds / length)`` is +1 with the opponent well ahead (the ego's front end faces it), -1 well
-    behind (the rear end does); ``side = tanh(dn / SIDE_SCALE)`` the side the opponent is on. The end facing
+    behind (the rear end does); ``side = tanh(dn / _SIDE_SCALE)`` the side the opponent is on. The end facing
     the opponent swings towards it by ``length * sin(e) * side * end`` when that is > 0, and away otherwise,
     so far from alongside the share is the smooth ``max(0, sin(e) * side * end)``. Alongside, a turn in either
     direction brings one end closer (an end behind the opponent's near end, or the side between), so the

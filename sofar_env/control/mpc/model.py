@@ -118,7 +118,8 @@ def linearisation_function(stage, name: str):
     ``dh`` (3 x slots, dense) column i the gradient of ``h_i`` with respect to ``(s, n, v)``. With
     ``BarrierParams.heading_extent`` h also depends on the heading error; its linearisation keeps the
     widening of the ellipse at its value at the linearisation point (no gradient in e; the opponent's
-    course is a parameter).
+    course is a parameter); with ``heading_sides = "toward"`` the widening also varies with the gap and the
+    lateral offset, and the gradient in (s, n) includes that.
     """
     import casadi as ca
 
