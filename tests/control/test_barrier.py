@@ -126,6 +126,22 @@ def test_heading_extent_widens_the_lateral_semi_axis_with_the_egos_heading():
             BarrierParams(heading_extent=bad)
 
 
+def _random_poses(seed: int, n: int = 100_000):
+    """``n`` random relative poses of two AV-21 footprints on a straight track (the ego at the origin turned by up to
+    1 rad, the opponent aligned within 8 m ahead or behind and 4.5 m to either side, both at 5 m/s): whether the
+    footprints touch, the ego rows (s, n, e, v, delta) and the opponent rows (s, n, v)."""
+    from sofar_env.configs.vehicle import AV21
+    from sofar_env.geometry import footprint_corners, rectangles_intersect
+
+    rng = np.random.default_rng(seed)
+    e, ds, dn = rng.uniform(-1.0, 1.0, n), rng.uniform(-8.0, 8.0, n), rng.uniform(-4.5, 4.5, n)
+    touch = rectangles_intersect(footprint_corners(np.zeros(n), np.zeros(n), e, AV21),
+                                 footprint_corners(ds, dn, np.zeros(n), AV21))
+    ego = np.stack([np.zeros(n), np.zeros(n), e, np.full(n, 5.0), np.zeros(n)], axis=-1)
+    opp = np.stack([ds, dn, np.full(n, 5.0)], axis=-1)
+    return touch, ego, opp
+
+
 def test_heading_extent_certifies_no_contact_for_a_turned_ego():
     """The aligned ellipse certifies "no contact" only for aligned cars: an ego turned towards a car beside it
     touches it while h > 0 (by 0.9 at most). Widened by half the car's length times |sin e|, h < 0 wherever the
@@ -135,13 +151,7 @@ def test_heading_extent_certifies_no_contact_for_a_turned_ego():
     from sofar_env.geometry import footprint_corners, rectangles_intersect
 
     wide = BarrierParams(heading_extent=2.45)
-    rng = np.random.default_rng(7)
-    n = 100_000
-    e, ds, dn = rng.uniform(-1.0, 1.0, n), rng.uniform(-8.0, 8.0, n), rng.uniform(-4.5, 4.5, n)
-    touch = rectangles_intersect(footprint_corners(np.zeros(n), np.zeros(n), e, AV21),
-                                 footprint_corners(ds, dn, np.zeros(n), AV21))
-    ego = np.stack([np.zeros(n), np.zeros(n), e, np.full(n, 5.0), np.zeros(n)], axis=-1)
-    opp = np.stack([ds, dn, np.full(n, 5.0)], axis=-1)
+    touch, ego, opp = _random_poses(7)
     assert touch.sum() > 10_000
     assert np.all(barrier(ego, opp, wide)[touch] < 0.0)
     aligned = barrier(ego, opp, P)[touch]
@@ -193,16 +203,7 @@ def test_toward_still_certifies_no_contact_for_a_turned_ego():
     """Widened only by the turns that bring a car's end closer, h < 0 still holds wherever the two footprints
     touch, for any heading up to 1 rad (as for ``"both"``), while more of the states where they do not touch
     read h >= 0: a car behind another and turned away from it is not held back."""
-    from sofar_env.configs.vehicle import AV21
-    from sofar_env.geometry import footprint_corners, rectangles_intersect
-
-    rng = np.random.default_rng(11)
-    n = 100_000
-    e, ds, dn = rng.uniform(-1.0, 1.0, n), rng.uniform(-8.0, 8.0, n), rng.uniform(-4.5, 4.5, n)
-    touch = rectangles_intersect(footprint_corners(np.zeros(n), np.zeros(n), e, AV21),
-                                 footprint_corners(ds, dn, np.zeros(n), AV21))
-    ego = np.stack([np.zeros(n), np.zeros(n), e, np.full(n, 5.0), np.zeros(n)], axis=-1)
-    opp = np.stack([ds, dn, np.full(n, 5.0)], axis=-1)
+    touch, ego, opp = _random_poses(11)
     toward = barrier(ego, opp, BarrierParams(heading_extent=2.45, heading_sides="toward"))
     both = barrier(ego, opp, BarrierParams(heading_extent=2.45))
     assert touch.sum() > 10_000 and np.all(toward[touch] < 0.0)
