@@ -1,4 +1,4 @@
-"""Does PASTA's preference input move its gamma? Two measurements.
+"""Does PASTA's preference input move its gamma, and which of its gammas cost pace? Three measurements.
 
     python eval/pasta_preference.py probe                          # every variant, 2 seeds, 40,000 steps each
     python eval/pasta_preference.py probe --variants shipped "mu 0.1, mid start" --steps 120000
@@ -38,6 +38,7 @@ import numpy as np
 
 from sofar_agents.cli_types import float_in, gamma_value, nonneg_int, positive_int
 from sofar_agents.evaluation.files import write_text_atomic
+from sofar_agents.evaluation.protocol import RHOS, TRACKS
 from sofar_agents.evaluation.preference_probe import (
     PROBE_SAFETY_WEIGHTS,
     PROBE_VARIANTS,
@@ -152,6 +153,24 @@ def push(args: argparse.Namespace) -> None:
                      + push_table(pool_bins(runs), agent.objective_names))
 
 
+def floor(args: argparse.Namespace) -> None:
+    from sofar_agents.evaluation.gamma_floor import GammaFloor, run_floor_study
+    from sofar_agents.evaluation.pareto import preference_family
+    from sofar_agents.evaluation.sweep import incomplete_message
+    from sofar_agents.policies import NAMED_POLICIES, named_policy_path
+
+    policy = str(named_policy_path(args.policy)) if args.policy in NAMED_POLICIES else args.policy
+    floors = [GammaFloor(args.floor, where, args.radius) for where in args.where]
+    stats, path = run_floor_study(policy, preference_family([args.safety_weight])[0], floors, args.out,
+                                  gammas=args.gammas, tracks=args.tracks, rhos=args.rhos, episodes=args.episodes,
+                                  base_seed=args.seed, workers=args.workers, stack=args.stack,
+                                  scenario=args.scenario, n_opponents=args.opponents)
+    sys.stdout.write(path.read_text())
+    if stats.unfinished:
+        logger.error(incomplete_message(stats, args.out))
+        raise SystemExit(1)
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -185,13 +204,33 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     pu.add_argument("--rho-max", type=float_in(0.0, 1.0), default=0.8)
     pu.add_argument("--n-envs", type=positive_int, default=2, help="environments per rollout (default 2)")
     pu.add_argument("--rollouts", type=positive_int, default=6, help="rollouts (default 6)")
+    fl = sub.add_parser("floor", help="a checkpoint with its gamma floored in chosen states, on seeded episodes")
+    fl.add_argument("--policy", required=True, help="PASTA checkpoint (.json) or the name of a shipped policy")
+    fl.add_argument("--safety-weight", type=float_in(0.0, 0.9), default=0.1,
+                    help="the preference: safety this, overtakes 0.9 minus it (default 0.1, pace first)")
+    fl.add_argument("--floor", type=gamma_value, default=0.15, help="the gamma floor (default 0.15)")
+    fl.add_argument("--where", nargs="+", choices=["always", "far", "near"], default=["always", "far", "near"],
+                    help="where the floor holds: every step, with no opponent within --radius, with one (default all)")
+    fl.add_argument("--radius", type=float_in(0.1, 1000.0), default=20.0,
+                    help="distance to the nearest opponent that separates near from far [m] (default 20)")
+    fl.add_argument("--gammas", nargs="*", type=gamma_value, default=[0.05, 0.15, 0.3, 0.5],
+                    help="fixed gammas run on the same episodes (default 0.05 0.15 0.3 0.5)")
+    fl.add_argument("--scenario", default="interactive")
+    fl.add_argument("--opponents", type=nonneg_int, default=None)
+    fl.add_argument("--stack", default="sofar", help="controller preset (default: the default controller)")
+    fl.add_argument("--tracks", nargs="+", choices=list(TRACKS), default=list(TRACKS))
+    fl.add_argument("--rhos", nargs="+", type=float_in(0.0, 1.0), default=list(RHOS))
+    fl.add_argument("--episodes", type=positive_int, default=2, help="episodes per (track, rho) (default 2)")
+    fl.add_argument("--seed", type=nonneg_int, default=0, help="base seed of the episodes (default 0)")
+    fl.add_argument("--workers", type=positive_int, default=1)
+    fl.add_argument("--out", required=True, help="output folder (floor_episodes.csv, floor.md; resumes)")
     return p.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     args = parse_args(argv)
-    {"probe": probe, "respond": respond, "push": push}[args.command](args)
+    {"probe": probe, "respond": respond, "push": push, "floor": floor}[args.command](args)
 
 
 if __name__ == "__main__":

@@ -30,6 +30,11 @@ class EpisodeRunner:
 
     def run(self, task: EpisodeTask) -> tuple[EpisodeResult, list[tuple]]:
         """Run ``task``: its result and its trace rows (:func:`~sofar_agents.evaluation.episode.run_episode`)."""
+        env, policy = self.env_and_policy(task)
+        return run_episode(env, policy, task)
+
+    def env_and_policy(self, task: EpisodeTask) -> tuple[Any, Callable]:
+        """The environment and the policy of ``task``, built on first use and kept."""
         env = self.envs.get(task.env_key)
         if env is None:
             env = self.envs[task.env_key] = make_env(task.track, task.use_miqp, task.duration, task.stack,
@@ -37,7 +42,7 @@ class EpisodeRunner:
         policy = self.policies.get(task.strategy)
         if policy is None:
             policy = self.policies[task.strategy] = task.strategy.build()
-        return run_episode(env, policy, task)
+        return env, policy
 
     def close(self) -> None:
         """Close every environment built so far (errors while closing are ignored)."""
