@@ -164,7 +164,7 @@ def floor(args: argparse.Namespace) -> None:
     stats, path = run_floor_study(policy, preference_family([args.safety_weight])[0], floors, args.out,
                                   gammas=args.gammas, tracks=args.tracks, rhos=args.rhos, episodes=args.episodes,
                                   base_seed=args.seed, workers=args.workers, stack=args.stack,
-                                  scenario=args.scenario, n_opponents=args.opponents)
+                                  scenario=args.scenario, n_opponents=args.opponents, trace=args.trace)
     sys.stdout.write(path.read_text())
     if stats.unfinished:
         logger.error(incomplete_message(stats, args.out))
@@ -223,6 +223,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     fl.add_argument("--episodes", type=positive_int, default=2, help="episodes per (track, rho) (default 2)")
     fl.add_argument("--seed", type=nonneg_int, default=0, help="base seed of the episodes (default 0)")
     fl.add_argument("--workers", type=positive_int, default=1)
+    fl.add_argument("--trace", action="store_true",
+                    help="also record every control step (floor_trace.csv) and report gamma near and away from cars")
     fl.add_argument("--out", required=True, help="output folder (floor_episodes.csv, floor.md; resumes)")
     return p.parse_args(argv)
 

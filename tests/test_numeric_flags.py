@@ -126,6 +126,9 @@ USAGE_ERRORS = [  # (script, argv, the flag named in the message)
     ("eval/pasta_preference.py", ["respond", "--policy", "x", "--safety-weights", "0.95"], "--safety-weights"),
     ("eval/pasta_preference.py", ["push", "--policy", "x", "--rollouts", "0"], "--rollouts"),
     ("eval/pasta_preference.py", ["push", "--policy", "x", "--rho-max", "1.5"], "--rho-max"),
+    ("eval/pasta_preference.py", ["floor", "--policy", "x", "--out", "o", "--floor", "0.01"], "--floor"),
+    ("eval/pasta_preference.py", ["floor", "--policy", "x", "--out", "o", "--radius", "0"], "--radius"),
+    ("eval/pasta_preference.py", ["floor", "--policy", "x", "--out", "o", "--safety-weight", "0.95"], "--safety-weight"),
 ]
 
 

@@ -14,6 +14,7 @@ sweep and ``eval/paired.py --pareto FILE --b NAME`` pairs every variant with any
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -133,10 +134,33 @@ def floor_strategies(policy: str | os.PathLike, preference: Sequence[float], flo
     return strategies, named
 
 
-def _summary(rows: Sequence[Mapping[str, Any]], strategies: Sequence[Strategy], settings: Mapping[str, Any]) -> str:
+def _trace_columns(trace: Mapping[str, np.ndarray] | None, radius: float) -> str:
+    """``| steps traced | mean gamma near | mean gamma far | at the range's floor |`` of one strategy's trace."""
+    if trace is None or not len(trace["gamma"]):
+        return " | | | |"
+    g, d = trace["gamma"], trace["nearest_opponent_m"]
+    near = np.isfinite(d) & (d < radius)
+
+    def mean(mask: np.ndarray) -> str:
+        return f"{g[mask].mean():.3f} ({100.0 * mask.mean():.0f} %)" if mask.any() else "-"
+
+    at_floor = 100.0 * float(np.mean(g <= GAMMA_RANGE[0] + 1e-6))
+    return f" {len(g):,} | {mean(near)} | {mean(~near)} | {at_floor:.0f} % |"
+
+
+def _summary(rows: Sequence[Mapping[str, Any]], strategies: Sequence[Strategy], settings: Mapping[str, Any],
+             trace_path: Path | None, radius: float) -> str:
+    from sofar_agents.evaluation.results import read_trace_csv
+
     lines = ["# A policy's gamma floored in chosen states: success and pace on the same seeded episodes", ""]
     lines += [f"- {k}: {v}" for k, v in settings.items()]
-    lines += ["", "| strategy | episodes | success [%] | overtakes per hour | mean gamma |", "|---|---:|---:|---:|---:|"]
+    head = "| strategy | episodes | success [%] | overtakes per hour | mean gamma |"
+    rule = "|---|---:|---:|---:|---:|"
+    if trace_path is not None:
+        head += (f" steps traced | mean gamma, a car within {radius:g} m (share of steps) | beyond {radius:g} m "
+                 f"| steps at gamma {GAMMA_RANGE[0]:g} |")
+        rule += "---:|---:|---:|---:|"
+    lines += ["", head, rule]
     for strat in strategies:
         mine = [r for r in rows if r["strategy"] == strat.name]
         if not mine:
@@ -145,9 +169,15 @@ def _summary(rows: Sequence[Mapping[str, Any]], strategies: Sequence[Strategy], 
         rate = sum(int(r["overtakes"]) for r in mine) / hours if hours > 0 else 0.0
         success = 100.0 * sum(bool(r["success"]) for r in mine) / len(mine)
         gamma = float(np.mean([float(r["mean_gamma"]) for r in mine]))
-        lines.append(f"| {strat.name} | {len(mine)} | {success:.1f} | {rate:.0f} | {gamma:.3f} |")
+        line = f"| {strat.name} | {len(mine)} | {success:.1f} | {rate:.0f} | {gamma:.3f} |"
+        if trace_path is not None:
+            line += _trace_columns(read_trace_csv(trace_path, strat.name) if trace_path.exists() else None, radius)
+        lines.append(line)
     lines += ["", "Mean gamma: the gamma the environment applied (after the floor), averaged per episode, then over "
               "the episodes. Paired tests of any two rows: `python eval/paired.py --pareto <episodes csv> --b NAME`."]
+    if trace_path is not None:
+        lines.append("Traced columns: over the control steps of the traced episodes (`floor_trace.csv`), split by the "
+                     "nearest opponent's distance after the step.")
     return "\n".join(lines) + "\n"
 
 
@@ -156,11 +186,12 @@ def run_floor_study(policy: str | os.PathLike, preference: Sequence[float], floo
                     rhos: Sequence[float] = RHOS, episodes: int = 2, base_seed: int = 0,
                     duration: float = DEFAULT_DURATION, workers: int | None = None, progress: bool = True,
                     stack: str = "sofar", scenario: str = "paper",
-                    n_opponents: int | None = None) -> tuple[SweepStats, Path]:
+                    n_opponents: int | None = None, trace: bool = False) -> tuple[SweepStats, Path]:
     """Run (or resume) ``policy`` at ``preference``, floored by each of ``floors`` and as it is, and the fixed
     ``gammas``, on the seeded episodes of a Table I sweep (``tracks`` x ``rhos`` x ``episodes`` from
     ``base_seed``) into ``out_dir/floor_episodes.csv``; write ``out_dir/floor.md`` (one row per strategy).
-    Returns the run's statistics (``stats.unfinished`` episodes failed or were lost: a rerun retries them) and the
+    ``trace``: also record every control step (``out_dir/floor_trace.csv``) and report each strategy's gamma near
+    and away from cars (the radius of the first floor, 20 m without one). Returns the run's statistics (``stats.unfinished`` episodes failed or were lost: a rerun retries them) and the
     Markdown's path."""
     strategies, named = floor_strategies(policy, preference, floors, gammas)
     out = Path(out_dir)
@@ -168,14 +199,17 @@ def run_floor_study(policy: str | os.PathLike, preference: Sequence[float], floo
     tasks = table1_tasks(strategies, tracks, rhos, episodes, base_seed, duration, stack=stack, scenario=scenario,
                          n_opponents=n_opponents)
     csv_path = out / "floor_episodes.csv"
-    job = EpisodeJob(csv_path, None, partial(FloorRunner, named))
+    trace_path = out / "floor_trace.csv" if trace else None
+    if trace:
+        tasks = [dataclasses.replace(t, trace=True) for t in tasks]
+    job = EpisodeJob(csv_path, trace_path, partial(FloorRunner, named))
     stats = execute(tasks, job, workers=workers, backend="local", progress=progress, stats=SweepStats())
     rows = select_rows(read_episode_csv(csv_path), tasks)
     settings = {"policy": str(policy), "preference": "/".join(f"{w:.3g}" for w in preference),
                 "controller": stack, "world": scenario, "opponents": "default" if n_opponents is None else n_opponents,
                 "tracks": ", ".join(tracks), "rho": ", ".join(f"{r:g}" for r in rhos),
                 "episodes per (track, rho)": episodes, "base seed": base_seed, "horizon": f"{duration:g} s"}
-    md = _summary(rows, strategies, settings)
+    md = _summary(rows, strategies, settings, trace_path, floors[0].radius if floors else 20.0)
     if len(rows) < len(tasks):
         md += f"\n**Incomplete:** {len(tasks) - len(rows)} of {len(tasks)} episodes are missing; rerun to finish.\n"
     path = out / "floor.md"
