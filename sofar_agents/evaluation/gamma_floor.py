@@ -33,6 +33,7 @@ from sofar_agents.evaluation.results import read_episode_csv, select_rows
 from sofar_agents.evaluation.runner import EpisodeRunner
 from sofar_agents.evaluation.sweep import EpisodeJob, SweepStats
 from sofar_agents.executor import execute
+from sofar_env.constants import GAMMA_MAX, GAMMA_MIN
 
 __all__ = ["WHERES", "FloorGamma", "FloorRunner", "GammaFloor", "floor_strategies", "run_floor_study"]
 
@@ -40,7 +41,7 @@ WHERES: tuple[str, ...] = ("always", "far", "near")
 """Where a floor applies: every step, only when no opponent is within ``radius`` (``far``), only when one is
 (``near``)."""
 
-GAMMA_RANGE: tuple[float, float] = (0.05, 1.0)
+GAMMA_RANGE: tuple[float, float] = (GAMMA_MIN, GAMMA_MAX)
 """The environments' gamma range: a floor outside it would be clipped away or do nothing."""
 
 
