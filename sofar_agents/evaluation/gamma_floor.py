@@ -17,7 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -35,7 +35,7 @@ from sofar_agents.evaluation.sweep import EpisodeJob, SweepStats
 from sofar_agents.executor import execute
 from sofar_env.constants import GAMMA_MAX, GAMMA_MIN
 
-__all__ = ["WHERES", "FloorGamma", "FloorRunner", "GammaFloor", "floor_strategies", "run_floor_study"]
+__all__ = ["WHERES", "FloorGamma", "FloorReport", "FloorRunner", "GammaFloor", "floor_strategies", "run_floor_study"]
 
 WHERES: tuple[str, ...] = ("always", "far", "near")
 """Where a floor applies: every step, only when no opponent is within ``radius`` (``far``), only when one is
@@ -182,18 +182,29 @@ def _summary(rows: Sequence[Mapping[str, Any]], strategies: Sequence[Strategy], 
     return "\n".join(lines) + "\n"
 
 
+@dataclass
+class FloorReport:
+    """What :func:`run_floor_study` did: the run's statistics (``stats.unfinished`` episodes failed or were lost: a
+    rerun retries them), the Markdown summary and its path."""
+
+    stats: SweepStats
+    markdown: str
+    path: Path
+
+
 def run_floor_study(policy: str | os.PathLike, preference: Sequence[float], floors: Sequence[GammaFloor],
                     out_dir: str | os.PathLike, *, gammas: Sequence[float] = (), tracks: Sequence[str] = TRACKS,
                     rhos: Sequence[float] = RHOS, episodes: int = 2, base_seed: int = 0,
                     duration: float = DEFAULT_DURATION, workers: int | None = None, progress: bool = True,
-                    stack: str = "sofar", scenario: str = "paper",
-                    n_opponents: int | None = None, trace: bool = False) -> tuple[SweepStats, Path]:
+                    stack: str = "sofar", scenario: str = "paper", n_opponents: int | None = None,
+                    trace: bool = False, tasks_filter: Callable[[EpisodeTask], bool] | None = None
+                    ) -> FloorReport | None:
     """Run (or resume) ``policy`` at ``preference``, floored by each of ``floors`` and as it is, and the fixed
     ``gammas``, on the seeded episodes of a Table I sweep (``tracks`` x ``rhos`` x ``episodes`` from
     ``base_seed``) into ``out_dir/floor_episodes.csv``; write ``out_dir/floor.md`` (one row per strategy).
     ``trace``: also record every control step (``out_dir/floor_trace.csv``) and report each strategy's gamma near
-    and away from cars (the radius of the first floor, 20 m without one). Returns the run's statistics (``stats.unfinished`` episodes failed or were lost: a rerun retries them) and the
-    Markdown's path."""
+    and away from cars (the radius of the first floor, 20 m without one). ``tasks_filter`` (re-making committed
+    rows): run only the episodes it keeps, write no summary and return None."""
     strategies, named = floor_strategies(policy, preference, floors, gammas)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -204,9 +215,14 @@ def run_floor_study(policy: str | os.PathLike, preference: Sequence[float], floo
     if trace:
         tasks = [dataclasses.replace(t, trace=True) for t in tasks]
     job = EpisodeJob(csv_path, trace_path, partial(FloorRunner, named))
-    stats = execute(tasks, job, workers=workers, backend="local", progress=progress, stats=SweepStats())
+    run = tasks if tasks_filter is None else [t for t in tasks if tasks_filter(t)]
+    stats = execute(run, job, workers=workers, backend="local", progress=progress, stats=SweepStats())
+    if tasks_filter is not None:
+        return None
     rows = select_rows(read_episode_csv(csv_path), tasks)
-    settings = {"policy": str(policy), "preference": "/".join(f"{w:.3g}" for w in preference),
+    shown = Path(policy).resolve()
+    shown = shown.relative_to(Path.cwd()) if shown.is_relative_to(Path.cwd()) else shown
+    settings = {"policy": str(shown), "preference": "/".join(f"{w:.3g}" for w in preference),
                 "controller": stack, "world": scenario, "opponents": "default" if n_opponents is None else n_opponents,
                 "tracks": ", ".join(tracks), "rho": ", ".join(f"{r:g}" for r in rhos),
                 "episodes per (track, rho)": episodes, "base seed": base_seed, "horizon": f"{duration:g} s"}
@@ -215,4 +231,4 @@ def run_floor_study(policy: str | os.PathLike, preference: Sequence[float], floo
         md += f"\n**Incomplete:** {len(tasks) - len(rows)} of {len(tasks)} episodes are missing; rerun to finish.\n"
     path = out / "floor.md"
     write_text_atomic(path, md)
-    return stats, path
+    return FloorReport(stats, md, path)

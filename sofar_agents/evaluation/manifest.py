@@ -36,7 +36,7 @@ from typing import Any
 from sofar_agents.evaluation import manifest_replays as replays
 from sofar_agents.evaluation.configs import row_hash, write_config_json
 from sofar_agents.evaluation.files import write_json_atomic, write_text_atomic
-from sofar_agents.evaluation.manifest_spec import KINDS, Manifest, load_manifest, manifest_paths
+from sofar_agents.evaluation.manifest_spec import FLOOR_GAMMAS, KINDS, Manifest, load_manifest, manifest_paths
 from sofar_agents.evaluation.results import EPISODE_COLUMNS, LEGACY_STACK, read_csv_rows
 
 __all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths", "run_manifest", "record_path", "check_manifest",
@@ -103,7 +103,7 @@ def episode_ids(m: Manifest, root: str | os.PathLike) -> set[tuple]:
     if m.kind == "table2":
         tasks = miqp_ablation_tasks(strategies, m.episode_count, m.rhos, m.track, m.seed, m.duration, stack=m.stack,
                                     scenario=m.scenario)
-    elif m.kind in ("table1", "figures"):
+    elif m.kind in ("table1", "figures", "floor"):
         tasks = table1_tasks(strategies, m.tracks, m.rhos, m.episode_count, m.seed, m.duration, stack=m.stack,
                              scenario=m.scenario, n_opponents=m.opponents)
     else:
@@ -180,6 +180,15 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
         report = replays.run_pareto_rows(m, root, folder, tasks_filter, workers)
     elif m.kind == "pareto":
         report = replays.run_pareto_manifest(m, root, folder, workers, progress)
+    elif m.kind == "floor":
+        from sofar_agents.evaluation.gamma_floor import run_floor_study
+        from sofar_agents.evaluation.pareto import preference_family
+
+        report = run_floor_study(m.policy_path(root), preference_family(m.safety_weights)[0], m.floors(), folder,
+                                 gammas=FLOOR_GAMMAS if m.gammas is None else m.gammas, tracks=m.tracks, rhos=m.rhos,
+                                 episodes=m.episode_count, base_seed=m.seed, duration=m.duration, workers=workers,
+                                 progress=progress, stack=m.stack, scenario=m.scenario, n_opponents=m.opponents,
+                                 trace=m.trace, tasks_filter=tasks_filter)
     elif m.kind == "multi-agent":
         from sofar_agents.evaluation.multi_agent import run_multi_agent_table
 

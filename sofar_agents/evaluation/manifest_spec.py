@@ -11,13 +11,15 @@ with) and reads like the command line it replaces. Keys (:class:`Manifest`):
                    (:func:`~sofar_agents.evaluation.pareto.run_pareto`), ``"interventions"``
                    (:func:`~sofar_agents.evaluation.interventions.replay_interventions`), ``"figures"``
                    (Fig. 5: :func:`~sofar_agents.evaluation.figures.record_figure_episodes`, then
-                   :func:`~sofar_agents.evaluation.figures.plot_gamma_figures`) or ``"standing-start"`` (the
+                   :func:`~sofar_agents.evaluation.figures.plot_gamma_figures`), ``"standing-start"`` (the
                    standing-start probe of one controller:
-                   :func:`~sofar_agents.evaluation.standing_start.run_probe_manifest`); required
+                   :func:`~sofar_agents.evaluation.standing_start.run_probe_manifest`) or ``"floor"`` (a policy
+                   replayed with its gamma floored in chosen states:
+                   :func:`~sofar_agents.evaluation.gamma_floor.run_floor_study`); required
 ``out``            the results folder, relative to the repository root; required
 ``stack``          controller preset (default ``"sofar"``); ``scenario``: world (default ``"paper"``)
 ``seed``           base seed of the paired episode seeds (default 0)
-``episodes``       per (track, rho) for table1, pareto and figures, per (setting, strategy) for table2, races
+``episodes``       per (track, rho) for table1, pareto, figures and floor, per (setting, strategy) for table2, races
                    per circuit for multi-agent (defaults 5, 5, 3, 10, 4)
 ``duration``       episode horizon [s] (default 200)
 ``tracks``,        circuits and pace ratios (defaults: the paper's; ``track``: table2's circuit, default
@@ -46,6 +48,10 @@ with) and reads like the command line it replaces. Keys (:class:`Manifest`):
 ``clearances``     the edge [m] (default [0.5, 0.3, 0.15])
 ``drive_time``,    standing-start: simulated seconds per placement (default 8) and the arc length a run must
 ``min_distance``   gain to count as driving off [m] (default 5)
+``floor``,        floor: the gamma floor (default 0.15), where it holds (default ["always", "far", "near"]), the
+``where``,         distance that separates near from far [m] (default 20) and whether every step is recorded
+``radius``,        (default false); the policy runs at the one preference of ``safety_weights`` (one weight, given),
+``trace``          beside the fixed ``gammas`` (default [0.05, 0.15, 0.3, 0.5])
 ``description``    free text
 =================  ========================================================================================
 
@@ -68,15 +74,17 @@ from sofar_agents.evaluation.protocol import DEFAULT_DURATION, FIXED_GAMMAS, RHO
 
 __all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths"]
 
-KINDS = ("table1", "table2", "multi-agent", "pareto", "interventions", "figures", "standing-start")
+KINDS = ("table1", "table2", "multi-agent", "pareto", "interventions", "figures", "standing-start", "floor")
 """Command kinds a manifest may name."""
-DEFAULT_EPISODES = {"table1": 5, "pareto": 5, "figures": 3, "table2": 10, "multi-agent": 4}
+DEFAULT_EPISODES = {"table1": 5, "pareto": 5, "figures": 3, "table2": 10, "multi-agent": 4, "floor": 2}
 """Episodes per cell (races per circuit for multi-agent) of a manifest without ``episodes``, by kind."""
 DEFAULT_SAFETY_WEIGHTS = (0.1, 0.3, 0.5, 0.7, 0.9)
 """Safety weights of a pareto manifest's preferences (those of ``eval/pareto.py``)."""
 DEFAULT_SWITCH_GAMMAS = (0.15, 0.3, 0.6)
 """Gammas inside the window of an interventions manifest (those of ``eval/interventions.py``)."""
-_TUPLES = ("tracks", "rhos", "gammas", "safety_weights", "sources", "windows", "clearances")
+_TUPLES = ("tracks", "rhos", "gammas", "safety_weights", "sources", "windows", "clearances", "where")
+FLOOR_GAMMAS = (0.05, 0.15, 0.3, 0.5)
+"""The fixed gammas of a floor manifest without ``gammas`` (those of ``eval/pasta_preference.py floor``)."""
 
 
 def _toml_load(path: Path) -> dict[str, Any]:
@@ -126,6 +134,10 @@ class Manifest:
     clearances: tuple[float, ...] = (0.5, 0.3, 0.15)
     drive_time: float = 8.0
     min_distance: float = 5.0
+    floor: float = 0.15
+    where: tuple[str, ...] = ("always", "far", "near")
+    radius: float = 20.0
+    trace: bool = False
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -137,6 +149,22 @@ class Manifest:
             raise ValueError(f"manifest {self.name}: a {self.kind} folder has fixed file names; no prefix")
         if self.kind == "standing-start":
             self._check_probe()
+        if self.kind == "floor":
+            self.floors()  # raises for a bad floor, place or radius
+            if len(self.safety_weights) != 1:
+                raise ValueError(f"manifest {self.name}: a floor study runs the policy at one preference; "
+                                 f"safety_weights must hold one weight, got {list(self.safety_weights)}")
+
+    def floors(self) -> list:
+        """The :class:`~sofar_agents.evaluation.gamma_floor.GammaFloor` of a floor manifest, one per ``where``."""
+        from sofar_agents.evaluation.gamma_floor import GammaFloor
+
+        if not self.where:
+            raise ValueError(f"manifest {self.name}: where must name at least one place")
+        try:
+            return [GammaFloor(self.floor, w, self.radius) for w in self.where]
+        except ValueError as err:
+            raise ValueError(f"manifest {self.name}: {err}") from err
 
     def _check_probe(self) -> None:
         """The keys of a standing-start manifest."""
@@ -208,6 +236,12 @@ class Manifest:
             return [Strategy.fixed(self.base_gamma)]
         if self.kind == "standing-start":
             return [Strategy.fixed((self.gammas or (0.5,))[0])]
+        if self.kind == "floor":
+            from sofar_agents.evaluation.gamma_floor import floor_strategies
+            from sofar_agents.evaluation.pareto import preference_family
+
+            return floor_strategies(self.policy_path(root), preference_family(self.safety_weights)[0], self.floors(),
+                                    FLOOR_GAMMAS if self.gammas is None else self.gammas)[0]
         if self.kind == "pareto":
             from sofar_agents.evaluation.pareto import pareto_strategies, preference_family
 

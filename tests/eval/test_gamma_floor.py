@@ -77,18 +77,51 @@ def test_a_study_resumes_and_floors_only_its_own_rows(tmp_path):
     floors = [GammaFloor(1.0, "near", 1e-3)]  # never near: the floored policy must drive exactly as the plain one
     kwargs = dict(gammas=[0.3], tracks=["LagunaSeca"], rhos=[0.5], episodes=1, base_seed=7, duration=4.0,
                   workers=1, progress=False, stack="sofar", scenario="interactive", n_opponents=8, trace=True)
-    stats, md = run_floor_study(POLICY, PREFERENCE, floors, tmp_path, **kwargs)
-    assert stats.completed == 3 and stats.unfinished == 0
+    report = run_floor_study(POLICY, PREFERENCE, floors, tmp_path, **kwargs)
+    assert report.stats.completed == 3 and report.stats.unfinished == 0
     rows = {r["strategy"]: r for r in read_episode_csv(tmp_path / "floor_episodes.csv")}
     plain = rows["pasta w=0.1/0.8/0.0333/0.0333/0.0333"]
     floored = rows["pasta w=0.1/0.8/0.0333/0.0333/0.0333 floor 1 within 0.001 m"]
     for col in ("overtakes", "mean_gamma", "sim_time", "success", "seed", "config_hash"):
         assert floored[col] == plain[col], col
     assert rows["gamma=0.30"]["mean_gamma"] == pytest.approx(0.3)
-    text = md.read_text()
+    text = report.path.read_text()
+    assert text == report.markdown
     assert "| gamma=0.30 | 1 |" in text and "mean gamma, a car within 0.001 m" in text
     trace = read_trace_csv(tmp_path / "floor_trace.csv", "gamma=0.30")
     assert len(trace["gamma"]) == int(rows["gamma=0.30"]["steps"]) and np.allclose(trace["gamma"], 0.3)
     assert f"| {len(trace['gamma']):,} | - | 0.300 (100 %) | 0 % |" in text
-    again, _ = run_floor_study(POLICY, PREFERENCE, floors, tmp_path, **kwargs)
-    assert again.completed == 0 and again.skipped == 3
+    again = run_floor_study(POLICY, PREFERENCE, floors, tmp_path, **kwargs)
+    assert again.stats.completed == 0 and again.stats.skipped == 3
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    ('safety_weights = [0.1, 0.9]\n', "one preference"),
+    ('safety_weights = [0.1]\nwhere = ["behind"]\n', "where must be one of"),
+    ('safety_weights = [0.1]\nwhere = []\n', "at least one place"),
+    ('safety_weights = [0.1]\nfloor = 0.01\n', "floor must be a gamma"),
+    ('safety_weights = [0.1]\nradius = -1.0\n', "radius must be"),
+])
+def test_a_bad_floor_manifest_is_refused_naming_the_file(tmp_path, extra, message):
+    from sofar_agents.evaluation.manifest import load_manifest
+
+    path = tmp_path / "bad_floor.toml"
+    path.write_text(f'kind = "floor"\nout = "x"\npolicy = "{POLICY}"\n' + extra)
+    with pytest.raises(ValueError, match=message) as err:
+        load_manifest(path)
+    assert "bad_floor" in str(err.value)
+
+
+def test_a_floor_manifest_names_the_strategies_of_the_script(tmp_path):
+    from pathlib import Path
+
+    from sofar_agents.evaluation.manifest import episode_ids, load_manifest
+
+    root = Path(__file__).resolve().parents[2]
+    m = load_manifest(root / "experiments" / "interactive_dense_morl_floor_seed17300_sofar_13.toml")
+    names = [s.name for s in m.strategies(root)]
+    assert names == ["gamma=0.05", "gamma=0.15", "gamma=0.30", "gamma=0.50", "pasta w=0.1/0.8/0.0333/0.0333/0.0333",
+                     "pasta w=0.1/0.8/0.0333/0.0333/0.0333 floor 0.15",
+                     "pasta w=0.1/0.8/0.0333/0.0333/0.0333 floor 0.15 beyond 20 m",
+                     "pasta w=0.1/0.8/0.0333/0.0333/0.0333 floor 0.15 within 20 m"]
+    assert m.trace and m.csv_name == "floor_episodes.csv" and len(episode_ids(m, root)) == 8 * 40

@@ -170,9 +170,9 @@ def test_run_writes_manifest_json_and_rows_with_the_hash(tmp_path: Path) -> None
 
 
 def test_replay_manifests_are_their_scripts_settings() -> None:
-    """The interventions and pareto manifests resolve to the episodes and strategies their folders hold: the
-    failed episodes of the base gamma in the sources (every one replayed), and the pareto strategies with the
-    policy ids of the rows."""
+    """The interventions, pareto and floor manifests resolve to the episodes and strategies their folders hold: the
+    failed episodes of the base gamma in the sources (every one replayed), and the pareto and floor strategies with
+    the policy ids of the rows."""
     for path in MANIFESTS:
         m = mf.load_manifest(path)
         if m.kind == "interventions":
@@ -180,7 +180,7 @@ def test_replay_manifests_are_their_scripts_settings() -> None:
             assert {float(r["base_gamma"]) for r in rows} == {m.base_gamma}
             switches = {float(r["gamma"]) for r in rows if r["kind"] == "switch"}
             assert switches <= set(m.gammas or ()) and {r["stack"] for r in rows} == {m.stack}, m.name
-        elif m.kind == "pareto":
+        elif m.kind in ("pareto", "floor"):
             extra = EXTRA_STRATEGIES.get(m.name, set())
             rows = [r for r in mf.raw_rows(ROOT / m.out / m.csv_name, m.kind) if r["strategy"] not in extra]
             ids = {s.name: s.policy_id or "" for s in m.strategies(ROOT)}
