@@ -162,9 +162,9 @@ def floor(args: argparse.Namespace) -> None:
     policy = str(named_policy_path(args.policy)) if args.policy in NAMED_POLICIES else args.policy
     floors = [GammaFloor(args.floor, where, args.radius) for where in args.where]
     report = run_floor_study(policy, preference_family([args.safety_weight])[0], floors, args.out,
-                                  gammas=args.gammas, tracks=args.tracks, rhos=args.rhos, episodes=args.episodes,
-                                  base_seed=args.seed, workers=args.workers, stack=args.stack,
-                                  scenario=args.scenario, n_opponents=args.opponents, trace=args.trace)
+                             gammas=args.gammas, tracks=args.tracks, rhos=args.rhos, episodes=args.episodes,
+                             base_seed=args.seed, workers=args.workers, stack=args.stack,
+                             scenario=args.scenario, n_opponents=args.opponents, trace=args.trace)
     sys.stdout.write(report.markdown)
     if report.stats.unfinished:
         logger.error(incomplete_message(report.stats, args.out))
