@@ -38,6 +38,7 @@ import numpy as np
 
 from sofar_agents.cli_types import float_in, gamma_value, nonneg_int, positive_int
 from sofar_agents.evaluation.files import write_text_atomic
+from sofar_agents.evaluation.gamma_floor import FLOOR_GAMMAS, WHERES
 from sofar_agents.evaluation.protocol import RHOS, TRACKS
 from sofar_agents.evaluation.preference_probe import (
     PROBE_SAFETY_WEIGHTS,
@@ -209,12 +210,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     fl.add_argument("--safety-weight", type=float_in(0.0, 0.9), default=0.1,
                     help="the preference: safety this, overtakes 0.9 minus it (default 0.1, pace first)")
     fl.add_argument("--floor", type=gamma_value, default=0.15, help="the gamma floor (default 0.15)")
-    fl.add_argument("--where", nargs="+", choices=["always", "far", "near"], default=["always", "far", "near"],
+    fl.add_argument("--where", nargs="+", choices=list(WHERES), default=list(WHERES),
                     help="where the floor holds: every step, with no opponent within --radius, with one (default all)")
     fl.add_argument("--radius", type=float_in(0.1, 1000.0), default=20.0,
                     help="distance to the nearest opponent that separates near from far [m] (default 20)")
-    fl.add_argument("--gammas", nargs="*", type=gamma_value, default=[0.05, 0.15, 0.3, 0.5],
-                    help="fixed gammas run on the same episodes (default 0.05 0.15 0.3 0.5)")
+    fl.add_argument("--gammas", nargs="*", type=gamma_value, default=list(FLOOR_GAMMAS),
+                    help=f"fixed gammas run on the same episodes (default {' '.join(map(str, FLOOR_GAMMAS))})")
     fl.add_argument("--scenario", default="interactive")
     fl.add_argument("--opponents", type=nonneg_int, default=None)
     fl.add_argument("--stack", default="sofar", help="controller preset (default: the default controller)")

@@ -35,11 +35,15 @@ from sofar_agents.evaluation.sweep import EpisodeJob, SweepStats
 from sofar_agents.executor import execute
 from sofar_env.constants import GAMMA_MAX, GAMMA_MIN
 
-__all__ = ["WHERES", "FloorGamma", "FloorReport", "FloorRunner", "GammaFloor", "floor_strategies", "run_floor_study"]
+__all__ = ["FLOOR_GAMMAS", "WHERES", "FloorGamma", "FloorReport", "FloorRunner", "GammaFloor", "floor_strategies",
+           "run_floor_study"]
 
 WHERES: tuple[str, ...] = ("always", "far", "near")
 """Where a floor applies: every step, only when no opponent is within ``radius`` (``far``), only when one is
 (``near``)."""
+
+FLOOR_GAMMAS: tuple[float, ...] = (0.05, 0.15, 0.3, 0.5)
+"""The fixed gammas a floor study runs beside the policy unless told otherwise (the script's and a manifest's)."""
 
 GAMMA_RANGE: tuple[float, float] = (GAMMA_MIN, GAMMA_MAX)
 """The environments' gamma range: a floor outside it would be clipped away or do nothing."""

@@ -36,7 +36,7 @@ from typing import Any
 from sofar_agents.evaluation import manifest_replays as replays
 from sofar_agents.evaluation.configs import row_hash, write_config_json
 from sofar_agents.evaluation.files import write_json_atomic, write_text_atomic
-from sofar_agents.evaluation.manifest_spec import FLOOR_GAMMAS, KINDS, Manifest, load_manifest, manifest_paths
+from sofar_agents.evaluation.manifest_spec import KINDS, Manifest, load_manifest, manifest_paths
 from sofar_agents.evaluation.results import EPISODE_COLUMNS, LEGACY_STACK, read_csv_rows
 
 __all__ = ["KINDS", "Manifest", "load_manifest", "manifest_paths", "run_manifest", "record_path", "check_manifest",
@@ -185,7 +185,7 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
         from sofar_agents.evaluation.pareto import preference_family
 
         report = run_floor_study(m.policy_path(root), preference_family(m.safety_weights)[0], m.floors(), folder,
-                                 gammas=FLOOR_GAMMAS if m.gammas is None else m.gammas, tracks=m.tracks, rhos=m.rhos,
+                                 gammas=m.floor_gammas, tracks=m.tracks, rhos=m.rhos,
                                  episodes=m.episode_count, base_seed=m.seed, duration=m.duration, workers=workers,
                                  progress=progress, stack=m.stack, scenario=m.scenario, n_opponents=m.opponents,
                                  trace=m.trace, tasks_filter=tasks_filter)

@@ -83,8 +83,6 @@ DEFAULT_SAFETY_WEIGHTS = (0.1, 0.3, 0.5, 0.7, 0.9)
 DEFAULT_SWITCH_GAMMAS = (0.15, 0.3, 0.6)
 """Gammas inside the window of an interventions manifest (those of ``eval/interventions.py``)."""
 _TUPLES = ("tracks", "rhos", "gammas", "safety_weights", "sources", "windows", "clearances", "where")
-FLOOR_GAMMAS = (0.05, 0.15, 0.3, 0.5)
-"""The fixed gammas of a floor manifest without ``gammas`` (those of ``eval/pasta_preference.py floor``)."""
 
 
 def _toml_load(path: Path) -> dict[str, Any]:
@@ -135,7 +133,7 @@ class Manifest:
     drive_time: float = 8.0
     min_distance: float = 5.0
     floor: float = 0.15
-    where: tuple[str, ...] = ("always", "far", "near")
+    where: tuple[str, ...] | None = None
     radius: float = 20.0
     trace: bool = False
     description: str = ""
@@ -156,15 +154,24 @@ class Manifest:
                                  f"safety_weights must hold one weight, got {list(self.safety_weights)}")
 
     def floors(self) -> list:
-        """The :class:`~sofar_agents.evaluation.gamma_floor.GammaFloor` of a floor manifest, one per ``where``."""
-        from sofar_agents.evaluation.gamma_floor import GammaFloor
+        """The :class:`~sofar_agents.evaluation.gamma_floor.GammaFloor` of a floor manifest, one per ``where``
+        (None: every place, :data:`~sofar_agents.evaluation.gamma_floor.WHERES`)."""
+        from sofar_agents.evaluation.gamma_floor import WHERES, GammaFloor
 
-        if not self.where:
+        if self.where is not None and not self.where:
             raise ValueError(f"manifest {self.name}: where must name at least one place")
         try:
-            return [GammaFloor(self.floor, w, self.radius) for w in self.where]
+            return [GammaFloor(self.floor, w, self.radius) for w in (WHERES if self.where is None else self.where)]
         except ValueError as err:
             raise ValueError(f"manifest {self.name}: {err}") from err
+
+    @property
+    def floor_gammas(self) -> tuple[float, ...]:
+        """The fixed gammas of a floor manifest: ``gammas``, else
+        :data:`~sofar_agents.evaluation.gamma_floor.FLOOR_GAMMAS`."""
+        from sofar_agents.evaluation.gamma_floor import FLOOR_GAMMAS
+
+        return FLOOR_GAMMAS if self.gammas is None else self.gammas
 
     def _check_probe(self) -> None:
         """The keys of a standing-start manifest."""
@@ -241,7 +248,7 @@ class Manifest:
             from sofar_agents.evaluation.pareto import preference_family
 
             return floor_strategies(self.policy_path(root), preference_family(self.safety_weights)[0], self.floors(),
-                                    FLOOR_GAMMAS if self.gammas is None else self.gammas)[0]
+                                    self.floor_gammas)[0]
         if self.kind == "pareto":
             from sofar_agents.evaluation.pareto import pareto_strategies, preference_family
 
