@@ -64,7 +64,8 @@ def test_no_numeric_flag_takes_a_bare_int_or_float(path, parse_only):
             "bench/bench_train.py": ["--compare", "HEAD"], "eval/reference_numerics.py": ["sweep"],
             "eval/manifest.py": ["list"], "eval/pasta_preference.py": ["probe"],
             "eval/stall_probe.py": ["x.csv", "--out", "x"],
-            "eval/off_tracks.py": ["--replay", "x.csv", "--out", "x"]}.get(path, [])
+            "eval/off_tracks.py": ["--replay", "x.csv", "--out", "x"],
+            "eval/training_env.py": ["record", "--checkpoint", "x.json", "--out", "x.npz"]}.get(path, [])
     parser = _run(path, argv).parser
     actions = list(parser._actions)
     for sub in (a for a in parser._actions if isinstance(a, argparse._SubParsersAction)):
@@ -74,6 +75,8 @@ def test_no_numeric_flag_takes_a_bare_int_or_float(path, parse_only):
 
 
 USAGE_ERRORS = [  # (script, argv, the flag named in the message)
+    ("eval/training_env.py", ["record", "--checkpoint", "x.json", "--out", "x.npz", "--episodes", "0"], "--episodes"),
+    ("eval/training_env.py", ["record", "--checkpoint", "x.json", "--out", "x.npz", "--steps", "-3"], "--steps"),
     ("eval/table.py", ["--episodes", "0"], "--episodes"),
     ("eval/table.py", ["--episodes", "-2"], "--episodes"),
     ("eval/table.py", ["--duration", "0"], "--duration"),

@@ -9,6 +9,7 @@ of the one it replaces, or those of a new file (:mod:`sofar_agents.file_modes`).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tempfile
@@ -17,7 +18,7 @@ from typing import Any
 
 from sofar_agents.file_modes import publish_mode
 
-__all__ = ["write_bytes_atomic", "write_text_atomic", "write_json_atomic"]
+__all__ = ["content_id", "write_bytes_atomic", "write_text_atomic", "write_json_atomic"]
 
 
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
@@ -47,3 +48,13 @@ def write_json_atomic(path: str | os.PathLike, data: Any, *, trailing_newline: b
     anything is written, so data that cannot be serialised leave the file as it was."""
     text = json.dumps(data, **dump) + ("\n" if trailing_newline else "")
     return write_text_atomic(path, text)
+
+
+def content_id(*paths: str | os.PathLike) -> str:
+    """First 10 hex digits of the SHA-1 of the files' contents, in order (a policy's id in result rows)."""
+    h = hashlib.sha1()
+    for path in paths:
+        with open(path, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                h.update(chunk)
+    return h.hexdigest()[:10]

@@ -21,7 +21,6 @@ reusing rows of the old configuration.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import warnings
 import zlib
@@ -32,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from sofar_agents.evaluation.files import content_id
 from sofar_env.constants import CIRCUIT_ABBREVIATIONS, EPISODE_SECONDS, TABLE_ORDER
 from sofar_env.constants import FIXED_GAMMAS as _FIXED_GAMMAS
 from sofar_env.constants import RHOS as _RHOS
@@ -90,12 +90,12 @@ class Strategy:
         if preference is not None:
             preference = tuple(float(w) for w in preference)
             load_policy(json_path, preference=preference)  # raises now for a preference the policy cannot take
-        return cls(name=name, kind="policy", path=str(json_path), policy_id=_file_id(json_path, pt_path),
+        return cls(name=name, kind="policy", path=str(json_path), policy_id=content_id(json_path, pt_path),
                    preference=preference)
 
     @classmethod
     def sb3(cls, path: str | os.PathLike, name: str = "sb3") -> Strategy:
-        return cls(name=name, kind="sb3", path=str(path), policy_id=_file_id(path))
+        return cls(name=name, kind="sb3", path=str(path), policy_id=content_id(path))
 
     @property
     def label(self) -> str:
@@ -129,16 +129,6 @@ def gamma_text(gamma: float) -> str:
     g = float(gamma)
     two = f"{g:.2f}"
     return two if float(two) == g else repr(g)
-
-
-def _file_id(*paths: str | os.PathLike) -> str:
-    """First 10 hex digits of the SHA-1 of the files' contents."""
-    h = hashlib.sha1()
-    for path in paths:
-        with open(path, "rb") as f:
-            for chunk in iter(lambda: f.read(1 << 20), b""):
-                h.update(chunk)
-    return h.hexdigest()[:10]
 
 
 def _limit_torch_threads() -> None:

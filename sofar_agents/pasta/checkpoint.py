@@ -11,7 +11,9 @@ A checkpoint is a pair of files with a common stem (format_version 1):
   ``rollout`` state to resume from (:mod:`sofar_agents.pasta.resume`; absent when the agent has not
   collected yet) and ``training`` metadata (command, seed, env, code version, steps, wall time; for an
   agent trained by ``train/pasta.py``, the training environment's ``env_config_hash`` and resolved
-  ``env_config``: :mod:`sofar_agents.pasta.env_record`). Every
+  ``env_config``: :mod:`sofar_agents.pasta.env_record`; a checkpoint written before that record gains it
+  from seeded replays under its training commit, with ``env_config_reconstructed`` saying how:
+  :mod:`sofar_agents.pasta.env_reconstruction`). Every
   field and its check: :mod:`sofar_agents.pasta.checkpoint_meta`.
 - ``<stem>.pt``: ``torch.save`` of a dict of tensors and state dicts only (``actor``,
   ``critic``, ``optimizer``, the return normaliser statistics, the utopia, the agent's torch
@@ -57,6 +59,7 @@ import numpy as np
 from sofar_agents.file_modes import publish_mode
 from sofar_agents.pasta.checkpoint_meta import FORMAT_VERSION, validate_metadata
 from sofar_agents.pasta.config import PASTAConfig
+from sofar_agents.pasta.env_reconstruction import sidecar_record
 from sofar_agents.pasta.env_record import training_env_record
 from sofar_agents.pasta.resume import RolloutState, check_rollout_meta
 
@@ -410,4 +413,6 @@ def load_agent(cls: type[PASTA], path: str | Path) -> PASTA:
     if rollout is not None:
         agent._rollout.restore(rollout)
     agent.metadata = copy.deepcopy(meta.get("training", {}))
+    if "env_config_hash" not in agent.metadata:  # written before the record: its sidecar, if replayed since
+        agent.metadata.update(sidecar_record(Path(json_path)))
     return agent

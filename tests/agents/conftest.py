@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 from pathlib import Path
+from types import ModuleType
 
 import gymnasium as gym
 import pytest
@@ -25,3 +28,14 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[PASTA, Path]:
     venv.close()
     path = agent.save(tmp_path_factory.mktemp("ckpt") / "agent", metadata={"command": "test", "seed": 7})
     return agent, path
+
+
+@pytest.fixture(scope="session")
+def training_env_script() -> ModuleType:
+    """``eval/training_env.py`` as a module (its ``record_single``, ``record_race``, ``main``)."""
+    path = Path(__file__).resolve().parents[2] / "eval" / "training_env.py"
+    spec = importlib.util.spec_from_file_location("eval_training_env", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
