@@ -19,6 +19,7 @@ then_ c24fe75 dynamic results/dynamic/pasta_dynamic.json
 then_ 6c282d1 dynamic results/dynamic/pasta_dynamic_low.json
 then_ bfadab9 race4 results/multi_agent/selfplay_lagunaseca.json
 then_ 8605e0d race4 results/multi_agent/selfplay_lagunaseca.json
+then_ bf41b6a paper_stack sofar_agents/checkpoints/pasta_lagunaseca_paper.json  # the commit of results/paper_stack/avx2
 now_() {  # name, checkpoint, keyword arguments as named today
   local name=$1 ckpt=$2; shift 2
   python eval/training_env.py record --checkpoint "$ckpt" --out "$D/now_$name.npz" "$@"
