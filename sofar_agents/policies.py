@@ -183,6 +183,7 @@ NAMED_POLICIES: dict[str, str] = {
     "lagunaseca-interactive-sofar-4": "pasta_lagunaseca_interactive_sofar4.json",
     "morl-dynamic": "pasta_morl_dynamic.json",
     "morl-dynamic-sofar-13": "pasta_morl_dynamic_sofar13.json",
+    "morl-dynamic-sofar-13-sigmoid": "pasta_morl_dynamic_sofar13_sigmoid.json",
     "morl-dynamic-sofar-6": "pasta_morl_dynamic_sofar6.json",
     "morl-dynamic-sofar-4": "pasta_morl_dynamic_sofar4.json",
     "morl-interactive-sofar-13": "pasta_morl_interactive_sofar13.json",
@@ -201,9 +202,10 @@ cautious end of the gamma range with a preference drawn every 64 decisions along
 (``preference_sampling="trade-off"``); ``morl-dynamic-sofar-4`` and ``morl-interactive-sofar-4``: the same
 recipes with ``"sofar-4"``; ``morl-dynamic-sofar-13`` and ``morl-interactive-sofar-13``: with the default
 ``"sofar-13"`` (fronts: ``results/interactive_dense/morl_sofar13/``, ``results/dynamic/morl_sofar13/``);
-``morl-interactive-sofar-13-sigmoid``: the dense world's recipe with the action squashed by a sigmoid instead of
-clipped and GAE lambda 0.99, whose front is the closest to the fixed gammas' (``docs/decisions/pasta-preference.md``,
-``results/interactive_dense/morl_sofar13/sigmoid/``). Their gamma falls as the safety weight grows
+``morl-interactive-sofar-13-sigmoid`` and ``morl-dynamic-sofar-13-sigmoid``: the same recipes with the action
+squashed by a sigmoid instead of clipped and GAE lambda 0.99, whose fronts are the closest to the fixed gammas'
+(``docs/decisions/pasta-preference.md``, ``results/interactive_dense/morl_sofar13/sigmoid/``,
+``results/dynamic/morl_sofar13/sigmoid/``). Their gamma falls as the safety weight grows
 (``tests/agents/test_policies.py``, ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic
 world's first such policy, trained with ``"sofar-1"`` from the middle of the range."""
 
