@@ -203,8 +203,8 @@ cautious end of the gamma range with a preference drawn every 64 decisions along
 recipes with ``"sofar-4"``; ``morl-dynamic-sofar-13`` and ``morl-interactive-sofar-13``: with the default
 ``"sofar-13"`` (fronts: ``results/interactive_dense/morl_sofar13/``, ``results/dynamic/morl_sofar13/``);
 ``morl-interactive-sofar-13-sigmoid`` and ``morl-dynamic-sofar-13-sigmoid``: the same recipes with the action
-squashed by a sigmoid instead of clipped and GAE lambda 0.99, whose fronts are the closest to the fixed gammas'
-(``docs/decisions/pasta-preference.md``, ``results/interactive_dense/morl_sofar13/sigmoid/``,
+squashed by a sigmoid instead of clipped and GAE lambda 0.99: faster at every preference than the clipped ones,
+weaker at the cautious end (``docs/decisions/pasta-preference.md``, ``results/interactive_dense/morl_sofar13/sigmoid/``,
 ``results/dynamic/morl_sofar13/sigmoid/``). Their gamma falls as the safety weight grows
 (``tests/agents/test_policies.py``, ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic
 world's first such policy, trained with ``"sofar-1"`` from the middle of the range."""
