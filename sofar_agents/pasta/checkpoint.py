@@ -11,9 +11,9 @@ A checkpoint is a pair of files with a common stem (format_version 1):
   ``rollout`` state to resume from (:mod:`sofar_agents.pasta.resume`; absent when the agent has not
   collected yet) and ``training`` metadata (command, seed, env, code version, steps, wall time; for an
   agent trained by ``train/pasta.py``, the training environment's ``env_config_hash`` and resolved
-  ``env_config``: :mod:`sofar_agents.pasta.env_record`; a checkpoint written before that record gains it
-  from seeded replays under its training commit, with ``env_config_reconstructed`` saying how:
-  :mod:`sofar_agents.pasta.env_reconstruction`). Every
+  ``env_config``: :mod:`sofar_agents.pasta.env_record`; a checkpoint written before that record may have a
+  sidecar ``<stem>.training_env.json``, recovered by seeded replays under its training commit, whose fields
+  loading adds to the metadata: :mod:`sofar_agents.pasta.env_reconstruction`). Every
   field and its check: :mod:`sofar_agents.pasta.checkpoint_meta`.
 - ``<stem>.pt``: ``torch.save`` of a dict of tensors and state dicts only (``actor``,
   ``critic``, ``optimizer``, the return normaliser statistics, the utopia, the agent's torch
