@@ -5,8 +5,6 @@ set -e
 D=results/training_envs
 B="python eval/training_env.py backfill"
 NOTE1="stage 1 (dca1c31 + uncommitted controller work): the code it ran is in no commit"
-$B sofar_agents/checkpoints/pasta_lagunaseca.json --evidence $D/then_074fb0c_paper.npz $D/now_paper.npz --unverified "$NOTE1" \
-    --note "074fb0c and sofar-1 part at decision 49: git bisect puts the change at f2e0003 (the controller follows a car alongside when braking drops it behind, with a hysteresis), made before controllers had versioned names; sofar-1 with the two settings that commit added turned off (follow_alongside false, follow_release_slack = follow_slack) differs earlier (the reward of decision 1); no registered configuration is the one stage 2 trained with"
 $B sofar_agents/checkpoints/pasta_lagunaseca_interactive.json --evidence $D/then_3134d23_interactive8.npz $D/now_interactive8.npz
 $B sofar_agents/checkpoints/pasta_lagunaseca_paper.json --evidence $D/then_2ab0661_paper_stack.npz $D/now_paper_stack.npz
 $B results/interactive_dense/pasta_midstart.json --evidence $D/then_2ab0661_interactive8.npz $D/now_interactive8.npz

@@ -8,7 +8,10 @@ then_() {  # commit, name, checkpoint
   [ -d "$dir" ] || git worktree add -f "$dir" "$1" --detach >/dev/null
   PYTHONPATH="$dir" python eval/training_env.py record --checkpoint "$3" --out "$D/then_$1_$2.npz"
 }
-then_ 074fb0c paper sofar_agents/checkpoints/pasta_lagunaseca.json
+# The first single-car policy as it was before it was re-trained with "sofar-1" (its JSON at f9726b0): the first
+# stage of the self-play policy continued it.
+OLD=$(mktemp --suffix=.json) && git show f9726b0:sofar_agents/checkpoints/pasta_lagunaseca.json > "$OLD"
+then_ 074fb0c paper "$OLD"
 then_ 3134d23 interactive8 sofar_agents/checkpoints/pasta_lagunaseca_interactive.json
 then_ 2ab0661 paper_stack sofar_agents/checkpoints/pasta_lagunaseca_paper.json
 then_ 2ab0661 interactive8 results/interactive_dense/pasta_midstart.json
@@ -24,7 +27,7 @@ now_() {  # name, checkpoint, keyword arguments as named today
   local name=$1 ckpt=$2; shift 2
   python eval/training_env.py record --checkpoint "$ckpt" --out "$D/now_$name.npz" "$@"
 }
-now_ paper sofar_agents/checkpoints/pasta_lagunaseca.json --set stack=sofar-1
+now_ paper "$OLD" --set stack=sofar-1
 now_ interactive8 sofar_agents/checkpoints/pasta_lagunaseca_interactive.json --set stack=sofar-1
 now_ paper_stack sofar_agents/checkpoints/pasta_lagunaseca_paper.json
 now_ dynamic results/dynamic/pasta_dynamic.json --set stack=sofar-1

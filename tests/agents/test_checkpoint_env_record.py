@@ -45,13 +45,6 @@ def _committed_checkpoints() -> list:
     return [p for p in paths if "weights_file" in json.loads(p.read_text())]
 
 
-NOT_RECONSTRUCTIBLE = {"pasta_lagunaseca.json"}
-"""Committed checkpoints whose training environment no registered configuration reproduces: written before
-checkpoints recorded it, and replayed under their training commit (``eval/training_env.py``) differently from
-what the recorded name means today (``pasta_lagunaseca.json``: the controller of 074fb0c, changed at f2e0003
-before controllers had versioned names). Their sidecar holds the replay's record and no hash."""
-
-
 def _training_env(path: Path) -> dict:
     """The checkpoint's own record of its training environment, or else its sidecar's (written by replay)."""
     training = json.loads(path.read_text())["training"]
@@ -64,15 +57,12 @@ def _training_env(path: Path) -> dict:
     return side
 
 
-def test_every_committed_checkpoint_carries_its_training_config_hash_or_the_replay_that_says_why_not() -> None:
+def test_every_committed_checkpoint_carries_its_training_config_hash() -> None:
     paths = _committed_checkpoints()
     assert len(paths) >= 10
     for path in paths:
         record = _training_env(path)
         replayed = record.get("env_config_reconstructed")
-        if path.name in NOT_RECONSTRUCTIBLE:
-            assert "env_config_hash" not in record and not replayed["stages"][-1]["identical"], path
-            continue
         assert record["env_config_hash"] == hash_of_canonical(record["env_config"]), path
         assert PASTA.load(path).metadata["env_config_hash"] == record["env_config_hash"], path
         if replayed is not None:  # recovered by replay: the name it was replayed under still means that config
@@ -80,7 +70,6 @@ def test_every_committed_checkpoint_carries_its_training_config_hash_or_the_repl
             meta = {"env_id": last["env_id"], "env_kwargs": last["env_kwargs_now"], "multi_agent": last["multi_agent"]}
             assert last["identical"] and last["env_config_hash"] == record["env_config_hash"], path
             assert training_env_record(meta)["env_config_hash"] == record["env_config_hash"], path
-    assert NOT_RECONSTRUCTIBLE <= {p.name for p in paths}
 
 
 def test_the_reconstructed_environments_still_replay_what_their_training_commits_recorded(training_env_script) -> None:
