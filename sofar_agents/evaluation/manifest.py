@@ -47,6 +47,9 @@ logger = logging.getLogger(__name__)
 
 _NOT_COMPARED = ("wall_time", "config_hash")
 """Columns that :func:`rerun_rows` does not compare (the wall time varies; old rows have no hash)."""
+_NOT_RECORDED = {"miqp_failures": "-1"}
+"""Committed values that stand for "not recorded": a row written before its file had the column, kept with this
+value when a resumed run added the column (a race's MIQP failures); :func:`rerun_rows` does not compare them."""
 
 
 def row_id(m: Manifest, row: dict[str, str]) -> tuple:
@@ -122,11 +125,14 @@ def _probe_ids(m: Manifest) -> set[tuple]:
 
 
 def _git_commit(root: Path) -> str:
+    """The commit checked out at ``root``, with ``-dirty`` when a tracked file outside ``results/`` has changes:
+    the code that ran differed from the commit. Changed result files (rows a run resumes from, other tables made
+    before it in the same checkout) do not make it dirty."""
     try:
         out = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
                              check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no", "--",
+                                ".", ":(exclude)results"], capture_output=True, text=True, check=True).stdout.strip()
         return out + ("-dirty" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
@@ -167,7 +173,7 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
     folder.mkdir(parents=True, exist_ok=True)
     strategies = m.strategies(root)
     write_config_json(folder, [m.config()])
-    t0 = time.perf_counter()
+    commit, t0 = _git_commit(root), time.perf_counter()
     if m.kind == "interventions":
         report = replays.run_interventions_manifest(m, root, folder, workers, progress, keep=tasks_filter)
     elif m.kind == "figures":
@@ -211,7 +217,7 @@ def run_manifest(m: Manifest, root: str | os.PathLike, *, workers: int | None = 
                             prefix=m.prefix or "table1", stack=m.stack, scenario=m.scenario,
                             n_opponents=m.opponents, tasks_filter=tasks_filter)
     record = {"manifest": m.name, "settings": {k: v for k, v in dataclasses.asdict(m).items() if k != "name"},
-              "config_hash": [m.config_hash], "commit": _git_commit(root),
+              "config_hash": [m.config_hash], "commit": commit,
               "machine": {"node": platform.node(), "platform": platform.platform(), "python": sys.version.split()[0],
                           "cpu": _cpu()},
               "wall_time_s": round(time.perf_counter() - t0, 3), "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
@@ -351,7 +357,8 @@ def rerun_rows(m: Manifest, root: str | os.PathLike, rows: Sequence[dict[str, st
             diffs.append(f"{row_id(m, r)}: not re-made (not an episode of manifest {m.name})")
             continue
         for c in columns:
-            if c not in _NOT_COMPARED and r.get(c, "") != new.get(c, ""):
+            unknown = _NOT_RECORDED.get(c) == r.get(c)
+            if c not in _NOT_COMPARED and not unknown and r.get(c, "") != new.get(c, ""):
                 diffs.append(f"{row_id(m, r)}: {c} {r.get(c)!r} committed, {new.get(c)!r} re-made")
         if new.get("config_hash") != m.config_hash:
             diffs.append(f"{row_id(m, r)}: re-made with config_hash {new.get('config_hash')}, "

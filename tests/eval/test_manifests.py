@@ -191,6 +191,30 @@ def test_run_writes_manifest_json_and_rows_with_the_hash(tmp_path: Path) -> None
         mf.load_manifest(tmp_path / "bad.toml")
 
 
+def test_the_run_record_s_commit_is_dirty_only_when_code_differs_from_it(tmp_path: Path) -> None:
+    """Result files changed in the checkout (rows a run resumes from, tables made before it) leave the commit clean;
+    a changed tracked file elsewhere marks it ``-dirty``."""
+    import subprocess
+
+    def git(*args: str) -> str:
+        return subprocess.run(["git", "-C", str(tmp_path), *args], capture_output=True, text=True,
+                              check=True).stdout.strip()
+
+    git("init", "-q")
+    (tmp_path / "results").mkdir()
+    for name in ("results/rows.csv", "code.py"):
+        (tmp_path / name).write_text("a\n")
+    git("add", "-A")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "first")
+    head = git("rev-parse", "HEAD")
+    (tmp_path / "results" / "rows.csv").write_text("a\nb\n")
+    (tmp_path / "results" / "new.csv").write_text("c\n")
+    assert mf._git_commit(tmp_path) == head
+    (tmp_path / "code.py").write_text("b\n")
+    assert mf._git_commit(tmp_path) == head + "-dirty"
+    assert mf._git_commit(tmp_path / "results" / "rows.csv") == "unknown"  # not a checkout
+
+
 def test_replay_manifests_are_their_scripts_settings() -> None:
     """The interventions, pareto and floor manifests resolve to the episodes and strategies their folders hold: the
     failed episodes of the base gamma in the sources (every one replayed), and the pareto and floor strategies with
