@@ -56,16 +56,19 @@ GAMMA_HIGH = GAMMA_MAX
 class PASTAPolicy:
     """Deterministic PASTA actor evaluated in numpy (float32).
 
-    ``gamma = low + (high - low) * sigmoid(mean_net([obs, w]))`` (``squashing="sigmoid"``)
-    or ``gamma = clip(mean_net([obs, w]), low, high)`` (``squashing="clip"``); the
+    ``gamma = low + (high - low) * sigmoid(mean_net([obs, w]))`` (``squashing="sigmoid"``),
+    ``gamma = clip(mean_net([obs, w]), low, high)`` (``squashing="clip"``) or the sigmoid reaching
+    ``margin * (high - low)`` beyond each bound, clipped (``squashing="sigmoid-clip"``); the
     preference part of the first layer is folded into its bias (see :meth:`set_preference`).
     """
 
     def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], obs_dim: int, preference: Any,
                  action_low: Any, action_high: Any, path: str | Path | None = None,
-                 objective_names: Any = None, squashing: str = "sigmoid") -> None:
+                 objective_names: Any = None, squashing: str = "sigmoid", margin: float = 0.05) -> None:
         if squashing not in SQUASHINGS:
             raise ValueError(f"squashing must be one of {SQUASHINGS}, got {squashing!r}")
+        if not 0.0 < margin <= 1.0:
+            raise ValueError(f"margin must lie in (0, 1], got {margin!r}")
         self.squashing = squashing
         self.obs_dim = int(obs_dim)
         self.path = Path(path) if path is not None else None
@@ -85,6 +88,12 @@ class PASTAPolicy:
             raise ValueError(f"{self._where}action_low {action_low} and action_high {action_high} must be finite "
                              "with action_low < action_high")
         self._scale = self.action_high - self.action_low
+        self._sig_low, self._sig_scale = self.action_low, self._scale
+        if squashing == "sigmoid-clip":
+            low64, high64 = self.action_low.astype(np.float64), self.action_high.astype(np.float64)
+            reach = margin * (high64 - low64)  # as the torch squashing computes its bounds
+            self._sig_low = (low64 - reach).astype(np.float32)
+            self._sig_scale = (high64 + reach).astype(np.float32) - self._sig_low
         self.set_preference(preference)
 
     def set_preference(self, preference: Any) -> None:
@@ -115,7 +124,7 @@ class PASTAPolicy:
         if self.squashing == "clip":
             gamma = out
         else:
-            gamma = self.action_low + self._scale / (1.0 + np.exp(-out))
+            gamma = self._sig_low + self._sig_scale / (1.0 + np.exp(-out))
         return np.clip(gamma, self.action_low, self.action_high).astype(np.float32, copy=False)
 
     def __repr__(self) -> str:
@@ -150,7 +159,8 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
     return PASTAPolicy(layers, meta["obs_dim"], meta["preference"] if preference is None else preference,
                        meta["action_low"], meta["action_high"], path=json_path,
                        objective_names=meta.get("objective_names"),
-                       squashing=meta.get("action_squashing", "sigmoid"))
+                       squashing=meta.get("action_squashing", "sigmoid"),
+                       margin=meta["config"].get("squash_margin", 0.05))
 
 
 SHIPPED_POLICIES: dict[tuple[str, str], str] = {

@@ -126,11 +126,11 @@ class EnvSlice:
     def begin(self, state: dict[str, np.ndarray], spec: tuple, noise: np.ndarray, prefs: np.ndarray,
               n_objectives: int, max_steps: int) -> dict[str, Any]:
         """Start a rollout of ``len(noise)`` steps with the actor weights ``state``; run the first chunk."""
-        in_dim, act_dim, hidden, log_std_init, low, high, squashing = spec
+        in_dim, act_dim, hidden, log_std_init, low, high, squashing, margin = spec
         if self.policy is None:
             self.policy = Actor(in_dim, act_dim, tuple(hidden), log_std_init, torch.Generator().manual_seed(0))
             self.low, self.high = np.array(low), np.array(high)  # writable copies (Ray hands out read-only arrays)
-            self.squash = make_squash(squashing, self.low, self.high)
+            self.squash = make_squash(squashing, self.low, self.high, margin)
         self.policy.load_state_dict({k: torch.tensor(v) for k, v in state.items()})
         self.std = torch.exp(self.policy.log_std.detach())
         self.noise, self.prefs, self.k = noise, prefs.copy(), int(n_objectives)
@@ -365,7 +365,8 @@ class ActorEnvPool(abc.ABC):
                           for _ in range(t_steps)])  # the local collector's per-step draws, in its order
         state = self._share({k: v.detach().numpy() for k, v in agent.actor.state_dict().items()})
         spec = (agent.obs_dim + agent.n_objectives, agent.act_dim, agent.config.hidden_sizes,
-                agent.config.log_std_init, agent.action_low, agent.action_high, agent.config.action_squashing)
+                agent.config.log_std_init, agent.action_low, agent.action_high, agent.config.action_squashing,
+                agent.config.squash_margin)
         chunks: list[list[dict]] = [[] for _ in range(n_w)]
         known = [-1] * n_w  # last step each actor has reported
         waiting: dict[int, int] = {}  # actor -> step at which one of its envs ended an episode

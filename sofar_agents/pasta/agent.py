@@ -98,7 +98,7 @@ class PASTA:
         cfg = self.config
         in_dim = self.obs_dim + self.n_objectives
         self.actor = Actor(in_dim, self.act_dim, cfg.hidden_sizes, cfg.log_std_init, self.torch_gen)
-        self.squash = make_squash(cfg.action_squashing, self.action_low, self.action_high)
+        self.squash = make_squash(cfg.action_squashing, self.action_low, self.action_high, cfg.squash_margin)
         start = cfg.initial_action
         if start is None and cfg.action_squashing == "clip":
             start = 0.5 * (self.action_low + self.action_high)  # the sigmoid's zero bias: mid-range

@@ -16,7 +16,8 @@ the wrong type or out of range. Keys it does not know are left alone. Fields:
 ``act_dim``         a positive integer, the length of the action bounds
 ``action_low``,     the action (gamma) bounds: lists of the same positive length of finite numbers in
 ``action_high``     ``[GAMMA_MIN, GAMMA_MAX]`` = [0.05, 1] with ``action_low < action_high`` (required)
-``action_squashing``  ``"sigmoid"`` or ``"clip"``, the same as ``config.action_squashing``
+``action_squashing``  ``"sigmoid"``, ``"clip"`` or ``"sigmoid-clip"``, the same as ``config.action_squashing``
+                    (``"sigmoid-clip"``: ``config.squash_margin`` in (0, 1], default 0.05)
 ``activation``      ``"tanh"``
 ``preference``      K finite, non-negative numbers with a positive sum (required)
 ``seed``            the agent's seed, an integer >= 0
@@ -154,6 +155,9 @@ def _check_config(meta: dict[str, Any], json_path: Path) -> None:
     if config.get("action_squashing", "sigmoid") != squashing:
         raise ValueError(f"{json_path}: action_squashing {squashing!r} disagrees with the config's "
                          f"{config.get('action_squashing', 'sigmoid')!r}")
+    margin = config.get("squash_margin", 0.05)
+    if not (isinstance(margin, (int, float)) and not isinstance(margin, bool) and 0.0 < margin <= 1.0):
+        raise _fail(json_path, "config.squash_margin", "must be a number in (0, 1]", margin)
     hidden = config.get("hidden_sizes", [1])
     if not isinstance(hidden, list) or not all(is_int(h) and h > 0 for h in hidden):
         raise _fail(json_path, "config.hidden_sizes", "must be a list of positive integers", hidden)

@@ -19,8 +19,9 @@ _UNIT = float_in(0.0, 1.0)
 _DISCOUNT = float_in(0.0, 1.0, low_open=True)
 _QUANTILE = float_in(0.5, 1.0)
 _KAPPA = float_in(0.0, 1.0, high_open=True)
+_FRACTION = float_in(0.0, 1.0, low_open=True)
 
-SQUASHINGS = ("sigmoid", "clip")
+SQUASHINGS = ("sigmoid", "clip", "sigmoid-clip")
 """Names of the action squashings (``PASTAConfig.action_squashing``, the checkpoint JSON)."""
 PREFERENCE_SAMPLINGS = ("dirichlet", "fixed", "trade-off")
 """Names of the training preference distributions (``PASTAConfig.preference_sampling``)."""
@@ -128,9 +129,15 @@ class PASTAConfig:
     action units with ``action_squashing="clip"`` (e.g. -2.3 for a spread of 0.1 in gamma)."""
     action_squashing: str = "sigmoid"
     """How the Gaussian ``u`` becomes the box action: ``"sigmoid"``, ``a = low + (high - low)
-    * sigmoid(u)`` (the bounds only in the limit), or ``"clip"``, ``a = clip(u, low, high)``
+    * sigmoid(u)`` (the bounds only in the limit), ``"clip"``, ``a = clip(u, low, high)``
     with ``u`` in action units (a censored Gaussian: a deterministic policy can sit exactly
-    on a bound). See :mod:`sofar_agents.pasta.distribution`."""
+    on a bound), or ``"sigmoid-clip"``, a sigmoid reaching ``squash_margin`` of the range beyond
+    each bound, clipped to the bounds (each bound at a finite ``u``, a sigmoid between them).
+    See :mod:`sofar_agents.pasta.distribution`."""
+    squash_margin: Annotated[float, _FRACTION] = 0.05
+    """``"sigmoid-clip"`` only: how far beyond each bound the sigmoid reaches, as a fraction of
+    ``high - low`` (0.05 on the gamma range [0.05, 1]: from 0.0025 to 1.0475; the lower bound at
+    ``u = -3.04``)."""
     initial_action: float | None = None
     """If set, the actor's output bias is initialised so that the deterministic action of
     the untrained policy is this value (in action units, strictly inside the bounds), e.g. a
@@ -170,6 +177,8 @@ class PASTAConfig:
             raise ValueError(f"scalarization must be 'stch' or 'linear', got {self.scalarization!r}")
         if self.action_squashing not in SQUASHINGS:
             raise ValueError(f"action_squashing must be one of {SQUASHINGS}, got {self.action_squashing!r}")
+        if not (isinstance(self.squash_margin, (int, float)) and 0.0 < self.squash_margin <= 1.0):
+            raise ValueError(f"squash_margin must lie in (0, 1], got {self.squash_margin!r}")
         if self.preference_sampling not in PREFERENCE_SAMPLINGS:
             raise ValueError(
                 f"preference_sampling must be one of {PREFERENCE_SAMPLINGS}, got {self.preference_sampling!r}"

@@ -12,6 +12,11 @@ to the box action. The PPO ratio is computed on ``u`` in both cases.
   Gaussian: a point mass at each bound and the Gaussian density inside. A deterministic
   policy can sit exactly on a bound (e.g. the most conservative barrier decay) wherever
   its mean lies beyond it.
+- ``"sigmoid-clip"`` (:class:`SigmoidClipSquash`): ``a = clip(low - m + (high - low + 2m)
+  * sigmoid(u), low, high)`` with ``m = margin * (high - low)``: a sigmoid that reaches past
+  each bound by ``m``, censored at the bounds. Between them it is the sigmoid's bijection; each
+  bound holds the Gaussian mass beyond a finite ``u``, so a deterministic policy reaches a
+  bound at a finite mean, and away from the bounds a sample's action is its own.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ import torch.nn.functional as F
 
 from sofar_agents.pasta.config import SQUASHINGS
 
-__all__ = ["SQUASHINGS", "ClipSquash", "SigmoidSquash", "gaussian_log_prob", "make_squash"]
+__all__ = ["SQUASHINGS", "ClipSquash", "SigmoidClipSquash", "SigmoidSquash", "gaussian_log_prob", "make_squash"]
 
 
 def gaussian_log_prob(u: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
@@ -109,10 +114,56 @@ class ClipSquash:
         return torch.where(at_low, lo_mass, torch.where(at_high, hi_mass, dens)).sum(-1)
 
 
-def make_squash(name: str, low: np.ndarray, high: np.ndarray) -> SigmoidSquash | ClipSquash:
-    """The squashing called ``name`` (one of :data:`SQUASHINGS`) for the box ``[low, high]``."""
+class SigmoidClipSquash:
+    """``a = clip(low - m + (high - low + 2m) * sigmoid(u), low, high)``, ``m = margin * (high - low)``.
+
+    Args:
+        low, high: action bounds (float32 arrays of shape ``(act_dim,)``), in action units.
+        margin: how far the sigmoid reaches beyond each bound, as a fraction of ``high - low`` (> 0).
+    """
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, margin: float) -> None:
+        width = np.asarray(high, np.float64) - np.asarray(low, np.float64)
+        self.low, self.high = torch.as_tensor(low), torch.as_tensor(high)
+        self.inner = SigmoidSquash((low - margin * width).astype(np.float32),
+                                   (high + margin * width).astype(np.float32))
+        self.u_low = self.inner.inverse(self.low)  # the pre-activations at which the bounds are reached
+        self.u_high = self.inner.inverse(self.high)
+
+    def __call__(self, u: torch.Tensor) -> torch.Tensor:
+        """The action for pre-activation ``u``."""
+        return torch.minimum(torch.maximum(self.inner(u), self.low), self.high)
+
+    def log_abs_det_jacobian(self, u: torch.Tensor) -> torch.Tensor:
+        """log |da/du| of the sigmoid at ``u`` (the entropy bonus; the clip is not counted)."""
+        return self.inner.log_abs_det_jacobian(u)
+
+    def initial_bias(self, action: np.ndarray) -> np.ndarray:
+        """The mean ``u`` whose action is ``action`` (strictly inside the bounds)."""
+        return self.inner.initial_bias(action)
+
+    def action_log_prob(self, action: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+        """Log-likelihood of ``action``, summed over the action dims: the squashed density inside the
+        bounds, the log of the Gaussian mass beyond ``u_low`` or ``u_high`` on a bound."""
+        std = torch.exp(log_std)
+        normal = torch.distributions.Normal(torch.zeros(()), torch.ones(()))
+        u = self.inner.inverse(torch.minimum(torch.maximum(action, self.low), self.high))
+        z = (u - mean) / std
+        log_jac = torch.log(self.inner.scale) - F.softplus(-u) - F.softplus(u)
+        dens = -0.5 * z * z - log_std - 0.5 * math.log(2.0 * math.pi) - log_jac  # per action dim
+        lo_mass = torch.log(normal.cdf((self.u_low - mean) / std).clamp_min(1e-30))
+        hi_mass = torch.log((1.0 - normal.cdf((self.u_high - mean) / std)).clamp_min(1e-30))
+        return torch.where(action <= self.low, lo_mass, torch.where(action >= self.high, hi_mass, dens)).sum(-1)
+
+
+def make_squash(name: str, low: np.ndarray, high: np.ndarray,
+                margin: float = 0.05) -> SigmoidSquash | ClipSquash | SigmoidClipSquash:
+    """The squashing called ``name`` (one of :data:`SQUASHINGS`) for the box ``[low, high]`` (``margin``:
+    ``"sigmoid-clip"``'s, :attr:`PASTAConfig.squash_margin`)."""
     if name == "sigmoid":
         return SigmoidSquash(low, high)
     if name == "clip":
         return ClipSquash(low, high)
+    if name == "sigmoid-clip":
+        return SigmoidClipSquash(low, high, margin)
     raise ValueError(f"unknown action squashing {name!r}; valid: {', '.join(SQUASHINGS)}")
