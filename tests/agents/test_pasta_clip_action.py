@@ -1,5 +1,6 @@
 """The clipped-Gaussian action (``action_squashing="clip"``): censored likelihood, bounds reached
-exactly, training, checkpoints and the numpy deployment policy."""
+exactly, training, checkpoints and the numpy deployment policy (training and deployment also for the other censored
+squashing, ``"sigmoid-clip"``: ``test_pasta_sigmoid_clip.py``)."""
 
 from __future__ import annotations
 
@@ -57,26 +58,32 @@ def test_untrained_agent_starts_at_the_initial_action_and_reaches_the_bound() ->
     assert np.all((stochastic >= 0.05) & (stochastic <= 1.0)) and np.mean(stochastic == np.float32(0.05)) > 0.99
 
 
-def test_clip_agent_trains_saves_and_deploys(tmp_path: Path) -> None:
+@pytest.mark.parametrize("squashing, extra", [("clip", dict(log_std_init=-2.3)),
+                                               ("sigmoid-clip", dict(log_std_init=0.0, squash_margin=0.1))])
+def test_a_censored_agent_trains_saves_and_deploys(squashing: str, extra: dict, tmp_path: Path) -> None:
     torch.set_num_threads(1)
     venv = gym.vector.SyncVectorEnv([lambda: LinearReward(SyntheticRace()) for _ in range(2)],
                                     autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
-    cfg = PASTAConfig(action_squashing="clip", initial_action=0.1, log_std_init=-2.3, n_steps=32, n_epochs=2,
-                      hidden_sizes=(16,), critic_head_hidden=0)
+    cfg = PASTAConfig(action_squashing=squashing, initial_action=0.1, n_steps=32, n_epochs=2, hidden_sizes=(16,),
+                      critic_head_hidden=0, **extra)
     agent = PASTA(12, 5, LOW, HIGH, cfg, seed=3)
     buf = agent.collect(venv, 32)
     venv.close()
     assert np.any(buf.actions == np.float32(0.05)) and np.any(buf.actions > 0.05)  # censored samples occur
     log = agent.update(buf)
     assert np.isfinite(log["policy_loss"]) and np.isfinite(log["entropy"])
-    path = agent.save(tmp_path / "clip", metadata={"command": "test"})
+    path = agent.save(tmp_path / "agent", metadata={"command": "test"})
     meta = json.loads(path.read_text())
-    assert meta["action_squashing"] == "clip" and meta["config"]["action_squashing"] == "clip"
+    assert meta["action_squashing"] == squashing and meta["config"]["action_squashing"] == squashing
+    assert meta["config"]["squash_margin"] == cfg.squash_margin
     loaded = PASTA.load(path)
     np.testing.assert_array_equal(loaded.predict(_obs()), agent.predict(_obs()))
     policy = load_policy(path)
-    assert policy.squashing == "clip"
+    assert policy.squashing == squashing
     np.testing.assert_allclose(policy(_obs()), agent.predict(_obs()), atol=1e-6)
+    with torch.no_grad():  # a mean far past the floor: the numpy policy gives exactly the floor too
+        agent.actor.mean_net[-1].bias.fill_(-30.0)
+    np.testing.assert_array_equal(load_policy(agent.save(tmp_path / "floor", metadata={}))(_obs()), np.float32(0.05))
 
 
 def test_checkpoint_squashing_must_agree_with_its_config(tmp_path: Path) -> None:

@@ -1,5 +1,6 @@
 """The sigmoid reaching past the bounds, clipped (``action_squashing="sigmoid-clip"``): each bound at a finite
-pre-activation, the sigmoid between them, a censored likelihood, training, checkpoints and the numpy policy."""
+pre-activation, the sigmoid between them, a censored likelihood, bad margins (training, checkpoints and the numpy
+policy: ``test_pasta_clip_action.py``)."""
 
 from __future__ import annotations
 
@@ -7,15 +8,12 @@ import json
 import math
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
 from sofar_agents import PASTA, PASTAConfig, load_policy
 from sofar_agents.pasta.distribution import SigmoidClipSquash, make_squash
-from sofar_agents.wrappers import LinearReward
-from synthetic_envs import SyntheticRace
 
 LOW, HIGH = np.array([0.05], np.float32), np.array([1.0], np.float32)
 
@@ -62,32 +60,6 @@ def test_a_mean_past_the_floor_gives_exactly_the_floor_where_a_sigmoid_gives_mor
         gamma = agent.predict(_obs())
         assert np.all(gamma == np.float32(0.05)) == floor_exact
         assert np.all(gamma < 0.1)
-
-
-def test_sigmoid_clip_agent_trains_saves_and_deploys(tmp_path: Path) -> None:
-    torch.set_num_threads(1)
-    venv = gym.vector.SyncVectorEnv([lambda: LinearReward(SyntheticRace()) for _ in range(2)],
-                                    autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
-    cfg = PASTAConfig(action_squashing="sigmoid-clip", squash_margin=0.1, initial_action=0.1, log_std_init=0.0,
-                      n_steps=32, n_epochs=2, hidden_sizes=(16,), critic_head_hidden=0)
-    agent = PASTA(12, 5, LOW, HIGH, cfg, seed=3)
-    buf = agent.collect(venv, 32)
-    venv.close()
-    assert np.any(buf.actions == np.float32(0.05)) and np.any(buf.actions > 0.05)  # censored samples occur
-    log = agent.update(buf)
-    assert np.isfinite(log["policy_loss"]) and np.isfinite(log["entropy"])
-    path = agent.save(tmp_path / "sc", metadata={"command": "test"})
-    meta = json.loads(path.read_text())
-    assert meta["action_squashing"] == "sigmoid-clip" and meta["config"]["squash_margin"] == 0.1
-    loaded = PASTA.load(path)
-    np.testing.assert_array_equal(loaded.predict(_obs()), agent.predict(_obs()))
-    policy = load_policy(path)
-    assert policy.squashing == "sigmoid-clip"
-    np.testing.assert_allclose(policy(_obs()), agent.predict(_obs()), atol=1e-6)
-    with torch.no_grad():  # at the floor the numpy policy gives exactly the floor too
-        agent.actor.mean_net[-1].bias.fill_(-30.0)
-    path = agent.save(tmp_path / "floor", metadata={"command": "test"})
-    np.testing.assert_array_equal(load_policy(path)(_obs()), np.float32(0.05))
 
 
 @pytest.mark.parametrize("margin", [0.0, -0.1, 1.5, float("nan"), "0.1"])
