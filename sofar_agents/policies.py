@@ -67,7 +67,7 @@ class PASTAPolicy:
                  objective_names: Any = None, squashing: str = "sigmoid", margin: float = 0.05) -> None:
         if squashing not in SQUASHINGS:
             raise ValueError(f"squashing must be one of {SQUASHINGS}, got {squashing!r}")
-        if not 0.0 < margin <= 1.0:
+        if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not 0.0 < margin <= 1.0:
             raise ValueError(f"margin must lie in (0, 1], got {margin!r}")
         self.squashing = squashing
         self.obs_dim = int(obs_dim)

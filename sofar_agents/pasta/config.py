@@ -177,7 +177,8 @@ class PASTAConfig:
             raise ValueError(f"scalarization must be 'stch' or 'linear', got {self.scalarization!r}")
         if self.action_squashing not in SQUASHINGS:
             raise ValueError(f"action_squashing must be one of {SQUASHINGS}, got {self.action_squashing!r}")
-        if not (isinstance(self.squash_margin, (int, float)) and 0.0 < self.squash_margin <= 1.0):
+        if isinstance(self.squash_margin, bool) or not isinstance(self.squash_margin, (int, float)) \
+                or not 0.0 < self.squash_margin <= 1.0:
             raise ValueError(f"squash_margin must lie in (0, 1], got {self.squash_margin!r}")
         if self.preference_sampling not in PREFERENCE_SAMPLINGS:
             raise ValueError(

@@ -13,6 +13,7 @@ import pytest
 import torch
 
 from sofar_agents import PASTA, PASTAConfig, load_policy
+from sofar_agents.policies import PASTAPolicy
 from sofar_agents.pasta.distribution import SigmoidClipSquash, make_squash
 
 LOW, HIGH = np.array([0.05], np.float32), np.array([1.0], np.float32)
@@ -62,7 +63,7 @@ def test_a_mean_past_the_floor_gives_exactly_the_floor_where_a_sigmoid_gives_mor
         assert np.all(gamma < 0.1)
 
 
-@pytest.mark.parametrize("margin", [0.0, -0.1, 1.5, float("nan"), "0.1"])
+@pytest.mark.parametrize("margin", [0.0, -0.1, 1.5, float("nan"), "0.1", True])
 def test_a_bad_margin_is_refused_by_the_config_and_by_a_checkpoint(margin, tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="squash_margin"):
         PASTAConfig(action_squashing="sigmoid-clip", squash_margin=margin)
@@ -75,3 +76,7 @@ def test_a_bad_margin_is_refused_by_the_config_and_by_a_checkpoint(margin, tmp_p
     bad.write_text(json.dumps(meta))
     with pytest.raises(ValueError, match=r"bad\.json.*squash_margin"):
         load_policy(bad)
+    with pytest.raises(ValueError, match="margin must lie in"):
+        PASTAPolicy([(np.zeros((4, 17), np.float32), np.zeros(4, np.float32)),
+                     (np.zeros((1, 4), np.float32), np.zeros(1, np.float32))], 12, [1, 1, 1, 1, 1], LOW, HIGH,
+                    squashing="sigmoid-clip", margin=margin)
