@@ -5,6 +5,7 @@
     python eval/pareto.py --quick                          # a quick look (~1 min): 1 circuit, 1 episode of 30 s
     python eval/pareto.py --pool A/pareto_episodes.csv B/pareto_episodes.csv --out DIR   # seed sets pooled
     python eval/pareto.py --bootstrap A/pareto_episodes.csv [B/...] --out DIR       # hypervolume vs. episode noise
+    python eval/pareto.py --training-seeds S1/pareto_episodes.csv S2/... --out DIR   # a recipe over its seeds
 
 Each strategy is evaluated on the same seeded episodes and reported as (aggregate success %,
 overtakes per hour of racing); the hypervolume of each family's front (fixed gammas; the policy's
@@ -13,7 +14,10 @@ per-episode CSV (rerunning the same command resumes it). ``--pool`` runs nothing
 several seed sets of one front (the strategies every file holds) into <out>/pareto_pooled.md, with each
 strategy's mean gamma. ``--bootstrap`` runs nothing either: it draws the episodes of one or several seed sets
 again (paired, within each circuit and rho) and writes to <out>/hv_bootstrap.md how the difference of the policy's
-and the fixed gammas' hypervolumes spreads. The logic is in sofar_agents.evaluation.pareto and .pareto_bootstrap.
+and the fixed gammas' hypervolumes spreads. ``--training-seeds`` runs nothing: given the files of policies trained
+by one recipe with different seeds on the same episodes, it writes <out>/training_seeds.md: each seed's front, the
+recipe's (every seed's episodes at each preference) and bootstraps over the episodes and over the seeds. The logic
+is in sofar_agents.evaluation.pareto, .pareto_bootstrap and .pareto_seeds.
 """
 
 from __future__ import annotations
@@ -76,10 +80,14 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="run nothing: the paired bootstrap of the hypervolume of the policy's front minus the fixed "
                         "gammas' over the episodes of these pareto_episodes.csv files (pooled) into "
                         "<out>/hv_bootstrap.md (--out required)")
+    p.add_argument("--training-seeds", nargs="+", default=None, metavar="CSV",
+                   help="run nothing: the front of one training recipe over these pareto_episodes.csv files, one "
+                        "per training seed on the same episodes and fixed-gamma rows, into <out>/training_seeds.md "
+                        "(--out required)")
     p.add_argument("--resamples", type=positive_int, default=2000,
-                   help="with --bootstrap: draws of the episodes (default 2000, at least 100)")
+                   help="with --bootstrap or --training-seeds: draws (default 2000, at least 100)")
     p.add_argument("--bootstrap-seed", type=nonneg_int, default=0,
-                   help="with --bootstrap: seed of the draws (default 0)")
+                   help="with --bootstrap or --training-seeds: seed of the draws (default 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--log-level", default="WARNING")
     return p.parse_args(argv)
@@ -88,9 +96,11 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s %(name)s: %(message)s")
-    if args.pool and args.bootstrap:
-        print("error: give --pool or --bootstrap, not both", file=sys.stderr)
+    if sum(bool(x) for x in (args.pool, args.bootstrap, args.training_seeds)) > 1:
+        print("error: give one of --pool, --bootstrap and --training-seeds", file=sys.stderr)
         return 2
+    if args.training_seeds:
+        return _training_seeds(args.training_seeds, args.out, args.resamples, args.bootstrap_seed)
     if args.pool:
         return _pool(args.pool, args.out)
     if args.bootstrap:
@@ -157,6 +167,22 @@ def _bootstrap(csvs: list[str], out: str | None, resamples: int, seed: int) -> i
         return 2
     md = ev.bootstrap_markdown(result, csvs)
     path = ev.write_markdown(Path(out) / "hv_bootstrap.md", md)
+    print(md)
+    print(f"Wrote {path}")
+    return 0
+
+
+def _training_seeds(csvs: list[str], out: str | None, resamples: int, seed: int) -> int:
+    if out is None:
+        print("error: --training-seeds needs --out", file=sys.stderr)
+        return 2
+    try:
+        result = ev.training_seed_fronts(ev.read_seed_sets(csvs), resamples=resamples, seed=seed)
+    except ValueError as exc:
+        print(f"error: --training-seeds: {exc}", file=sys.stderr)
+        return 2
+    md = ev.training_seeds_markdown(result)
+    path = ev.write_markdown(Path(out) / "training_seeds.md", md)
     print(md)
     print(f"Wrote {path}")
     return 0

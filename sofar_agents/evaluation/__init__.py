@@ -24,6 +24,8 @@ and ``eval/figures.py`` (Fig. 5); the scripts only parse arguments. One module p
   seed sets of one front pooled: ``pooled_pareto``, ``eval/pareto.py --pool``);
 * :mod:`~sofar_agents.evaluation.pareto_bootstrap`: how far a difference of two fronts' hypervolumes is from the
   noise of their episodes, by a paired bootstrap (``bootstrap_hypervolume``; ``eval/pareto.py --bootstrap``);
+* :mod:`~sofar_agents.evaluation.pareto_seeds`: a training recipe's front over several training seeds on the same
+  episodes, against the fixed gammas (``training_seed_fronts``; ``eval/pareto.py --training-seeds``);
 * :mod:`~sofar_agents.evaluation.headroom`: what an adaptive gamma could gain over the best fixed one,
   by oracles over the fixed-gamma rows of Table I (``headroom``; ``eval/headroom.py``);
 * :mod:`~sofar_agents.evaluation.interventions`: the within-race part of that question: each failure of a
@@ -58,6 +60,7 @@ from sofar_agents.evaluation.pareto import (ParetoPoint, ParetoReport, hypervolu
                                             pareto_strategies, pooled_pareto, preference_family, run_pareto,
                                             strategy_points)
 from sofar_agents.evaluation.pareto_bootstrap import HypervolumeBootstrap, bootstrap_hypervolume, bootstrap_markdown
+from sofar_agents.evaluation.pareto_seeds import TrainingSeedFronts, training_seed_fronts, training_seeds_markdown
 from sofar_agents.evaluation.protocol import (DEFAULT_DURATION, FIXED_GAMMAS, FULL_TABLE1_STEPS, RHOS,
                                               TRACK_ABBREVIATIONS, TRACKS, EpisodeTask, Strategy,
                                               build_strategies, episode_seed, miqp_ablation_tasks,
@@ -110,6 +113,9 @@ __all__ = [
     "HypervolumeBootstrap",
     "bootstrap_hypervolume",
     "bootstrap_markdown",
+    "TrainingSeedFronts",
+    "training_seed_fronts",
+    "training_seeds_markdown",
     "preference_family",
     "run_pareto",
     "strategy_points",
