@@ -16,8 +16,8 @@ strategy's mean gamma. ``--bootstrap`` runs nothing either: it draws the episode
 again (paired, within each circuit and rho) and writes to <out>/hv_bootstrap.md how the difference of the policy's
 and the fixed gammas' hypervolumes spreads. ``--training-seeds`` runs nothing: given the files of policies trained
 by one recipe with different seeds on the same episodes, it writes <out>/training_seeds.md: each seed's front, the
-recipe's (every seed's episodes at each preference) and bootstraps over the episodes and over the seeds. The logic
-is in sofar_agents.evaluation.pareto, .pareto_bootstrap and .pareto_seeds.
+recipe's difference (the mean of the seeds') with bootstraps over the episodes and over the seeds, and the pooled
+front. The logic is in sofar_agents.evaluation.pareto, .pareto_bootstrap and .pareto_seeds.
 """
 
 from __future__ import annotations

@@ -4,14 +4,17 @@ One trained policy is one draw of its recipe: two training seeds of one recipe c
 recipes. Given the Pareto files (``pareto_episodes.csv``) of k >= 2 policies trained by one recipe with different
 seeds, each evaluated on the same seeded episodes as the same fixed gammas, :func:`training_seed_fronts` reports
 
-* each seed's front and its hypervolume against the fixed gammas' (as ``eval/pareto.py`` reports one file);
-* the **recipe's front**: at each preference, the point of all k policies' episodes together (success over all of
-  them, overtakes per hour as their sum over their simulated hours), i.e. a policy that draws one of the k trained
-  ones per episode. Its hypervolume is the recipe's, not its luckiest seed's;
-* two paired bootstraps of ``recipe - fixed``: over the episodes (the k policies kept, episodes drawn with
-  replacement within each (circuit, rho) cell, every strategy on the same draw, as
-  :mod:`~.pareto_bootstrap`), and over the training seeds and the episodes (the k policies drawn with replacement as
-  well): the second adds training luck, with the resolution k allows (k = 3 gives ten distinct multisets).
+* each seed's front and its hypervolume against the fixed gammas' (as ``eval/pareto.py`` reports one file), and
+  **the recipe's difference: the mean over the seeds of ``hv(seed) - hv(fixed)``**. Each seed's points rest on as
+  many episodes as the fixed gammas', so both fronts carry the same noise (a front's hypervolume grows with the
+  noise of its points: it keeps the lucky ones);
+* two paired bootstraps of that mean: over the episodes (the k policies kept, episodes drawn with replacement
+  within each (circuit, rho) cell, every strategy on the same draw, as :mod:`~.pareto_bootstrap`), and over the
+  training seeds and the episodes (the k policies drawn with replacement as well): the second adds training luck,
+  with the resolution k allows (k = 3 gives ten distinct multisets);
+* the **pooled front**, descriptive: at each preference, the point of all k policies' episodes together (a policy
+  drawing one of the trained ones per episode). Its points rest on k times the episodes of a fixed gamma's, so its
+  hypervolume is not compared with theirs as an estimate of the recipe's: it shows what the seeds share.
 
 Contract: every file holds the same fixed-gamma rows (strategy, episode and outcome equal: the fixed rows are run
 once and copied), the same policy strategies (preferences), one policy per file and a different one in each
@@ -48,22 +51,27 @@ class TrainingSeedFronts:
     """The fixed gammas' points (the same in every file)."""
     per_seed: tuple[tuple[ParetoPoint, ...], ...]
     """Each file's policy points, in preference order."""
-    recipe: tuple[ParetoPoint, ...]
-    """The recipe's points: each preference over the episodes of all k policies."""
+    pooled: tuple[ParetoPoint, ...]
+    """The pooled front's points: each preference over the episodes of all k policies (descriptive)."""
     mean_gamma: tuple[tuple[float, ...], ...]
     """Per file and preference, the mean over the episodes of the episode's mean gamma."""
     hv_fixed: float
     hv_seeds: tuple[float, ...]
-    hv_recipe: float
+    hv_pooled: float
     episodes: int
     """Episodes per strategy and file."""
     cells: int
     resamples: int
     seed: int
     diff_episodes: np.ndarray
-    """``recipe - fixed`` hypervolume on each draw of the episodes (the k policies kept)."""
+    """The mean over the seeds of ``hv(seed) - hv(fixed)`` on each draw of the episodes (the k policies kept)."""
     diff_seeds_episodes: np.ndarray
     """The same on each draw of the training seeds and of the episodes."""
+
+    @property
+    def difference(self) -> float:
+        """The recipe's difference: the mean over the seeds of ``hv(seed) - hv(fixed)``."""
+        return float(np.mean(self.hv_seeds)) - self.hv_fixed
 
     def relative(self, hv: float) -> float:
         """``hv / hv_fixed - 1``."""
@@ -142,12 +150,12 @@ def training_seed_fronts(files: Mapping[str, Sequence[Mapping[str, Any]]], resam
     fixed_pts = tuple(_point(s, "fixed", by_name[s], None) for s in fixed)
     per_seed = tuple(tuple(_point(p, "policy", by_name[f"{p}{_SEP}{i}"], _preference_of(p)) for p in prefs)
                      for i in range(k))
-    recipe = tuple(_point(p, "policy", [r for i in range(k) for r in by_name[f"{p}{_SEP}{i}"]], _preference_of(p))
+    pooled = tuple(_point(p, "policy", [r for i in range(k) for r in by_name[f"{p}{_SEP}{i}"]], _preference_of(p))
                    for p in prefs)
     gamma = tuple(tuple(float(np.mean([float(r["mean_gamma"]) for r in by_name[f"{p}{_SEP}{i}"]])) for p in prefs)
                   for i in range(k))
     values = lambda pts: np.array([(p.success, p.overtakes_per_hour) for p in pts])  # noqa: E731
-    hv_fixed, hv_recipe = hypervolume(values(fixed_pts)), hypervolume(values(recipe))
+    hv_fixed, hv_pooled = hypervolume(values(fixed_pts)), hypervolume(values(pooled))
     hv_seeds = tuple(hypervolume(values(pts)) for pts in per_seed)
 
     n_ep = len(cells)
@@ -171,18 +179,13 @@ def training_seed_fronts(files: Mapping[str, Sequence[Mapping[str, Any]]], resam
         rate = np.divide(overtakes, hours, out=np.zeros_like(hours), where=hours > 0)
         return np.stack([100.0 * success / episodes, rate], axis=1)
 
-    fixed_draws = [point(sums[s][:, 0], sums[s][:, 1], sums[s][:, 2], n_drawn) for s in fixed]
-    diffs = np.empty((2, n))
-    for mode, weight in enumerate((np.ones((n, k)), picks)):
-        recipe_draws = []
-        for j in range(len(prefs)):
-            tot = sum(weight[:, i:i + 1] * sums[seeded[i][j]] for i in range(k))
-            recipe_draws.append(point(tot[:, 0], tot[:, 1], tot[:, 2], k * n_drawn))
-        for b in range(n):
-            diffs[mode, b] = (hypervolume(np.array([p[b] for p in recipe_draws]))
-                              - hypervolume(np.array([p[b] for p in fixed_draws])))
-    return TrainingSeedFronts(tuple(names), tuple(ids), fixed_pts, per_seed, recipe, gamma, hv_fixed, hv_seeds,
-                              hv_recipe, n_ep, len(cell_index), n, int(seed), diffs[0], diffs[1])
+    front = lambda strategies, b: np.array([  # noqa: E731
+        point(sums[s][b:b + 1, 0], sums[s][b:b + 1, 1], sums[s][b:b + 1, 2], n_drawn[b:b + 1])[0] for s in strategies])
+    hv_draws = np.array([[hypervolume(front(strategies, b)) for b in range(n)] for strategies in [fixed] + seeded])
+    seed_diffs = hv_draws[1:] - hv_draws[0]  # (k, draws)
+    diffs = np.stack([seed_diffs.mean(axis=0), (picks.T * seed_diffs).sum(axis=0) / k])
+    return TrainingSeedFronts(tuple(names), tuple(ids), fixed_pts, per_seed, pooled, gamma, hv_fixed, hv_seeds,
+                              hv_pooled, n_ep, len(cell_index), n, int(seed), diffs[0], diffs[1])
 
 
 def training_seeds_markdown(result: TrainingSeedFronts, level: float = 0.95) -> str:
@@ -193,16 +196,15 @@ def training_seeds_markdown(result: TrainingSeedFronts, level: float = 0.95) -> 
     lines = ["# A recipe's front over its training seeds, against the fixed gammas on the same episodes", "",
              f"{len(r.sources)} training seeds, one file each: "
              + ", ".join(f"{s} (policy {p})" for s, p in zip(r.sources, r.policy_ids))
-             + f". {r.episodes} episodes per strategy and file in {r.cells} (circuit, rho) cells. The recipe's point "
-             "at a preference is over the episodes of every seed's policy (a policy drawing one of them per "
-             "episode).", "",
+             + f". {r.episodes} episodes per strategy and file in {r.cells} (circuit, rho) cells.", "",
              "| front | hypervolume [% x 1/h] | against the fixed gammas' |", "|---|---:|---:|",
              f"| fixed gammas | {r.hv_fixed:,.0f} | |"]
     lines += [f"| seed file {i + 1} | {h:,.0f} | {x:+.1f} % |" for i, (h, x) in enumerate(zip(r.hv_seeds, rel_seeds))]
-    lines += [f"| **the recipe** | **{r.hv_recipe:,.0f}** | **{100.0 * r.relative(r.hv_recipe):+.1f} %** |", "",
-              f"Over the seeds: mean {np.mean(rel_seeds):+.1f} %, sd {np.std(rel_seeds, ddof=1):.1f} points, "
-              f"range {min(rel_seeds):+.1f} to {max(rel_seeds):+.1f} %.", "",
-              f"| paired bootstrap of recipe - fixed ({r.resamples} draws, generator seed {r.seed}) | "
+    lines += [f"| **the recipe: mean over the seeds** | **{np.mean(r.hv_seeds):,.0f}** | **{pct(r.difference):+.1f} "
+              f"%** (sd {np.std(rel_seeds, ddof=1):.1f} points) |",
+              f"| pooled front (descriptive: {len(r.sources)} x the episodes per point) | {r.hv_pooled:,.0f} | "
+              f"{100.0 * r.relative(r.hv_pooled):+.1f} % |", "",
+              f"| paired bootstrap of the recipe's difference ({r.resamples} draws, generator seed {r.seed}) | "
               f"{100 * level:g} % interval | share of draws >= 0 |", "|---|---:|---:|"]
     for label, d in (("the episodes drawn, the policies kept", r.diff_episodes),
                      ("the training seeds and the episodes drawn", r.diff_seeds_episodes)):
@@ -211,11 +213,13 @@ def training_seeds_markdown(result: TrainingSeedFronts, level: float = 0.95) -> 
     lines += ["", "Fixed gammas (success [%], overtakes/h): " + "; ".join(
         f"{p.name} {p.success:.1f}, {p.overtakes_per_hour:.0f}" for p in r.fixed) + ".", "",
         "| preference | " + " | ".join(f"seed file {i + 1}: success [%], overtakes/h, mean gamma"
-                                       for i in range(len(r.sources))) + " | the recipe: success [%], overtakes/h |",
+                                       for i in range(len(r.sources))) + " | pooled: success [%], overtakes/h |",
         "|---|" + "---:|" * (len(r.sources) + 1)]
-    for j, p in enumerate(r.recipe):
+    for j, p in enumerate(r.pooled):
         seeds = [f"{s[j].success:.1f}, {s[j].overtakes_per_hour:.0f}, {g[j]:.3f}"
                  for s, g in zip(r.per_seed, r.mean_gamma)]
         lines.append(f"| {p.name} | " + " | ".join(seeds) + f" | {p.success:.1f}, {p.overtakes_per_hour:.0f} |")
-    lines += ["", "The second bootstrap covers training luck only as far as these seeds show it.", ""]
+    lines += ["", "Each seed's front rests on as many episodes per point as the fixed gammas', so their hypervolumes "
+              "carry the same noise; the pooled front's points rest on more and keep fewer lucky ones. The second "
+              "bootstrap covers training luck only as far as these seeds show it.", ""]
     return "\n".join(lines)

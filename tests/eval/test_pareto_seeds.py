@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sofar_agents.evaluation.pareto_bootstrap import bootstrap_hypervolume
 from sofar_agents.evaluation.pareto_seeds import training_seed_fronts, training_seeds_markdown
 
 from .episode_csv import write_episode_csv
@@ -39,24 +40,27 @@ def _seed_b():
     return _rows({SAFE: lambda c, e: (e == 0, 2), BOLD: lambda c, e: (e == 0, 6)}, "bbb")
 
 
-def test_the_recipe_front_pools_every_seed_s_episodes_and_is_computed_by_hand():
+def test_the_recipe_s_difference_and_the_pooled_front_are_computed_by_hand():
     result = training_seed_fronts({"a": _seed_a(), "b": _seed_b()}, resamples=200)
     # fixed: (100 %, 10 /h), (50 %, 30 /h): 100 x 10 + 50 x 20 = 2000
     assert result.hv_fixed == pytest.approx(2000.0)
     # seed a: (100 %, 20 /h), (50 %, 40 /h): 100 x 20 + 50 x 20 = 3000; seed b: (50 %, 20), (50 %, 60): 50 x 60
     assert result.hv_seeds == pytest.approx((3000.0, 3000.0))
-    # the recipe over the four episodes of each preference: SAFE (75 %, 20 /h), BOLD (50 %, 50 /h)
-    pts = {p.name: (p.success, p.overtakes_per_hour, p.episodes) for p in result.recipe}
+    assert result.difference == pytest.approx(1000.0) and result.relative(np.mean(result.hv_seeds)) == 0.5
+    # pooled over the four episodes of each preference: SAFE (75 %, 20 /h), BOLD (50 %, 50 /h)
+    pts = {p.name: (p.success, p.overtakes_per_hour, p.episodes) for p in result.pooled}
     assert pts == {SAFE: pytest.approx((75.0, 20.0, 4)), BOLD: pytest.approx((50.0, 50.0, 4))}
-    assert result.hv_recipe == pytest.approx(75.0 * 20.0 + 50.0 * 30.0)
-    assert result.relative(result.hv_recipe) == pytest.approx(0.5)
+    assert result.hv_pooled == pytest.approx(75.0 * 20.0 + 50.0 * 30.0)
     assert result.episodes == 2 and result.cells == 1 and result.policy_ids == ("aaa", "bbb")
 
 
 def test_two_copies_of_one_front_give_its_own_hypervolume_and_no_seed_spread():
     a, b = _seed_a(), [{**r, "policy_id": "ccc" if r["policy_id"] else ""} for r in _seed_a()]
     result = training_seed_fronts({"a": a, "b": b}, resamples=300)
-    assert result.hv_recipe == pytest.approx(result.hv_seeds[0]) == pytest.approx(result.hv_seeds[1])
+    assert result.hv_pooled == pytest.approx(result.hv_seeds[0]) == pytest.approx(result.hv_seeds[1])
+    single = bootstrap_hypervolume(a, resamples=300)  # its episode draws: the same generator, the same order
+    assert result.difference == pytest.approx(single.difference)
+    assert np.allclose(result.diff_episodes, single.differences)
     # drawing the seeds changes nothing when they are the same policy twice
     assert np.allclose(result.diff_episodes, result.diff_seeds_episodes)
 
