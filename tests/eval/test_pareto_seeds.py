@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +11,7 @@ from sofar_agents.evaluation.pareto_bootstrap import bootstrap_hypervolume
 from sofar_agents.evaluation.pareto_seeds import training_seed_fronts, training_seeds_markdown
 
 from .episode_csv import write_episode_csv
+from .test_pareto_bootstrap import _cli
 
 SAFE = "pasta w=0.9/0/0.0333/0.0333/0.0333"
 BOLD = "pasta w=0.1/0.8/0.0333/0.0333/0.0333"
@@ -112,13 +112,6 @@ def test_too_few_draws_are_refused():
 def _write(path: Path, rows: list[dict]) -> str:
     write_episode_csv(path, [{**r, "use_miqp": 1} for r in rows])
     return str(path)
-
-
-def _cli():
-    spec = importlib.util.spec_from_file_location("pareto_cli", Path(__file__).parents[2] / "eval" / "pareto.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def test_the_command_writes_the_report_and_refuses_bad_files(tmp_path, capsys):
