@@ -92,6 +92,20 @@ def _episode_table(rows: Sequence[Mapping[str, Any]], strategies: Sequence[str])
     return table, cells
 
 
+def _draw_episodes(cells: Sequence[tuple], resamples: int, rng: np.random.Generator) -> tuple[np.ndarray, int]:
+    """(resamples, episodes): how often each draw takes each episode, drawing with replacement within each cell
+    (``cells[i]`` the cell of episode i), and the number of cells."""
+    cell_index: dict[tuple, list[int]] = {}
+    for i, c in enumerate(cells):
+        cell_index.setdefault(c, []).append(i)
+    counts = np.zeros((resamples, len(cells)))
+    rows_of_draws = np.arange(resamples)[:, None]
+    for idx in cell_index.values():
+        draws = rng.choice(np.asarray(idx), size=(resamples, len(idx)), replace=True)
+        np.add.at(counts, (rows_of_draws, draws), 1.0)
+    return counts, len(cell_index)
+
+
 def _points(counts: np.ndarray, data: np.ndarray) -> np.ndarray:
     """(draws, 2): success [%] and overtakes per hour of one strategy on each draw (``counts``: (draws, episodes),
     how often each episode is drawn)."""
@@ -122,15 +136,7 @@ def bootstrap_hypervolume(rows: Sequence[Mapping[str, Any]], families: tuple[str
     strategies = [n for f in families for n in members[f]]
     table, cells = _episode_table(rows, strategies)
     n_ep = len(cells)
-    cell_index: dict[tuple, list[int]] = {}
-    for i, c in enumerate(cells):
-        cell_index.setdefault(c, []).append(i)
-    rng = np.random.default_rng(seed)
-    counts = np.zeros((int(resamples), n_ep))  # how often each draw takes each episode
-    rows_of_draws = np.arange(int(resamples))[:, None]
-    for idx in cell_index.values():
-        draws = rng.choice(np.asarray(idx), size=(int(resamples), len(idx)), replace=True)
-        np.add.at(counts, (rows_of_draws, draws), 1.0)
+    counts, n_cells = _draw_episodes(cells, int(resamples), np.random.default_rng(seed))
     points = {n: _points(counts, table[n]) for n in strategies}
     ones = np.ones((1, n_ep))
     observed = tuple(hypervolume(np.vstack([_points(ones, table[n]) for n in members[f]])) for f in families)
@@ -138,7 +144,7 @@ def bootstrap_hypervolume(rows: Sequence[Mapping[str, Any]], families: tuple[str
     for b in range(int(resamples)):
         hv_a, hv_b = (hypervolume(np.array([points[n][b] for n in members[f]])) for f in families)
         diffs[b] = hv_b - hv_a
-    return HypervolumeBootstrap(tuple(families), members, n_ep, len(cell_index), observed, int(resamples),
+    return HypervolumeBootstrap(tuple(families), members, n_ep, n_cells, observed, int(resamples),
                                 int(seed), diffs)
 
 

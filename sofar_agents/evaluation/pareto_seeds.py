@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from sofar_agents.evaluation.pareto import ParetoPoint, _family_of, _point, _preference_of, hypervolume
-from sofar_agents.evaluation.pareto_bootstrap import _episode_table
+from sofar_agents.evaluation.pareto_bootstrap import _draw_episodes, _episode_table, _points
 
 __all__ = ["TrainingSeedFronts", "training_seed_fronts", "training_seeds_markdown"]
 
@@ -158,34 +158,18 @@ def training_seed_fronts(files: Mapping[str, Sequence[Mapping[str, Any]]], resam
     hv_fixed, hv_pooled = hypervolume(values(fixed_pts)), hypervolume(values(pooled))
     hv_seeds = tuple(hypervolume(values(pts)) for pts in per_seed)
 
-    n_ep = len(cells)
-    cell_index: dict[tuple, list[int]] = {}
-    for i, c in enumerate(cells):
-        cell_index.setdefault(c, []).append(i)
     rng = np.random.default_rng(seed)
     n = int(resamples)
-    counts = np.zeros((n, n_ep))
-    for idx in cell_index.values():
-        draws = rng.choice(np.asarray(idx), size=(n, len(idx)), replace=True)
-        np.add.at(counts, (np.arange(n)[:, None], draws), 1.0)
+    counts, n_cells = _draw_episodes(cells, n, rng)
     picks = np.zeros((n, k))  # how often each draw takes each training seed
     np.add.at(picks, (np.arange(n)[:, None], rng.integers(0, k, size=(n, k))), 1.0)
-    # per strategy and draw: sums of success, overtakes, simulated time over the drawn episodes
-    sums = {s: counts @ t for s, t in table.items()}
-    n_drawn = counts.sum(axis=1)
-
-    def point(success, overtakes, time, episodes):
-        hours = time / 3600.0
-        rate = np.divide(overtakes, hours, out=np.zeros_like(hours), where=hours > 0)
-        return np.stack([100.0 * success / episodes, rate], axis=1)
-
-    front = lambda strategies, b: np.array([  # noqa: E731
-        point(sums[s][b:b + 1, 0], sums[s][b:b + 1, 1], sums[s][b:b + 1, 2], n_drawn[b:b + 1])[0] for s in strategies])
-    hv_draws = np.array([[hypervolume(front(strategies, b)) for b in range(n)] for strategies in [fixed] + seeded])
+    points = {s: _points(counts, t) for s, t in table.items()}  # (draws, 2) per strategy
+    hv_draws = np.array([[hypervolume(np.array([points[s][b] for s in strategies])) for b in range(n)]
+                         for strategies in [fixed] + seeded])
     seed_diffs = hv_draws[1:] - hv_draws[0]  # (k, draws)
     diffs = np.stack([seed_diffs.mean(axis=0), (picks.T * seed_diffs).sum(axis=0) / k])
     return TrainingSeedFronts(tuple(names), tuple(ids), fixed_pts, per_seed, pooled, gamma, hv_fixed, hv_seeds,
-                              hv_pooled, n_ep, len(cell_index), n, int(seed), diffs[0], diffs[1])
+                              hv_pooled, len(cells), n_cells, n, int(seed), diffs[0], diffs[1])
 
 
 def training_seeds_markdown(result: TrainingSeedFronts, level: float = 0.95) -> str:
