@@ -110,7 +110,10 @@ LIFETIME = {
 @pytest.mark.parametrize("case", sorted(LIFETIME))
 def test_the_workers_end_with_their_driver(case, tmp_path):
     sig, (backend, transport_only) = LIFETIME[case]
-    code = (f"import sys; sys.path.insert(0, {str(TESTS)!r}); from eval.executor_jobs import drive; "
+    # a driver started from a shell gets Ctrl-C as KeyboardInterrupt; one started from a process that ignores SIGINT
+    # (as a test process can, after some library set it) would inherit the ignored disposition and never see it
+    code = (f"import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            f"sys.path.insert(0, {str(TESTS)!r}); from eval.executor_jobs import drive; "
             f"drive({str(tmp_path / 'rows.csv')!r}, 4, {backend!r}, {transport_only!r})")
     driver = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                               start_new_session=True)
