@@ -21,20 +21,28 @@ rows of ``T``. Infinite bounds stay infinite (inactive). The solution is mapped 
 variables ``z`` (states from ``T``, soft slacks as the violation of their rows divided by ``g``), so the
 controller treats every backend alike.
 
-Each :class:`~.layout.QPStructure` keeps one :class:`CondensedDAQP` as its solver: a
-:class:`daqp.Model` set up once per pattern and updated with the new matrices. Every solve starts from
+Each :class:`~.layout.QPStructure` keeps one :class:`CondensedDAQP` as its solver. Every solve starts from
 the empty working set (``sense`` given anew): with daqp 0.11, starting from the previous solve's working
 set (the update without ``sense``, or ``sense`` with the active flags of the last multipliers) returned
-non-finite solutions with exit flag 1 on closed-loop QPs of this controller. A status other than
+non-finite solutions with exit flag 1 on closed-loop QPs of this controller. Two routes, the same solution
+to the bit (tests/control/test_condensed_c.py):
+
+* compiled (with :data:`~sofar_env.planning.daqp_c.SOFT_AVAILABLE`, the pinned daqp): one kernel,
+  :func:`_solve_compact`, drops the rows with both bounds infinite (the box rows of most states: about 100 of
+  140; such a row can never enter DAQP's working set, and on every recorded QP the solution is the same to the
+  bit without it), then sets up, solves and frees DAQP's workspace through its C calls
+  (:func:`~sofar_env.planning.daqp_c.soft_solve`);
+* otherwise a :class:`daqp.Model` set up once per pattern and updated with the new matrices. A status other than
 optimal (1) or soft-optimal (2), data outside this contract (ValueError) or a non-finite solution drop
 the model (the next solve sets up afresh) and are reported as a failure (-> fallback), as with the other
 backends (:func:`~.backends.solve_qp`).
 
 Accuracy and cost (``bench/bench_qp_backends.py``, 309 QPs of a 300-step closed loop, against PIQP at
 tolerances 1e-11): first input within 4e-8, plan within 3e-7 (PIQP at its defaults: 5e-6 and 5e-3);
-CPU time per solve median 0.18 ms against PIQP's 0.16 ms (p95 0.26 against 0.29 ms): about 0.05 ms the
-condensing (one compiled kernel, :func:`_condense`, compiled on first use and cached as the package's other
-kernels), 0.05 ms DAQP's update and solve.
+CPU time per solve of the :class:`daqp.Model` route median 0.18 ms against PIQP's 0.16 ms (p95 0.26
+against 0.29 ms): about 0.05 ms the condensing (one compiled kernel, :func:`_condense`, compiled on first use
+and cached as the package's other kernels), 0.05 ms DAQP's update and solve; the compiled route's numbers are
+in docs/decisions/qp-backend.md.
 """
 
 from __future__ import annotations
@@ -43,6 +51,7 @@ import daqp
 import numpy as np
 
 from ..._jit import kernel
+from ...planning import daqp_c
 from .layout import N_FIXED
 
 __all__ = ["CondensedDAQP", "DAQP_ITER_LIMIT", "DAQP_PRIMAL_TOL"]
@@ -58,16 +67,16 @@ _CONTRACT = {1: "dx_{k+1} with a factor other than 1", 2: "a soft row pair", 3: 
 
 
 @kernel
-def _condense(ad, g_csr, qp, p, layout, out):
-    """The condensed QP (module docstring) into the output arrays (``amat``, ``lo_rows``, ``go``, ``rho``, ``w``
-    prefilled by the caller); returns 0, or the contract the data break: 1 (a dx_{k+1} factor other than 1),
-    2 (a soft pair: signs, infinite sides or rows differ), 3 (a single soft row's other side is finite),
-    4 (a soft slack's bounds are not [0, inf)).
+def _condense(a_csc, g_csr, qp, p, layout, out):
+    """The condensed QP (module docstring) into the output arrays, every entry written; returns 0, or the
+    contract the data break: 1 (a dx_{k+1} factor other than 1), 2 (a soft pair: signs, infinite sides or rows
+    differ), 3 (a single soft row's other side is finite), 4 (a soft slack's bounds are not [0, inf)).
 
-    The inputs, one bundle per concept: ``ad`` the equality rows (dense); ``g_csr`` ``(data, indices, indptr)``
-    of G; ``qp`` the sparse QP's vectors ``(c, b, hl, hu, xl, xu)``; ``p`` the cost's diagonal; ``layout`` the
-    pattern's index arrays ``(u_cols, x_cols, var_cols, kind, idx, hard_rows, soft_cols, soft_up, soft_lo,
-    row_out, row_lo)``; ``out`` ``(sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs)``, written.
+    The inputs, one bundle per concept: ``a_csc`` ``(data, indices, indptr)`` of the equality rows A (CSC,
+    canonical), their entries in ``ad`` (nx, nu + 6) as ``A.toarray()`` has them (below); ``g_csr``
+    ``(data, indices, indptr)`` of G; ``qp`` the sparse QP's vectors ``(c, b, hl, hu, xl, xu)``; ``p`` the cost's
+    diagonal; ``layout`` the pattern's index arrays ``(u_cols, x_cols, var_cols, kind, idx, hard_rows, soft_cols, soft_up, soft_lo,
+    row_out, row_lo)``; ``out`` ``(ad, sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs)``, written.
 
     ``sol`` (5N, 2N + 1): ``dx = sol[:, :2N] du + sol[:, 2N]``, by block forward substitution through the
     equality rows ``ad``, whose dx_k entries sit in the block below the diagonal. ``kind``/``idx`` per
@@ -75,33 +84,58 @@ def _condense(ad, g_csr, qp, p, layout, out):
     3 a soft slack. ``row_out``/``row_lo`` per row of G: its row of ``amat`` (or -1) and, for the lower row of
     a soft pair, its row of ``lo_rows`` (checked equal to the upper one's)."""
     g_data, g_ind, g_ptr = g_csr
+    a_data, a_ind, a_ptr = a_csc
     c, b, hl, hu, xl, xu = qp
     u_cols, x_cols, var_cols, kind, idx, hard_rows, soft_cols, soft_up, soft_lo, row_out, row_lo = layout
-    sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs = out
+    ad, sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs = out
     nu = len(u_cols)
     nx = len(x_cols)
     nv = hess.shape[0]
+    # A's entries as A.toarray() has them (each added to a zero), compact: ad[r, :nu] the inputs' columns,
+    # ad[r, nu + q % 5] the previous stage's states q, ad[r, nu + 5] the diagonal dx_{k+1} (the only columns
+    # the constructor allows)
+    ad[:, :] = 0.0
+    for col in range(len(kind)):
+        for e in range(a_ptr[col], a_ptr[col + 1]):
+            r = a_ind[e]
+            if kind[col] == 0:
+                ad[r, idx[col]] += a_data[e]
+            elif idx[col] == r:
+                ad[r, nu + 5] += a_data[e]
+            else:
+                ad[r, nu + idx[col] % 5] += a_data[e]
+    amat[:, :] = 0.0
+    lo_rows[:, :] = 0.0
+    go[:] = 0.0
+    rho[:] = 1e-6  # DAQP's default weight where a row is not soft (unused there)
+    w[:] = 0.0
+    # (each entry's sums below run in a fixed order, the same as a loop over that entry alone: the loops are
+    # ordered for contiguous rows, which changes no bit without fastmath)
     for r in range(nx):
         k = r // 5
-        if ad[r, x_cols[r]] != 1.0:
+        if ad[r, nu + 5] != 1.0:
             return 1
-        for j in range(nu + 1):
-            acc = -ad[r, u_cols[j]] if j < nu else b[r]
-            if k > 0:
-                for q in range(5 * (k - 1), 5 * k):
-                    acc -= ad[r, x_cols[q]] * sol[q, j]
-            sol[r, j] = acc
+        for j in range(nu):
+            sol[r, j] = -ad[r, j]
+        sol[r, nu] = b[r]
+        if k > 0:
+            for q in range(5 * (k - 1), 5 * k):
+                a_rq = ad[r, nu + q % 5]
+                for j in range(nu + 1):
+                    sol[r, j] -= a_rq * sol[q, j]
     # H = Tz' diag(p) Tz (here its diagonal from the identity blocks), f = Tz' (p t0 + c); input i acts on
-    # the states from stage i // 2 on
+    # the states from stage i // 2 on, i.e. state row r on the inputs i < 2 (r // 5 + 1)
     for i in range(nv):
         for j in range(nv):
             hess[i, j] = 0.0
         f[i] = c[var_cols[i]]
-    for i in range(nu):  # (the inputs' block of H, sol' diag(p) sol, is added by the caller with BLAS)
-        acc = 0.0
-        for r in range(5 * (i // 2), nx):
-            acc += sol[r, i] * (p[x_cols[r]] * sol[r, nu] + c[x_cols[r]])
-        f[i] += acc
+    acc = np.zeros(nu)  # (the inputs' block of H, sol' diag(p) sol, is added by the caller with BLAS)
+    for r in range(nx):
+        t_r = p[x_cols[r]] * sol[r, nu] + c[x_cols[r]]
+        for i in range(min(nu, 2 * (r // 5 + 1))):
+            acc[i] += sol[r, i] * t_r
+    for i in range(nu):
+        f[i] += acc[i]
     for i in range(nv):
         hess[i, i] += p[var_cols[i]]
         bu[i] = xu[var_cols[i]]
@@ -161,6 +195,38 @@ def _condense(ad, g_csr, qp, p, layout, out):
     return 0
 
 
+@kernel
+def _solve_compact(hess, f, amat, bu, bl, sense, rho, w, compact, records, buffers, work, slot):
+    """:func:`~sofar_env.planning.daqp_c.soft_solve` of the condensed QP without its rows whose bounds are both
+    infinite (module docstring): ``compact`` ``(A, bupper, blower, sense, rho, w)`` buffers of the full size,
+    written. Returns ``soft_solve``'s ``(setup_flag, exitflag, iterations)``; the solution is in
+    ``buffers[0][:n]``."""
+    a_c, bu_c, bl_c, sense_c, rho_c, w_c = compact
+    nv = f.shape[0]
+    for i in range(nv):
+        bu_c[i] = bu[i]
+        bl_c[i] = bl[i]
+        sense_c[i] = sense[i]
+        rho_c[i] = rho[i]
+        w_c[i] = w[i]
+    k = 0
+    for r in range(amat.shape[0]):
+        i = nv + r
+        if bu[i] == np.inf and bl[i] == -np.inf:
+            continue
+        for j in range(nv):
+            a_c[k, j] = amat[r, j]
+        bu_c[nv + k] = bu[i]
+        bl_c[nv + k] = bl[i]
+        sense_c[nv + k] = sense[i]
+        rho_c[nv + k] = rho[i]
+        w_c[nv + k] = w[i]
+        k += 1
+    m = nv + k
+    return daqp_c.soft_solve(hess, f, a_c[:k], bu_c[:m], bl_c[:m], sense_c[:m], rho_c[:m], w_c[:m], records,
+                             buffers, work, slot)
+
+
 class CondensedDAQP:
     """The condensed QP of one :class:`~.layout.QPStructure` and its DAQP model (module docstring)."""
 
@@ -171,6 +237,8 @@ class CondensedDAQP:
         self.u_cols = (blk[:, None] + np.arange(2)[None, :]).ravel()
         self.x_cols = (blk[:, None] + 2 + np.arange(5)[None, :]).ravel()
         g = qs.G.tocsc()
+        if qs.A.format != "csc" or not qs.A.has_canonical_format:
+            raise RuntimeError("equality rows not in canonical CSC form")  # construction bug (read as CSC)
         a_coo = qs.A.tocoo()
         if not np.all(np.isin(a_coo.col, np.concatenate([self.u_cols, self.x_cols]))):
             raise RuntimeError("equality rows on slack columns")  # construction bug
@@ -221,7 +289,24 @@ class CondensedDAQP:
         n_rows = nx + nh + ns
         self.sense = np.zeros(self.nv + n_rows, dtype=np.int32)
         self.sense[self.nv + n_rows - ns:] = _SOFT
+        self._p_x = self.p[self.x_cols][:, None]
+        self._layout = (self.u_cols, self.x_cols, self.var_cols, self.kind, self.idx, self.hard_rows,
+                        self.soft_cols, self.soft_up, self.soft_lo, self.row_out, self.row_lo)
+        nu, nv, n_in = len(self.u_cols), self.nv, qs.n_in
+        self._out = (np.zeros((nx, nu + 6)), np.empty((nx, nu + 1)), np.empty((nv, nv)), np.empty(nv),
+                     np.zeros((n_rows, nv)), np.zeros((ns, nv)), np.zeros(n_in), np.empty(nv + n_rows),
+                     np.empty(nv + n_rows), np.empty(nv + n_rows), np.empty(nv + n_rows), np.empty(ns))
+        """The condensed QP's arrays (:func:`_condense`'s ``out``), rewritten by every :meth:`condense`."""
         self.model: daqp.Model | None = None
+        self.native: daqp_c.Workspace | None = None
+        """The compiled route's DAQP records and buffers (None: the :class:`daqp.Model` route)."""
+        if daqp_c.SOFT_AVAILABLE:
+            self.native = daqp_c.Workspace(self.nv, self.nv + n_rows)
+            settings = self.native.records[1][0]
+            settings["primal_tol"], settings["iter_limit"] = DAQP_PRIMAL_TOL, DAQP_ITER_LIMIT
+            m = self.nv + n_rows
+            self._compact = (np.zeros((n_rows, self.nv)), np.empty(m), np.empty(m), np.empty(m, dtype=np.int32),
+                             np.empty(m), np.empty(m))
 
     @staticmethod
     def _same_pattern(g, r0: int, r1: int) -> bool:
@@ -236,28 +321,62 @@ class CondensedDAQP:
     def condense(self, qs, data: tuple) -> tuple:
         """``(H, f, A, bupper, blower, rho, w, sol, go, gabs)`` of the condensed QP (module docstring): simple
         bounds first, then the rows on dx, the hard rows and the soft rows; ``rho``, ``w`` the soft weights of
-        every constraint; ``sol``, ``go``, ``gabs`` what maps the solution back (:meth:`solve`). Raises
-        ValueError for data outside the contract (:func:`_condense`)."""
-        nu, nv, nx = len(self.u_cols), self.nv, len(self.x_cols)
-        n_rows = len(self.sense) - nv
-        out = (np.empty((nx, nu + 1)), np.empty((nv, nv)), np.empty(nv), np.zeros((n_rows, nv)),
-               np.zeros((len(self.soft_cols), nv)), np.zeros(qs.n_in), np.empty(nv + n_rows), np.empty(nv + n_rows),
-               np.full(nv + n_rows, 1e-6), np.zeros(nv + n_rows), np.empty(len(self.soft_cols)))
-        sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs = out
-        g = qs.G
-        layout = (self.u_cols, self.x_cols, self.var_cols, self.kind, self.idx, self.hard_rows, self.soft_cols,
-                  self.soft_up, self.soft_lo, self.row_out, self.row_lo)
-        status = _condense(qs.A.toarray(), (g.data, g.indices, g.indptr), tuple(data), self.p, layout, out)
+        every constraint; ``sol``, ``go``, ``gabs`` what maps the solution back (:meth:`solve`). The arrays are
+        this object's, rewritten by the next call. Raises ValueError for data outside the contract
+        (:func:`_condense`)."""
+        out = self._out
+        a, g = qs.A, qs.G
+        status = _condense((a.data, a.indices, a.indptr), (g.data, g.indices, g.indptr), tuple(data), self.p,
+                           self._layout, out)
         if status:
             raise ValueError(f"QP data outside the condensing contract ({_CONTRACT[status]})")
+        _, sol, hess, f, amat, _, go, bu, bl, rho, w, gabs = out
+        nu = len(self.u_cols)
         sx = sol[:, :nu]
-        hess[:nu, :nu] += sx.T @ (self.p[self.x_cols][:, None] * sx)
+        hess[:nu, :nu] += sx.T @ (self._p_x * sx)
         return hess, f, amat, bu, bl, rho, w, sol, go, gabs
 
     def solve(self, qs, data: tuple) -> tuple[np.ndarray | None, int, str]:
         """``(z or None, iterations, message)``; raises only ValueError / RuntimeError for the caller
         (:func:`~.backends.solve_qp`) to map to a failure."""
         hess, f, amat, bu, bl, rho, w, sol, go, gabs = self.condense(qs, data)
+        if self.native is not None:
+            v, iters, fail = self._solve_native(hess, f, amat, bu, bl, rho, w)
+        else:
+            v, iters, fail = self._solve_model(hess, f, amat, bu, bl, rho, w)
+        if fail:
+            return None, iters, fail
+        nu = len(self.u_cols)
+        z = np.zeros(qs.nz)
+        z[self.u_cols] = v[:nu]
+        z[self.x_cols] = sol[:, :nu] @ v[:nu] + sol[:, nu]
+        z[self.expl_cols] = v[nu:]
+        # soft slacks: the violation of their row (the sparse QP's optimal slack), in sigma~ units
+        _, _, hl, hu, _, _ = data
+        up, lo = self.soft_up, self.soft_lo
+        r = amat[self._soft_out] @ v + go[up]
+        z[self.soft_cols] = np.maximum(np.maximum(r - hu[up], hl[lo] - r), 0.0) / gabs
+        return z, iters, "solved"
+
+    def _solve_native(self, hess, f, amat, bu, bl, rho, w) -> tuple[np.ndarray | None, int, str]:
+        """``(v, iterations, failure message or "")`` by the compiled route (module docstring)."""
+        ws = self.native
+        setup, flag, iters = _solve_compact(hess, f, amat, bu, bl, self.sense, rho, w, self._compact, ws.records,
+                                            ws.buffers, ws.work, daqp_c.SETTINGS_SLOT)
+        if setup <= 0:
+            return None, 0, f"daqp setup exit flag {setup}" if setup < 0 else "daqp without per-row soft weights"
+        return self._checked(ws.buffers[0][:self.nv].copy(), int(flag), int(iters))
+
+    @staticmethod
+    def _checked(v: np.ndarray, flag: int, iters: int) -> tuple[np.ndarray | None, int, str]:
+        if flag not in _OK:
+            return None, iters, f"daqp exit flag {flag}"
+        if not np.all(np.isfinite(v)):
+            return None, iters, f"daqp returned non-finite values (exit flag {flag})"
+        return v, iters, ""
+
+    def _solve_model(self, hess, f, amat, bu, bl, rho, w) -> tuple[np.ndarray | None, int, str]:
+        """``(v, iterations, failure message or "")`` by the :class:`daqp.Model` route (module docstring)."""
         if self.model is None:
             self.model = daqp.Model()
             flag, _ = self.model.setup(hess, f, amat, bu, bl, self.sense.copy())
@@ -271,20 +390,4 @@ class CondensedDAQP:
                 return None, 0, f"daqp update exit flag {flag}"
         self.model.soft_weights(rho_l=rho, rho_u=rho, w_l=w, w_u=w)
         v, _, flag, info = self.model.solve()
-        iters = int(info["iterations"])
-        if flag not in _OK:
-            return None, iters, f"daqp exit flag {flag}"
-        v = np.asarray(v, dtype=float)
-        if not np.all(np.isfinite(v)):
-            return None, iters, f"daqp returned non-finite values (exit flag {flag})"
-        nu = len(self.u_cols)
-        z = np.zeros(qs.nz)
-        z[self.u_cols] = v[:nu]
-        z[self.x_cols] = sol[:, :nu] @ v[:nu] + sol[:, nu]
-        z[self.expl_cols] = v[nu:]
-        # soft slacks: the violation of their row (the sparse QP's optimal slack), in sigma~ units
-        _, _, hl, hu, _, _ = data
-        up, lo = self.soft_up, self.soft_lo
-        r = amat[self._soft_out] @ v + go[up]
-        z[self.soft_cols] = np.maximum(np.maximum(r - hu[up], hl[lo] - r), 0.0) / gabs
-        return z, iters, "solved"
+        return self._checked(np.asarray(v, dtype=float), int(flag), int(info["iterations"]))

@@ -8,10 +8,6 @@ default tolerances (measured: PIQP 5e-6 on du_0, 3e-5 on the plan): 1e-6 on du_0
 and the slacks (measured 4e-8 and 3e-7).
 """
 
-import importlib
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -22,17 +18,6 @@ from sofar_env.control.mpc.backends import solve_qp
 from sofar_env.errors import ConfigError
 
 from .scenarios import make_stage
-
-BENCH = Path(__file__).resolve().parents[3] / "bench"
-
-
-@pytest.fixture(scope="module")
-def bench():
-    sys.path.insert(0, str(BENCH))
-    try:
-        yield importlib.import_module("bench_qp_backends")
-    finally:
-        sys.path.remove(str(BENCH))
 
 
 def test_config_accepts_daqp():
