@@ -18,7 +18,8 @@ Measurements and what stays numpy: docs/decisions/compiled-planner.md.
 Contract of :func:`soft_solve`: the problem of ``daqp.Model.setup`` (or ``update`` with every matrix and a fresh
 ``sense``), then ``Model.soft_weights(rho, rho, w, w)`` and ``Model.solve()``, settings as ``records`` hold them,
 through DAQP's documented C calls (``setup_daqp``, ``daqp_set_soft_weights``, ``daqp_solve``, then
-``free_daqp_workspace`` and ``free_daqp_ldp``): the same solution to the bit (tests/control/test_condensed_c.py).
+``free_daqp_workspace`` and ``free_daqp_ldp``): the same solution to the bit
+(tests/control/mpc/test_condensed_c.py).
 The workspace ``DAQPWorkspace`` is opaque here: a zeroed buffer of :data:`WORKSPACE_BYTES`, of which only the
 slot of its ``settings`` pointer is known, found at import (:data:`SETTINGS_SLOT`: the one pointer
 ``allocate_daqp_settings`` writes into a zeroed buffer). Our settings record is put there before the setup and

@@ -25,17 +25,18 @@ Each :class:`~.layout.QPStructure` keeps one :class:`CondensedDAQP` as its solve
 the empty working set (``sense`` given anew): with daqp 0.11, starting from the previous solve's working
 set (the update without ``sense``, or ``sense`` with the active flags of the last multipliers) returned
 non-finite solutions with exit flag 1 on closed-loop QPs of this controller. Two routes, the same solution
-to the bit (tests/control/test_condensed_c.py):
+to the bit (tests/control/mpc/test_condensed_c.py):
 
 * compiled (with :data:`~sofar_env.planning.daqp_c.SOFT_AVAILABLE`, the pinned daqp): one kernel,
   :func:`_solve_compact`, drops the rows with both bounds infinite (the box rows of most states: about 100 of
   140; such a row can never enter DAQP's working set, and on every recorded QP the solution is the same to the
   bit without it), then sets up, solves and frees DAQP's workspace through its C calls
   (:func:`~sofar_env.planning.daqp_c.soft_solve`);
-* otherwise a :class:`daqp.Model` set up once per pattern and updated with the new matrices. A status other than
-optimal (1) or soft-optimal (2), data outside this contract (ValueError) or a non-finite solution drop
-the model (the next solve sets up afresh) and are reported as a failure (-> fallback), as with the other
-backends (:func:`~.backends.solve_qp`).
+* otherwise a :class:`daqp.Model` set up once per pattern and updated with the new matrices.
+
+A status other than optimal (1) or soft-optimal (2), data outside this contract (ValueError) or a non-finite
+solution drop the solver (the next solve sets up afresh) and are reported as a failure (-> fallback), as with
+the other backends (:func:`~.backends.solve_qp`).
 
 Accuracy and cost (``bench/bench_qp_backends.py``, 309 QPs of a 300-step closed loop, against PIQP at
 tolerances 1e-11): first input within 4e-8, plan within 3e-7 (PIQP at its defaults: 5e-6 and 5e-3);
@@ -75,8 +76,9 @@ def _condense(a_csc, g_csr, qp, p, layout, out):
     The inputs, one bundle per concept: ``a_csc`` ``(data, indices, indptr)`` of the equality rows A (CSC,
     canonical), their entries in ``ad`` (nx, nu + 6) as ``A.toarray()`` has them (below); ``g_csr``
     ``(data, indices, indptr)`` of G; ``qp`` the sparse QP's vectors ``(c, b, hl, hu, xl, xu)``; ``p`` the cost's
-    diagonal; ``layout`` the pattern's index arrays ``(u_cols, x_cols, var_cols, kind, idx, hard_rows, soft_cols, soft_up, soft_lo,
-    row_out, row_lo)``; ``out`` ``(ad, sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs)``, written.
+    diagonal; ``layout`` the pattern's index arrays ``(u_cols, x_cols, var_cols, kind, idx, hard_rows, soft_cols,
+    soft_up, soft_lo, row_out, row_lo)``; ``out`` ``(ad, sol, hess, f, amat, lo_rows, go, bu, bl, rho, w, gabs)``,
+    written.
 
     ``sol`` (5N, 2N + 1): ``dx = sol[:, :2N] du + sol[:, 2N]``, by block forward substitution through the
     equality rows ``ad``, whose dx_k entries sit in the block below the diagonal. ``kind``/``idx`` per
