@@ -57,8 +57,9 @@ class PASTAPolicy:
     """Deterministic PASTA actor evaluated in numpy (float32).
 
     ``gamma = low + (high - low) * sigmoid(mean_net([obs, w]))`` (``squashing="sigmoid"``),
-    ``gamma = clip(mean_net([obs, w]), low, high)`` (``squashing="clip"``) or the sigmoid reaching
-    ``margin * (high - low)`` beyond each bound, clipped (``squashing="sigmoid-clip"``); the
+    ``gamma = clip(mean_net([obs, w]), low, high)`` (``squashing="clip"``), the sigmoid reaching
+    ``margin * (high - low)`` beyond each bound, clipped (``squashing="sigmoid-clip"``), or
+    ``gamma = low * (high / low) ** sigmoid(mean_net([obs, w]))`` (``squashing="log-sigmoid"``); the
     preference part of the first layer is folded into its bias (see :meth:`set_preference`).
     """
 
@@ -89,8 +90,13 @@ class PASTAPolicy:
                              "with action_low < action_high")
         self._scale = self.action_high - self.action_low
         self._sig_low, self._sig_scale = self.action_low, self._scale
+        low64, high64 = self.action_low.astype(np.float64), self.action_high.astype(np.float64)
+        if squashing == "log-sigmoid":  # as the torch squashing computes them (float32 of the float64 logs)
+            if not np.all(low64 > 0.0):
+                raise ValueError(f"{self._where}the log-sigmoid squashing needs action_low > 0, got {action_low}")
+            self._log_low = np.log(low64).astype(np.float32)
+            self._log_scale = np.log(high64 / low64).astype(np.float32)
         if squashing == "sigmoid-clip":
-            low64, high64 = self.action_low.astype(np.float64), self.action_high.astype(np.float64)
             reach = margin * (high64 - low64)  # as the torch squashing computes its bounds
             self._sig_low = (low64 - reach).astype(np.float32)
             self._sig_scale = (high64 + reach).astype(np.float32) - self._sig_low
@@ -123,6 +129,8 @@ class PASTAPolicy:
         out = h @ w + b
         if self.squashing == "clip":
             gamma = out
+        elif self.squashing == "log-sigmoid":
+            gamma = np.exp(self._log_low + self._log_scale / (1.0 + np.exp(-out)))
         else:
             gamma = self._sig_low + self._sig_scale / (1.0 + np.exp(-out))
         return np.clip(gamma, self.action_low, self.action_high).astype(np.float32, copy=False)

@@ -16,7 +16,7 @@ the wrong type or out of range. Keys it does not know are left alone. Fields:
 ``act_dim``         a positive integer, the length of the action bounds
 ``action_low``,     the action (gamma) bounds: lists of the same positive length of finite numbers in
 ``action_high``     ``[GAMMA_MIN, GAMMA_MAX]`` = [0.05, 1] with ``action_low < action_high`` (required)
-``action_squashing``  ``"sigmoid"``, ``"clip"`` or ``"sigmoid-clip"``, the same as ``config.action_squashing``
+``action_squashing``  ``"sigmoid"``, ``"clip"``, ``"sigmoid-clip"`` or ``"log-sigmoid"``, as ``config.action_squashing``
                     (``"sigmoid-clip"``: ``config.squash_margin`` in (0, 1], default 0.05)
 ``activation``      ``"tanh"``
 ``preference``      K finite, non-negative numbers with a positive sum (required)

@@ -21,7 +21,7 @@ _QUANTILE = float_in(0.5, 1.0)
 _KAPPA = float_in(0.0, 1.0, high_open=True)
 _FRACTION = float_in(0.0, 1.0, low_open=True)
 
-SQUASHINGS = ("sigmoid", "clip", "sigmoid-clip")
+SQUASHINGS = ("sigmoid", "clip", "sigmoid-clip", "log-sigmoid")
 """Names of the action squashings (``PASTAConfig.action_squashing``, the checkpoint JSON)."""
 PREFERENCE_SAMPLINGS = ("dirichlet", "fixed", "trade-off")
 """Names of the training preference distributions (``PASTAConfig.preference_sampling``)."""
@@ -131,8 +131,10 @@ class PASTAConfig:
     """How the Gaussian ``u`` becomes the box action: ``"sigmoid"``, ``a = low + (high - low)
     * sigmoid(u)`` (the bounds only in the limit), ``"clip"``, ``a = clip(u, low, high)``
     with ``u`` in action units (a censored Gaussian: a deterministic policy can sit exactly
-    on a bound), or ``"sigmoid-clip"``, a sigmoid reaching ``squash_margin`` of the range beyond
-    each bound, clipped to the bounds (each bound at a finite ``u``, a sigmoid between them).
+    on a bound), ``"sigmoid-clip"``, a sigmoid reaching ``squash_margin`` of the range beyond
+    each bound, clipped to the bounds (each bound at a finite ``u``, a sigmoid between them), or
+    ``"log-sigmoid"``, ``a = low * (high / low) ** sigmoid(u)``, the sigmoid in log units (as
+    fine near the lower bound, relative to the action, as near the upper one; needs ``low > 0``).
     See :mod:`sofar_agents.pasta.distribution`."""
     squash_margin: Annotated[float, _FRACTION] = 0.05
     """``"sigmoid-clip"`` only: how far beyond each bound the sigmoid reaches, as a fraction of

@@ -17,6 +17,11 @@ to the box action. The PPO ratio is computed on ``u`` in both cases.
   each bound by ``m``, censored at the bounds. Between them it is the sigmoid's bijection; each
   bound holds the Gaussian mass beyond a finite ``u``, so a deterministic policy reaches a
   bound at a finite mean, and away from the bounds a sample's action is its own.
+- ``"log-sigmoid"`` (:class:`LogSigmoidSquash`): ``a = low * (high / low) ** sigmoid(u)``, the
+  sigmoid's bijection in ``log a`` (``low > 0``). On the gamma range [0.05, 1] the sigmoid puts
+  gamma 0.07 at ``u = -3.8`` and the log-sigmoid at ``u = -2.1``: where a fixed gamma's outcome
+  changes fastest (near 0.05), a unit of ``u`` moves gamma by a constant fraction of itself instead
+  of a constant share of the range.
 """
 
 from __future__ import annotations
@@ -29,7 +34,8 @@ import torch.nn.functional as F
 
 from sofar_agents.pasta.config import SQUASHINGS
 
-__all__ = ["SQUASHINGS", "ClipSquash", "SigmoidClipSquash", "SigmoidSquash", "gaussian_log_prob", "make_squash"]
+__all__ = ["SQUASHINGS", "ClipSquash", "LogSigmoidSquash", "SigmoidClipSquash", "SigmoidSquash", "gaussian_log_prob",
+           "make_squash"]
 
 
 def gaussian_log_prob(u: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
@@ -66,6 +72,45 @@ class SigmoidSquash:
     def initial_bias(self, action: np.ndarray) -> np.ndarray:
         """The mean ``u`` whose action is ``action`` (strictly inside the bounds)."""
         frac = (action - self.low.numpy()) / self.scale.numpy()
+        return np.log(frac / (1.0 - frac))
+
+    def action_log_prob(self, action: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+        """log-density of ``action`` under the squashed Gaussian N(mean, exp(log_std)^2) of ``u``."""
+        u = self.inverse(action)
+        return gaussian_log_prob(u, mean, log_std) - self.log_abs_det_jacobian(u)
+
+
+class LogSigmoidSquash:
+    """The bijection ``a = exp(log_low + log_scale * sigmoid(u))``, ``log_scale = log(high / low)``.
+
+    Args:
+        low, high: action bounds (float32 arrays of shape ``(act_dim,)``, ``0 < low < high``), in action units.
+    """
+
+    def __init__(self, low: np.ndarray, high: np.ndarray) -> None:
+        low64, high64 = np.asarray(low, np.float64), np.asarray(high, np.float64)
+        if not np.all((low64 > 0.0) & (low64 < high64)):
+            raise ValueError(f"the log-sigmoid squashing needs 0 < low < high, got low {low}, high {high}")
+        self.log_low = torch.as_tensor(np.log(low64).astype(np.float32))
+        self.log_scale = torch.as_tensor(np.log(high64 / low64).astype(np.float32))
+
+    def __call__(self, u: torch.Tensor) -> torch.Tensor:
+        """The action for pre-activation ``u``."""
+        return torch.exp(self.log_low + self.log_scale * torch.sigmoid(u))
+
+    def inverse(self, action: torch.Tensor) -> torch.Tensor:
+        """The pre-activation of ``action`` (clamped 1e-6 inside the bounds)."""
+        p = ((torch.log(action) - self.log_low) / self.log_scale).clamp(1e-6, 1.0 - 1e-6)
+        return torch.log(p) - torch.log1p(-p)
+
+    def log_abs_det_jacobian(self, u: torch.Tensor) -> torch.Tensor:
+        """log |da/du| = log a + log log_scale + log sigmoid'(u) at ``u``, summed over the action dims."""
+        return (self.log_low + self.log_scale * torch.sigmoid(u) + torch.log(self.log_scale)
+                - F.softplus(-u) - F.softplus(u)).sum(-1)
+
+    def initial_bias(self, action: np.ndarray) -> np.ndarray:
+        """The mean ``u`` whose action is ``action`` (strictly inside the bounds)."""
+        frac = (np.log(np.asarray(action, np.float64)) - self.log_low.numpy()) / self.log_scale.numpy()
         return np.log(frac / (1.0 - frac))
 
     def action_log_prob(self, action: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
@@ -157,7 +202,7 @@ class SigmoidClipSquash:
 
 
 def make_squash(name: str, low: np.ndarray, high: np.ndarray,
-                margin: float = 0.05) -> SigmoidSquash | ClipSquash | SigmoidClipSquash:
+                margin: float = 0.05) -> SigmoidSquash | ClipSquash | SigmoidClipSquash | LogSigmoidSquash:
     """The squashing called ``name`` (one of :data:`SQUASHINGS`) for the box ``[low, high]`` (``margin``:
     ``"sigmoid-clip"``'s, :attr:`PASTAConfig.squash_margin`)."""
     if name == "sigmoid":
@@ -166,4 +211,6 @@ def make_squash(name: str, low: np.ndarray, high: np.ndarray,
         return ClipSquash(low, high)
     if name == "sigmoid-clip":
         return SigmoidClipSquash(low, high, margin)
+    if name == "log-sigmoid":
+        return LogSigmoidSquash(low, high)
     raise ValueError(f"unknown action squashing {name!r}; valid: {', '.join(SQUASHINGS)}")
