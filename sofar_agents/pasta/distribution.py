@@ -44,7 +44,17 @@ def gaussian_log_prob(u: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor
     return (-0.5 * z * z - log_std - 0.5 * math.log(2.0 * math.pi)).sum(-1)
 
 
-class SigmoidSquash:
+class _Bijection:
+    """A squashing that is a bijection: the density of ``a`` is the Gaussian's at ``u = inverse(a)`` less
+    ``log|da/du|`` (subclasses give ``inverse`` and ``log_abs_det_jacobian``)."""
+
+    def action_log_prob(self, action: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+        """log-density of ``action`` under the squashed Gaussian N(mean, exp(log_std)^2) of ``u``."""
+        u = self.inverse(action)
+        return gaussian_log_prob(u, mean, log_std) - self.log_abs_det_jacobian(u)
+
+
+class SigmoidSquash(_Bijection):
     """The bijection ``a = low + scale * sigmoid(u)`` between ``u`` and a box action.
 
     Args:
@@ -68,19 +78,13 @@ class SigmoidSquash:
         """log |da/du| at ``u``, summed over the action dims."""
         return (torch.log(self.scale) - F.softplus(-u) - F.softplus(u)).sum(-1)
 
-
     def initial_bias(self, action: np.ndarray) -> np.ndarray:
         """The mean ``u`` whose action is ``action`` (strictly inside the bounds)."""
         frac = (action - self.low.numpy()) / self.scale.numpy()
         return np.log(frac / (1.0 - frac))
 
-    def action_log_prob(self, action: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
-        """log-density of ``action`` under the squashed Gaussian N(mean, exp(log_std)^2) of ``u``."""
-        u = self.inverse(action)
-        return gaussian_log_prob(u, mean, log_std) - self.log_abs_det_jacobian(u)
 
-
-class LogSigmoidSquash:
+class LogSigmoidSquash(_Bijection):
     """The bijection ``a = exp(log_low + log_scale * sigmoid(u))``, ``log_scale = log(high / low)``.
 
     Args:
@@ -112,11 +116,6 @@ class LogSigmoidSquash:
         """The mean ``u`` whose action is ``action`` (strictly inside the bounds)."""
         frac = (np.log(np.asarray(action, np.float64)) - self.log_low.numpy()) / self.log_scale.numpy()
         return np.log(frac / (1.0 - frac))
-
-    def action_log_prob(self, action: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
-        """log-density of ``action`` under the squashed Gaussian N(mean, exp(log_std)^2) of ``u``."""
-        u = self.inverse(action)
-        return gaussian_log_prob(u, mean, log_std) - self.log_abs_det_jacobian(u)
 
 
 class ClipSquash:
