@@ -193,6 +193,13 @@ def _sofar_16() -> StackConfig:
     return dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, qp_solver="daqp", qp_fallback="off"))
 
 
+def _sofar_17() -> StackConfig:
+    base = _sofar_16()
+    barrier = dataclasses.replace(base.mpc.barrier, heading_sides="toward")
+    return dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, barrier=barrier),
+                               miqp=dataclasses.replace(base.miqp, daqp_cycle_tol=100))
+
+
 DEFAULT_STACK_PRESET = "sofar-13"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
@@ -325,6 +332,12 @@ onto its inputs and solved by DAQP (``mpc.qp_solver = "daqp"``, no fallback back
 its fallback. The same problem: DAQP solves it to about 1e-8 where PIQP stops at its tolerances (5e-6 on the first
 input, 5e-3 on the plan), never failed on the closed-loop QPs measured, and is now faster per solve; another
 floating-point path, so its episodes are compared paired with ``"sofar-13"``'s (``docs/decisions/qp-backend.md``)."""),
+    "sofar-17": Entry(_sofar_17(), """A candidate default, not the default: the three candidates since ``"sofar-13"`` in
+one preset, ``"sofar-16"`` (the MPC's QP on DAQP) with ``"sofar-14"``'s planner cycling limit
+(``miqp.daqp_cycle_tol = 100``) and ``"sofar-15"``'s barrier widened only by the turns that bring the ego closer
+(``mpc.barrier.heading_sides = "toward"``). Each was measured alone against ``"sofar-13"``; this preset measures them
+together, paired with ``"sofar-13"`` on the same episodes (``docs/decisions/default-controller.md``, "The next
+default: the three candidates together")."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

@@ -46,7 +46,7 @@ def test_presets_and_worlds_are_documented_registry_entries():
                                                             "sofar-2", "sofar-3", "sofar-4", "sofar-5", "sofar-6",
                                                             "sofar-7", "sofar-8", "sofar-9", "sofar-10", "sofar-11",
                                                             "sofar-12", "sofar-13", "sofar-14", "sofar-15",
-                                                            "sofar-16", "sofar-daqp", "reference-numerics",
+                                                            "sofar-16", "sofar-17", "sofar-daqp", "reference-numerics",
                                                             "reference-numerics-no-phantoms")
     assert SCENARIOS == tuple(WORLD_REGISTRY) == ("paper", "interactive", "dynamic", "interactive-2", "dynamic-2")
     for name, (value, doc) in STACK_PRESET_REGISTRY.items():

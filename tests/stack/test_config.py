@@ -37,7 +37,7 @@ def test_the_miqp_side_windows_use_the_barrier_braking_distance():
 def test_sofar_preset_is_the_default():
     assert STACK_PRESETS == ("sofar", "sofar-1", "paper", "sofar-ends", "sofar-recover", "sofar-2", "sofar-3",
                              "sofar-4", "sofar-5", "sofar-6", "sofar-7", "sofar-8", "sofar-9", "sofar-10", "sofar-11",
-                             "sofar-12", "sofar-13", "sofar-14", "sofar-15", "sofar-16", "sofar-daqp",
+                             "sofar-12", "sofar-13", "sofar-14", "sofar-15", "sofar-16", "sofar-17", "sofar-daqp",
                              "reference-numerics", "reference-numerics-no-phantoms")
     assert DEFAULT_STACK_PRESET == "sofar-13"
     assert stack_preset("sofar") == stack_preset(DEFAULT_STACK_PRESET) == default_stack() == EnvConfig().stack
