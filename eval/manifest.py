@@ -5,6 +5,7 @@
     python eval/manifest.py check                      # every manifest resolves; committed rows carry its hash
     python eval/manifest.py verify NAME [--rows 2]     # re-make its shortest rows (races) per circuit in a temporary folder
     python eval/manifest.py verify NAME --backfill     # ... and, when they match, give its rows the manifest's hash
+    python eval/manifest.py adopt NAME --rows-from CANDIDATE   # start NAME's table from a candidate's rows (same hash)
 
 ``check`` exits with status 1 when a committed CSV holds rows of another configuration hash than its
 manifest's (the defaults moved since: re-run the manifest into another folder, or restore the old
@@ -57,6 +58,11 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="when every re-made row matches, give the CSV's rows the manifest's hash: rows without one "
                         "(written before the column), or rows of one other hash (a configuration whose hash moved "
                         "without changing the episodes)")
+    a = sub.add_parser("adopt", help="copy into a manifest's CSV the rows another manifest of the same configuration "
+                                     "hash ran (a candidate's, when the default moves to it), relabelled")
+    a.add_argument("name", help="the manifest whose table the rows start")
+    a.add_argument("--rows-from", required=True, metavar="SOURCE",
+                   help="the manifest whose rows are copied (its episodes that are the target's)")
     p.add_argument("--log-level", default="INFO")
     return p.parse_args(argv)
 
@@ -130,6 +136,18 @@ def main(argv=None) -> int:
             logger.info("%s", getattr(report, "markdown", report) or "")  # a table's report, or the probe's text
         for name, wall in walls:
             logger.info("%s: %.0f s", name, wall)
+        return 0
+    if args.command == "adopt":
+        from sofar_agents.evaluation.manifest_adopt import adopt_rows
+
+        target, source = _load(folder, args.name), _load(folder, args.rows_from)
+        try:
+            n = adopt_rows(target, source, ROOT)
+        except ValueError as err:
+            logger.error("%s: nothing adopted: %s", target.name, err)
+            return 1
+        logger.info("%s: %d rows of %s adopted (config_hash %s); run it to make the rest", target.name, n,
+                    source.name, target.config_hash)
         return 0
     m = _load(folder, args.name)
     rows = shortest_rows(m, args.rows)

@@ -7,7 +7,8 @@ The keys of a manifest and how it is read: :mod:`~sofar_agents.evaluation.manife
 :func:`run_manifest` runs a manifest into its folder (resuming, as the table scripts do) and writes
 ``<name>.manifest.json`` there (:func:`record_path`; one per manifest, so that two manifests of one folder keep
 theirs): the manifest, its configuration hash, the code commit, the machine, its CPU flags and the wall time;
-``earlier_runs`` lists the commit, wall time and end of the runs of the same hash that a resumed run continued.
+``earlier_runs`` lists the commit, wall time and end of the runs of the same hash that a resumed run continued
+(and ``adopted_from``, the manifest whose rows :mod:`~.manifest_adopt` copied in).
 :func:`check_manifest` compares the hash a manifest resolves to with the hashes the rows of its committed CSV
 carry. :func:`rerun_rows` re-makes chosen committed rows in another folder and
 compares them field by field (every column of the committed file but ``wall_time`` and ``config_hash``; for
@@ -236,7 +237,10 @@ def _earlier_runs(path: Path, config_hash: str) -> list[dict[str, Any]]:
     if not isinstance(old, dict) or old.get("config_hash") != [config_hash]:
         return []
     runs = [r for r in old.get("earlier_runs", []) if isinstance(r, dict)]
-    return runs + [{k: old.get(k) for k in ("commit", "wall_time_s", "finished_at")}]
+    last = {k: old.get(k) for k in ("commit", "wall_time_s", "finished_at")}
+    if "adopted_from" in old:  # rows another manifest ran (:mod:`.manifest_adopt`)
+        last["adopted_from"] = old["adopted_from"]
+    return runs + [last]
 
 
 @dataclass

@@ -1,0 +1,82 @@
+"""sofar_agents.evaluation.manifest_adopt: a default's table started from a candidate's rows of the same
+configuration, relabelled and otherwise byte for byte; the run resumes from them; every mismatch refused with
+nothing written."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from sofar_agents.evaluation import manifest as mf
+from sofar_agents.evaluation.manifest_adopt import adopt_rows
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _manifest(tmp_path: Path, name: str, stack: str, gammas: str, kind: str = "table1", duration: float = 0.3):
+    path = tmp_path / f"{name}.toml"
+    path.write_text(f'kind = "{kind}"\nout = "{tmp_path / name}"\nstack = "{stack}"\ntracks = ["LagunaSeca"]\n'
+                    f'rhos = [0.5]\nepisodes = 1\nduration = {duration}\ngammas = [{gammas}]\nadaptive = false\n')
+    return mf.load_manifest(path)
+
+
+@pytest.fixture(scope="module")
+def candidate(tmp_path_factory):
+    """A candidate preset's run of two fixed gammas (``"sofar-13"``, the default's value under its own name)."""
+    tmp = tmp_path_factory.mktemp("adopt")
+    m = _manifest(tmp, "candidate", "sofar-13", "0.05, 0.5")
+    mf.run_manifest(m, ROOT, workers=1, progress=False)
+    return tmp, m
+
+
+def test_adopted_rows_are_the_candidate_s_relabelled_and_the_run_makes_only_the_rest(candidate):
+    tmp, source = candidate
+    target = _manifest(tmp, "default", "sofar", "0.05, 0.5, 0.95")
+    assert target.config_hash == source.config_hash
+    assert adopt_rows(target, source, ROOT) == 2
+    src = (tmp / "candidate" / "table1_episodes.csv").read_text().splitlines()
+    dst = (tmp / "default" / "table1_episodes.csv").read_text().splitlines()
+    at = src[0].split(",").index("stack")
+    assert dst[0] == src[0] and len(dst) == 3
+    for a, b in zip(src[1:], dst[1:]):  # every field as written but the preset's name
+        fa, fb = a.split(","), b.split(",")
+        assert fb[at] == "sofar" and fa[at] == "sofar-13"
+        assert fa[:at] + fa[at + 1:] == fb[:at] + fb[at + 1:]
+    record = json.loads((tmp / "default" / "default.manifest.json").read_text())
+    assert record["adopted_from"] == "candidate" and record["config_hash"] == [target.config_hash]
+    report = mf.run_manifest(target, ROOT, workers=1, progress=False)  # resumes: runs gamma 0.95 only
+    assert sorted(r["strategy"] for r in report.rows) == ["gamma=0.05", "gamma=0.50", "gamma=0.95"]
+    after = (tmp / "default" / "table1_episodes.csv").read_text().splitlines()
+    assert after[:3] == dst and len(after) == 4
+    again = json.loads((tmp / "default" / "default.manifest.json").read_text())
+    assert again["earlier_runs"][-1]["adopted_from"] == "candidate"
+    assert mf.check_manifest(target, ROOT).status == "ok"
+    with pytest.raises(ValueError, match="already"):  # adopting twice would duplicate episodes
+        adopt_rows(target, source, ROOT)
+    assert (tmp / "default" / "table1_episodes.csv").read_text().splitlines() == after
+
+
+@pytest.mark.parametrize("stack,kind,duration,match", [
+    ("sofar-16", "table1", 0.3, "another configuration"),  # the DAQP backend: another hash
+    ("sofar", "table2", 0.3, "one kind"),
+    ("sofar", "table1", 0.6, "another configuration"),  # the duration is part of the configuration
+])
+def test_rows_of_another_configuration_or_kind_are_refused_and_nothing_is_written(candidate, stack, kind, duration,
+                                                                                  match):
+    tmp, source = candidate
+    target = _manifest(tmp, f"refused_{stack}_{kind}_{duration}", stack, "0.05", kind=kind, duration=duration)
+    with pytest.raises(ValueError, match=match):
+        adopt_rows(target, source, ROOT)
+    assert not (tmp / target.name).exists()
+
+
+def test_a_source_without_rows_or_without_the_target_s_episodes_is_refused(candidate, tmp_path):
+    tmp, source = candidate
+    empty = _manifest(tmp_path, "empty", "sofar-13", "0.05")
+    with pytest.raises(ValueError, match="run it first"):
+        adopt_rows(_manifest(tmp_path, "t1", "sofar", "0.05"), empty, ROOT)
+    with pytest.raises(ValueError, match="none of the rows"):
+        adopt_rows(_manifest(tmp_path, "t2", "sofar", "0.95"), source, ROOT)
+    assert not (tmp_path / "t1").exists() and not (tmp_path / "t2").exists()
