@@ -3,9 +3,10 @@
 When the default controller moves to a candidate preset, the candidate has usually run the same episodes already
 (its ``candidate_*`` manifests: the same seeds, the same configuration, another preset name). Its rows are then
 the new default's rows: the configuration hash is that of the resolved configuration, not of the name, so the
-episodes would be re-made bit for bit. :func:`adopt_rows` copies them into the default manifest's CSV, with the
-``stack`` column relabelled to the target manifest's preset and every other byte as it was, and writes a run
-record there that names the candidate's run; ``python eval/manifest.py run TARGET`` then resumes from those rows
+episodes would be re-made bit for bit. :func:`adopt_rows` copies its fixed-gamma rows into the default manifest's
+CSV, with the ``stack`` column relabelled to the target manifest's preset and every other byte as it was, and writes
+a run record there that names the candidate's run. Rows of a policy (Adaptive, self-play: a ``policy_id``) are never
+adopted: the policy is not part of the configuration hash, and a moved default trains its policies again; ``python eval/manifest.py run TARGET`` then resumes from those rows
 and runs only what the candidate did not (the Adaptive rows, a policy of the new default), listing the
 candidate's run under ``earlier_runs``. ``python eval/manifest.py verify TARGET`` re-makes some of them to show
 the claim. Nothing is written unless every check passes.
@@ -28,8 +29,8 @@ ADOPTABLE_KINDS = ("table1", "table2", "multi-agent")
 
 
 def adopt_rows(target: Manifest, source: Manifest, root: str | os.PathLike) -> int:
-    """Copy the rows of ``source``'s CSV that are episodes of ``target`` into ``target``'s CSV (under ``root``) and
-    return how many. The two must be of one kind in :data:`ADOPTABLE_KINDS` and resolve to one configuration hash,
+    """Copy the fixed-gamma rows of ``source``'s CSV (no ``policy_id``) that are episodes of ``target`` into
+    ``target``'s CSV (under ``root``) and return how many. The two must be of one kind in :data:`ADOPTABLE_KINDS` and resolve to one configuration hash,
     every adopted row must carry that hash and run ``target``'s scenario and duration, and none of their episodes
     may be in ``target``'s CSV already; else ``ValueError`` naming what differs, and no file is written. The rows
     keep their bytes but for the ``stack`` field (``target.stack``); they go after the rows the CSV has (or into a
@@ -47,9 +48,9 @@ def adopt_rows(target: Manifest, source: Manifest, root: str | os.PathLike) -> i
     if not src_path.is_file():
         raise ValueError(f"{source.name}: no rows at {src_path}; run it first")
     wanted = episode_ids(target, root)
-    rows = [r for r in raw_rows(src_path, source.kind) if row_episode(target, r) in wanted]
+    rows = [r for r in raw_rows(src_path, source.kind) if row_episode(target, r) in wanted and not r["policy_id"]]
     if not rows:
-        raise ValueError(f"none of the rows of {src_path} is an episode of {target.name}")
+        raise ValueError(f"none of the fixed-gamma rows of {src_path} is an episode of {target.name}")
     for r in rows:
         if r["config_hash"] != target.config_hash:
             raise ValueError(f"{src_path}: row {row_id(target, r)} carries config_hash {r['config_hash'] or 'none'}, "

@@ -15,28 +15,36 @@ from sofar_agents.evaluation.manifest_adopt import adopt_rows
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _manifest(tmp_path: Path, name: str, stack: str, gammas: str, kind: str = "table1", duration: float = 0.3):
+POLICY = "sofar_agents/checkpoints/pasta_lagunaseca_sofar13.json"
+
+
+def _manifest(tmp_path: Path, name: str, stack: str, gammas: str, kind: str = "table1", duration: float = 0.3,
+              adaptive: bool = False):
     path = tmp_path / f"{name}.toml"
+    policy = f'adaptive = true\npolicy = "{POLICY}"\n' if adaptive else "adaptive = false\n"
     path.write_text(f'kind = "{kind}"\nout = "{tmp_path / name}"\nstack = "{stack}"\ntracks = ["LagunaSeca"]\n'
-                    f'rhos = [0.5]\nepisodes = 1\nduration = {duration}\ngammas = [{gammas}]\nadaptive = false\n')
+                    f'rhos = [0.5]\nepisodes = 1\nduration = {duration}\ngammas = [{gammas}]\n{policy}')
     return mf.load_manifest(path)
 
 
 @pytest.fixture(scope="module")
 def candidate(tmp_path_factory):
-    """A candidate preset's run of two fixed gammas (``"sofar-13"``, the default's value under its own name)."""
+    """A candidate preset's run of two fixed gammas and a policy (``"sofar-13"``, the default's value under its own
+    name)."""
     tmp = tmp_path_factory.mktemp("adopt")
-    m = _manifest(tmp, "candidate", "sofar-13", "0.05, 0.5")
+    m = _manifest(tmp, "candidate", "sofar-13", "0.05, 0.5", adaptive=True)
     mf.run_manifest(m, ROOT, workers=1, progress=False)
     return tmp, m
 
 
 def test_adopted_rows_are_the_candidate_s_relabelled_and_the_run_makes_only_the_rest(candidate):
     tmp, source = candidate
-    target = _manifest(tmp, "default", "sofar", "0.05, 0.5, 0.95")
+    target = _manifest(tmp, "default", "sofar", "0.05, 0.5, 0.95", adaptive=True)
     assert target.config_hash == source.config_hash
-    assert adopt_rows(target, source, ROOT) == 2
-    src = (tmp / "candidate" / "table1_episodes.csv").read_text().splitlines()
+    assert adopt_rows(target, source, ROOT) == 2  # the policy's row is left to the run (its policy may differ)
+    src = [line for line in (tmp / "candidate" / "table1_episodes.csv").read_text().splitlines()
+           if ",adaptive," not in line]
+    assert len(src) == 3
     dst = (tmp / "default" / "table1_episodes.csv").read_text().splitlines()
     at = src[0].split(",").index("stack")
     assert dst[0] == src[0] and len(dst) == 3
@@ -46,10 +54,10 @@ def test_adopted_rows_are_the_candidate_s_relabelled_and_the_run_makes_only_the_
         assert fa[:at] + fa[at + 1:] == fb[:at] + fb[at + 1:]
     record = json.loads((tmp / "default" / "default.manifest.json").read_text())
     assert record["adopted_from"] == "candidate" and record["config_hash"] == [target.config_hash]
-    report = mf.run_manifest(target, ROOT, workers=1, progress=False)  # resumes: runs gamma 0.95 only
-    assert sorted(r["strategy"] for r in report.rows) == ["gamma=0.05", "gamma=0.50", "gamma=0.95"]
+    report = mf.run_manifest(target, ROOT, workers=1, progress=False)  # resumes: gamma 0.95 and the policy
+    assert sorted(r["strategy"] for r in report.rows) == ["adaptive", "gamma=0.05", "gamma=0.50", "gamma=0.95"]
     after = (tmp / "default" / "table1_episodes.csv").read_text().splitlines()
-    assert after[:3] == dst and len(after) == 4
+    assert after[:3] == dst and len(after) == 5
     again = json.loads((tmp / "default" / "default.manifest.json").read_text())
     assert again["earlier_runs"][-1]["adopted_from"] == "candidate"
     assert mf.check_manifest(target, ROOT).status == "ok"
@@ -77,6 +85,6 @@ def test_a_source_without_rows_or_without_the_target_s_episodes_is_refused(candi
     empty = _manifest(tmp_path, "empty", "sofar-13", "0.05")
     with pytest.raises(ValueError, match="run it first"):
         adopt_rows(_manifest(tmp_path, "t1", "sofar", "0.05"), empty, ROOT)
-    with pytest.raises(ValueError, match="none of the rows"):
+    with pytest.raises(ValueError, match="none of the fixed-gamma rows"):
         adopt_rows(_manifest(tmp_path, "t2", "sofar", "0.95"), source, ROOT)
     assert not (tmp_path / "t1").exists() and not (tmp_path / "t2").exists()
