@@ -5,7 +5,7 @@
     python eval/manifest.py check                      # every manifest resolves; committed rows carry its hash
     python eval/manifest.py verify NAME [--rows 2]     # re-make its shortest rows (races) per circuit in a temporary folder
     python eval/manifest.py verify NAME --backfill     # ... and, when they match, give its rows the manifest's hash
-    python eval/manifest.py adopt NAME --rows-from CANDIDATE   # start NAME's table from a candidate's rows (same hash)
+    python eval/manifest.py adopt NAME --rows-from CANDIDATE   # start NAME's table from a candidate's fixed-gamma rows
 
 ``check`` exits with status 1 when a committed CSV holds rows of another configuration hash than its
 manifest's (the defaults moved since: re-run the manifest into another folder, or restore the old
@@ -58,8 +58,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="when every re-made row matches, give the CSV's rows the manifest's hash: rows without one "
                         "(written before the column), or rows of one other hash (a configuration whose hash moved "
                         "without changing the episodes)")
-    a = sub.add_parser("adopt", help="copy into a manifest's CSV the rows another manifest of the same configuration "
-                                     "hash ran (a candidate's, when the default moves to it), relabelled")
+    a = sub.add_parser("adopt", help="copy into a manifest's CSV the fixed-gamma rows another manifest of the same "
+                                     "configuration hash ran (a candidate's, when the default moves to it), relabelled")
     a.add_argument("name", help="the manifest whose table the rows start")
     a.add_argument("--rows-from", required=True, metavar="SOURCE",
                    help="the manifest whose rows are copied (its episodes that are the target's)")
