@@ -172,6 +172,8 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
 
 
 SHIPPED_POLICIES: dict[tuple[str, str], str] = {
+    ("sofar-17", "paper"): "pasta_lagunaseca_sofar17.json",
+    ("sofar-17", "interactive"): "pasta_lagunaseca_interactive_sofar17.json",
     ("sofar-13", "paper"): "pasta_lagunaseca_sofar13.json",
     ("sofar-13", "interactive"): "pasta_lagunaseca_interactive_sofar13.json",
     ("sofar-6", "paper"): "pasta_lagunaseca_sofar6.json",
@@ -183,19 +185,21 @@ SHIPPED_POLICIES: dict[tuple[str, str], str] = {
     ("paper", "paper"): "pasta_lagunaseca_paper.json",
 }
 """The shipped PASTA policies, by (controller preset they were trained with, world scenario): all trained on
-Laguna Seca only; ``"sofar"`` looks up the default controller's version (``"sofar-13"``). The interactive ones
+Laguna Seca only; ``"sofar"`` looks up the default controller's version (``"sofar-17"``). The interactive ones
 were trained with a field of 8 opponents (``n_opponents=8``), the dense field of the interactive world, and observe
-the interactive world's 16 values. The ``"sofar-6"``, ``"sofar-4"`` and ``"sofar-1"`` ones were trained with the
-former defaults and made their tables, by the same recipes."""
+the interactive world's 16 values. The ``"sofar-13"``, ``"sofar-6"``, ``"sofar-4"`` and ``"sofar-1"`` ones were
+trained with the former defaults and made their tables, by the same recipes."""
 
 
 NAMED_POLICIES: dict[str, str] = {
     "lagunaseca": "pasta_lagunaseca.json",
+    "lagunaseca-sofar-17": "pasta_lagunaseca_sofar17.json",
     "lagunaseca-sofar-13": "pasta_lagunaseca_sofar13.json",
     "lagunaseca-sofar-6": "pasta_lagunaseca_sofar6.json",
     "lagunaseca-sofar-4": "pasta_lagunaseca_sofar4.json",
     "lagunaseca-paper": "pasta_lagunaseca_paper.json",
     "lagunaseca-interactive": "pasta_lagunaseca_interactive.json",
+    "lagunaseca-interactive-sofar-17": "pasta_lagunaseca_interactive_sofar17.json",
     "lagunaseca-interactive-sofar-13": "pasta_lagunaseca_interactive_sofar13.json",
     "lagunaseca-interactive-sofar-6": "pasta_lagunaseca_interactive_sofar6.json",
     "lagunaseca-interactive-sofar-4": "pasta_lagunaseca_interactive_sofar4.json",
@@ -213,13 +217,15 @@ NAMED_POLICIES: dict[str, str] = {
 ``lagunaseca-interactive``: trained with ``"sofar-1"``, the first default; ``lagunaseca-sofar-4`` and
 ``lagunaseca-interactive-sofar-4``: the same recipes with ``"sofar-4"``, the second; ``lagunaseca-sofar-6`` and
 ``lagunaseca-interactive-sofar-6``: with ``"sofar-6"``, the third; ``lagunaseca-sofar-13`` and
-``lagunaseca-interactive-sofar-13``: the same recipes with the default controller. ``morl-dynamic-sofar-6`` and
+``lagunaseca-interactive-sofar-13``: with ``"sofar-13"``, the fourth; ``lagunaseca-sofar-17`` and
+``lagunaseca-interactive-sofar-17``: the same recipes with the default controller. ``morl-dynamic-sofar-6`` and
 ``morl-interactive-sofar-6``: the preference-conditioned policies of the dynamic and the dense interactive world
 (8 opponents), trained with ``"sofar-6"`` (the default before ``"sofar-13"``) on Laguna Seca, started at the
 cautious end of the gamma range with a preference drawn every 64 decisions along the safety-overtakes path
 (``preference_sampling="trade-off"``); ``morl-dynamic-sofar-4`` and ``morl-interactive-sofar-4``: the same
-recipes with ``"sofar-4"``; ``morl-dynamic-sofar-13`` and ``morl-interactive-sofar-13``: with the default
-``"sofar-13"`` (fronts: ``results/interactive_dense/morl_sofar13/``, ``results/dynamic/morl_sofar13/``);
+recipes with ``"sofar-4"``; ``morl-dynamic-sofar-13`` and ``morl-interactive-sofar-13``: with ``"sofar-13"``
+(the default before ``"sofar-17"``; fronts: ``results/interactive_dense/morl_sofar13/``,
+``results/dynamic/morl_sofar13/``);
 ``morl-interactive-sofar-13-sigmoid`` and ``morl-dynamic-sofar-13-sigmoid``: the same recipes with the action
 squashed by a sigmoid instead of clipped and GAE lambda 0.99: faster at every preference than the clipped ones,
 weaker at the cautious end (``docs/decisions/pasta-preference.md``, ``results/interactive_dense/morl_sofar13/sigmoid/``,
@@ -240,10 +246,10 @@ def named_policy_path(name: str) -> Path:
 def default_policy_path(stack: str = "sofar", scenario: str = "paper") -> Path:
     """Path of the PASTA policy shipped for a controller preset and a world (trained on Laguna Seca).
 
-    ``stack="sofar"`` (default) or ``"sofar-13"``: trained with the default controller; ``stack="sofar-6"``,
-    ``"sofar-4"`` and ``"sofar-1"``: trained with the defaults before it; ``stack="paper"``: trained with the paper's
-    Algorithm 1 as written (``gym.make(..., stack="paper")``). Raises ``ValueError`` for a combination without
-    a shipped policy and ``FileNotFoundError`` (with instructions) when its files are missing.
+    ``stack="sofar"`` (default) or ``"sofar-17"``: trained with the default controller; ``stack="sofar-13"``,
+    ``"sofar-6"``, ``"sofar-4"`` and ``"sofar-1"``: trained with the defaults before it; ``stack="paper"``: trained
+    with the paper's Algorithm 1 as written (``gym.make(..., stack="paper")``). Raises ``ValueError`` for a
+    combination without a shipped policy and ``FileNotFoundError`` (with instructions) when its files are missing.
     """
     from importlib.resources import files
 

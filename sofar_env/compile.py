@@ -16,9 +16,11 @@ Usage::
 A warm-up races short races per world on one circuit, with opponents close enough for
 every part of the controller to run (the MPC's barrier rows, the passing-side planner), and
 changes nothing else: the environments built afterwards behave exactly as without it. The
-MPC's optional QP backends that have kernels of their own (:data:`QP_SOLVERS`: DAQP's
-condensing, ``MPCConfig.qp_solver="daqp"``) are compiled by one more short race each, in the
-first world warmed up.
+MPC's QP backends that have kernels of their own (:data:`QP_SOLVERS`: DAQP's condensing,
+``MPCConfig.qp_solver="daqp"``) are compiled by one more short race each, in the first world
+warmed up; the default controller's MPC runs on DAQP, so the worlds' races compile it already
+and that race only loads it (PIQP, the backend of ``"sofar-13"`` and before, has no kernels of
+its own).
 """
 
 from __future__ import annotations
@@ -42,8 +44,9 @@ WARM_UP_RACES: tuple[tuple[float, ...], ...] = ((12.0, 25.0, 40.0, 300.0), (12.0
 _STEPS = 3
 """Control steps per warm-up race."""
 QP_SOLVERS: tuple[str, ...] = ("daqp",)
-"""The MPC's QP backends (``MPCConfig.qp_solver``) other than the default whose kernels the warm-up compiles:
-``"daqp"``, the condensing of :mod:`sofar_env.control.mpc.condensed`."""
+"""The MPC's QP backends (``MPCConfig.qp_solver``) with kernels of their own, which the warm-up compiles by a race
+with the MPC on each: ``"daqp"``, the condensing of :mod:`sofar_env.control.mpc.condensed` (the default
+controller's backend, so also compiled by any world's race)."""
 
 
 def _race(track: str, world: str, gaps: tuple[float, ...], **kwargs: Any) -> None:

@@ -98,8 +98,8 @@ class RaceConfig:
     error to the track and the other car's course angle (from its lateral rate; ``stack.mpc.barrier.
     heading_extent``, see :mod:`sofar_env.control.barrier`), unless the user's keys set
     ``stack.mpc.barrier.heading_extent``; 0 adds nothing, so the controller keeps its own value (2.45 m in
-    the default ``"sofar-13"``, which widens the barrier in every race; 0 in ``"sofar-6"`` and before). The
-    rewards and the observation measure the barrier without this widening
+    the default ``"sofar-17"``, by the turns toward the other car, and in ``"sofar-13"``; 0 in ``"sofar-6"`` and
+    before). The rewards and the observation measure the barrier without this widening
     (:class:`~sofar_env.core.ControlledRace`). No effect in single-car races [m], >= 0. Decision:
     ``docs/decisions/multi-car-defaults.md``."""
     vehicle: VehicleParams = nested(VehicleParams, default=AV21)

@@ -200,16 +200,16 @@ def _sofar_17() -> StackConfig:
                                miqp=dataclasses.replace(base.miqp, daqp_cycle_tol=100))
 
 
-DEFAULT_STACK_PRESET = "sofar-13"
+DEFAULT_STACK_PRESET = "sofar-17"
 """The versioned name of the default controller: what ``"sofar"`` and an environment without a ``stack`` key
 run. Moving it changes the config hash of every default row, so the manifests of the default's tables no
 longer match their rows until they are re-made (``tests/eval/test_manifests.py``)."""
 
 _DEFAULT_DOC = """The default controller of every environment, whichever version is current:
-now ``"sofar-13"`` (:data:`DEFAULT_STACK_PRESET`), the same value and config hash. Scripts that mean "the
+now ``"sofar-17"`` (:data:`DEFAULT_STACK_PRESET`), the same value and config hash. Scripts that mean "the
 project's controller" name it; a result row records its config hash, so rows of two versions are never mixed
 under this name. A fixed version is named by its number (``"sofar-1"``, ``"sofar-4"``, ``"sofar-6"``,
-``"sofar-13"``)."""
+``"sofar-13"``, ``"sofar-17"``)."""
 
 STACK_PRESET_REGISTRY: dict[str, Entry] = {
     "sofar-1": Entry(StackConfig(), """The default controller until ``"sofar-4"`` replaced it (version 1, called
@@ -309,10 +309,11 @@ takes at its lateral-acceleration limit while braking; on the dynamic world's si
 spins the car or runs it wide (``docs/decisions/dynamic-world-settings.md``, "The departures"). The smooth free
 plan is the planner's problem without side constraints: the return keeps the continuity and smoothness of every
 other plan."""),
-    "sofar-13": Entry(_sofar_13(), """The default controller (version 13, also named ``"sofar"``): ``"sofar-12"`` with
-``"sofar-9"``'s restart weights (``restart_buffer_scale = 0.25``), so every candidate change since ``"sofar-6"`` in
-one preset: following the queue, the heading-widened barrier, the smooth free plan and the restart mode's
-quarter-weight buffer slack. The restart weights remove the free-road stall of ``"sofar-12"`` in the dynamic
+    "sofar-13": Entry(_sofar_13(), """The default controller after ``"sofar-6"``, until ``"sofar-17"`` replaced it
+(version 13, called ``"sofar"`` in the tables made with it; kept so that they re-make from their manifests):
+``"sofar-12"`` with ``"sofar-9"``'s restart weights (``restart_buffer_scale = 0.25``), so every candidate change since
+``"sofar-6"`` in one preset: following the queue, the heading-widened barrier, the smooth free plan and the restart
+mode's quarter-weight buffer slack. The restart weights remove the free-road stall of ``"sofar-12"`` in the dynamic
 world (a car at rest on the inside of a tight corner finding standing cheaper than starting;
 ``docs/decisions/stall-fixes.md``, "Standing in a tight corner"). The measurements behind the move:
 ``docs/decisions/default-controller.md``, "The move to ``"sofar-13"``"."""),
@@ -332,12 +333,12 @@ onto its inputs and solved by DAQP (``mpc.qp_solver = "daqp"``, no fallback back
 its fallback. The same problem: DAQP solves it to about 1e-8 where PIQP stops at its tolerances (5e-6 on the first
 input, 5e-3 on the plan), never failed on the closed-loop QPs measured, and is now faster per solve; another
 floating-point path, so its episodes are compared paired with ``"sofar-13"``'s (``docs/decisions/qp-backend.md``)."""),
-    "sofar-17": Entry(_sofar_17(), """A candidate default, not the default: the three candidates since ``"sofar-13"`` in
-one preset, ``"sofar-16"`` (the MPC's QP on DAQP) with ``"sofar-14"``'s planner cycling limit
-(``miqp.daqp_cycle_tol = 100``) and ``"sofar-15"``'s barrier widened only by the turns that bring the ego closer
-(``mpc.barrier.heading_sides = "toward"``). Each was measured alone against ``"sofar-13"``; this preset measures them
-together, paired with ``"sofar-13"`` on the same episodes (``docs/decisions/default-controller.md``, "The next
-default: the three candidates together")."""),
+    "sofar-17": Entry(_sofar_17(), """The default controller (version 17, also named ``"sofar"``): the three
+candidates since ``"sofar-13"`` in one preset, ``"sofar-16"`` (the MPC's QP on DAQP) with ``"sofar-14"``'s planner
+cycling limit (``miqp.daqp_cycle_tol = 100``) and ``"sofar-15"``'s barrier widened only by the turns that bring the
+ego closer (``mpc.barrier.heading_sides = "toward"``). Each was measured alone against ``"sofar-13"``, then the three
+together, paired with ``"sofar-13"`` on the same episodes (``docs/decisions/default-controller.md``, "The move to
+``"sofar-17"``")."""),
     "sofar-daqp": Entry(dataclasses.replace(StackConfig(), mpc=dataclasses.replace(StackConfig().mpc,
                                                                                    qp_solver="daqp")),
                         """``"sofar-1"`` with the MPC's QP condensed onto its inputs and solved by DAQP

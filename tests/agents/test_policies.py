@@ -86,7 +86,7 @@ def test_default_policy_path() -> None:
     except FileNotFoundError as err:
         assert "train/pasta.py" in str(err)
     else:
-        assert path.name == "pasta_lagunaseca_sofar13.json"  # trained with the default controller
+        assert path.name == "pasta_lagunaseca_sofar17.json"  # trained with the default controller
         assert load_policy(path, obs_dim=12)(np.zeros(12, np.float32)).shape == (1,)
 
 

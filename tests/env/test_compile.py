@@ -32,17 +32,18 @@ def test_the_command_line_logs_each_world(caplog) -> None:
     assert any("MPC QP solver daqp: kernels ready in" in r.getMessage() for r in caplog.records)
 
 
-def test_warm_up_compiles_the_daqp_condensing_kernel() -> None:
-    """The DAQP backend's condensing kernel is compiled (or loaded from the cache) by the warm-up, in a race with
-    the MPC on DAQP, and only then (a fresh process: no kernel loaded before)."""
-    code = """
+@pytest.mark.parametrize("call", ['warm_up([], multi_agent=False)',  # the backend's own race: {"daqp": ...}
+                                  'warm_up(["paper"], multi_agent=False, qp_solvers=())'])  # the default's MPC
+def test_warm_up_compiles_the_daqp_condensing_kernel(call) -> None:
+    """The DAQP backend's condensing kernel is compiled (or loaded from the cache) by the warm-up: by the race with
+    the MPC on DAQP, and by a world's races, whose default controller (``"sofar-17"``) solves its MPC with DAQP (a
+    fresh process each: no kernel loaded before)."""
+    code = f"""
 from sofar_env.compile import warm_up
 from sofar_env.control.mpc import condensed
 assert not condensed._condense.signatures
-warm_up(["paper"], multi_agent=False, qp_solvers=())
-assert not condensed._condense.signatures, "compiled without the DAQP race"
-times = warm_up([], multi_agent=False)
-assert set(times) == {"daqp"}, times
+times = {call}
+assert set(times) in ({{"daqp"}}, {{"paper"}}), times
 assert condensed._condense.signatures, "not compiled by the warm-up"
 """
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)

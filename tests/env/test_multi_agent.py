@@ -267,8 +267,8 @@ def test_mpc_restart_is_on_in_multi_car_races_only():
 def test_heading_extent_is_on_in_multi_car_races_only():
     """race.heading_extent (2.45 m) widens each controller's barrier with its heading error in multi-car
     races, unless the stack sets its own value; 0 adds nothing (the controller keeps its own); single-car
-    worlds are untouched. The default ``"sofar-13"`` widens its barrier itself, in every world; ``"sofar-6"``
-    does not."""
+    worlds are untouched. The default ``"sofar-17"`` (as ``"sofar-13"``) widens its barrier itself, in every world;
+    ``"sofar-6"`` does not."""
     import gymnasium as gym
 
     env = sofar_env.parallel_env(track="Monza", n_agents=2, stack="sofar-6")

@@ -39,7 +39,10 @@ def test_paper_preset_never_follows_where_the_default_stack_does():
 @pytest.mark.parametrize("stack, scenario, name", [("sofar-1", "paper", "pasta_lagunaseca.json"),
                                                    ("paper", "paper", "pasta_lagunaseca_paper.json"),
                                                    ("sofar-1", "interactive", "pasta_lagunaseca_interactive.json"),
-                                                   ("sofar", "paper", "pasta_lagunaseca_sofar13.json"),
+                                                   ("sofar", "paper", "pasta_lagunaseca_sofar17.json"),
+                                                   ("sofar-17", "paper", "pasta_lagunaseca_sofar17.json"),
+                                                   ("sofar-17", "interactive",
+                                                    "pasta_lagunaseca_interactive_sofar17.json"),
                                                    ("sofar-13", "paper", "pasta_lagunaseca_sofar13.json"),
                                                    ("sofar-13", "interactive",
                                                     "pasta_lagunaseca_interactive_sofar13.json"),
@@ -67,8 +70,9 @@ def test_the_default_controller_has_its_own_policies():
     """"sofar" looks up the default's version; a preset without a trained policy gets none."""
     for scenario in ("paper", "interactive"):
         default = default_policy_path(stack="sofar", scenario=scenario)
-        assert default == default_policy_path(stack="sofar-13", scenario=scenario)
-        assert default not in (default_policy_path(stack="sofar-6", scenario=scenario),
+        assert default == default_policy_path(stack="sofar-17", scenario=scenario)
+        assert default not in (default_policy_path(stack="sofar-13", scenario=scenario),
+                               default_policy_path(stack="sofar-6", scenario=scenario),
                                default_policy_path(stack="sofar-4", scenario=scenario),
                                default_policy_path(stack="sofar-1", scenario=scenario))
     with pytest.raises(ValueError, match="no shipped PASTA policy"):

@@ -9,7 +9,10 @@ else, each ``"sofar-1"`` entry equals the former ``"sofar"`` one and each new ``
 equal to the former ``"sofar-6"`` one. To ``"sofar-13"``: the same entries gained ``follow_queue = True``,
 ``miqp.free_plan = "smooth"`` and ``restart_buffer_scale = 0.25`` (and ``mpc.barrier.heading_extent = 2.45`` where
 a case had turned the multi-car widening off, ``heading0``: the controller's own value now) and nothing else, each
-new ``"sofar"`` entry and each default world entry equal to the former ``"sofar-13"`` one. A new preset adds its
+new ``"sofar"`` entry and each default world entry equal to the former ``"sofar-13"`` one. To ``"sofar-17"``: the
+same 37 entries gained ``mpc.qp_solver = "daqp"``, ``miqp.daqp_cycle_tol = 100`` and ``mpc.barrier.heading_sides =
+"toward"`` and lost ``mpc.qp_fallback = "daqp"`` (no fallback backend: its neutral value) and nothing else, each new
+``"sofar"`` entry equal to the ``"sofar-17"`` one. A new preset adds its
 entries (``"sofar-5"``: 7, every other entry
 unchanged; ``"sofar-7"`` and ``"sofar-8"``: 7 each, every other entry unchanged; ``"sofar-9"``, ``"sofar-10"``,
 ``"sofar-11"``, ``"sofar-12"``, ``"sofar-13"`` and ``"sofar-14"``: 11 each, one per world in each group), a new

@@ -29,10 +29,10 @@ def _manifest(tmp_path: Path, name: str, stack: str, gammas: str, kind: str = "t
 
 @pytest.fixture(scope="module")
 def candidate(tmp_path_factory):
-    """A candidate preset's run of two fixed gammas and a policy (``"sofar-13"``, the default's value under its own
+    """A candidate preset's run of two fixed gammas and a policy (``"sofar-17"``, the default's value under its own
     name)."""
     tmp = tmp_path_factory.mktemp("adopt")
-    m = _manifest(tmp, "candidate", "sofar-13", "0.05, 0.5", adaptive=True)
+    m = _manifest(tmp, "candidate", "sofar-17", "0.05, 0.5", adaptive=True)
     mf.run_manifest(m, ROOT, workers=1, progress=False)
     return tmp, m
 
@@ -50,7 +50,7 @@ def test_adopted_rows_are_the_candidate_s_relabelled_and_the_run_makes_only_the_
     assert dst[0] == src[0] and len(dst) == 3
     for a, b in zip(src[1:], dst[1:]):  # every field as written but the preset's name
         fa, fb = a.split(","), b.split(",")
-        assert fb[at] == "sofar" and fa[at] == "sofar-13"
+        assert fb[at] == "sofar" and fa[at] == "sofar-17"
         assert fa[:at] + fa[at + 1:] == fb[:at] + fb[at + 1:]
     record = json.loads((tmp / "default" / "default.manifest.json").read_text())
     assert record["adopted_from"] == "candidate" and record["config_hash"] == [target.config_hash]
@@ -82,7 +82,7 @@ def test_rows_of_another_configuration_or_kind_are_refused_and_nothing_is_writte
 
 def test_a_source_without_rows_or_without_the_target_s_episodes_is_refused(candidate, tmp_path):
     tmp, source = candidate
-    empty = _manifest(tmp_path, "empty", "sofar-13", "0.05")
+    empty = _manifest(tmp_path, "empty", "sofar-17", "0.05")
     with pytest.raises(ValueError, match="run it first"):
         adopt_rows(_manifest(tmp_path, "t1", "sofar", "0.05"), empty, ROOT)
     with pytest.raises(ValueError, match="none of the fixed-gamma rows"):

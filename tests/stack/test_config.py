@@ -39,7 +39,7 @@ def test_sofar_preset_is_the_default():
                              "sofar-4", "sofar-5", "sofar-6", "sofar-7", "sofar-8", "sofar-9", "sofar-10", "sofar-11",
                              "sofar-12", "sofar-13", "sofar-14", "sofar-15", "sofar-16", "sofar-17", "sofar-daqp",
                              "reference-numerics", "reference-numerics-no-phantoms")
-    assert DEFAULT_STACK_PRESET == "sofar-13"
+    assert DEFAULT_STACK_PRESET == "sofar-17"
     assert stack_preset("sofar") == stack_preset(DEFAULT_STACK_PRESET) == default_stack() == EnvConfig().stack
     assert stack_preset(" SoFAR ") == stack_preset("sofar")
     assert stack_preset("sofar-1") == StackConfig()  # version 1: the default before the stall fixes
@@ -53,10 +53,10 @@ def test_the_default_differs_from_version_1_exactly_by_the_stall_fixes_and_the_c
     assert changed == {"restart_lateral_weight": 15.0, "follow_creep_speed": 2.0, "slow_rows_speed": 10.0,
                        "slow_rows_curved": True, "restart_buffer_edge": 0.05, "restart_buffer_scale": 0.25,
                        "follow_queue": True, "mpc": new.mpc, "miqp": new.miqp}
-    # DAQP solves what PIQP fails on; the barrier widens with the heading error
-    assert new.mpc == dataclasses.replace(old.mpc, qp_fallback="daqp",
-                                          barrier=dataclasses.replace(old.mpc.barrier, heading_extent=2.45))
-    assert new.miqp == dataclasses.replace(old.miqp, free_plan="smooth")
+    # the MPC's QP on DAQP; the barrier widens with the turns of the heading that bring the ego closer
+    assert new.mpc == dataclasses.replace(old.mpc, qp_solver="daqp", barrier=dataclasses.replace(
+        old.mpc.barrier, heading_extent=2.45, heading_sides="toward"))
+    assert new.miqp == dataclasses.replace(old.miqp, free_plan="smooth", daqp_cycle_tol=100)
 
 
 def test_paper_preset_switches_off_exactly_the_additions():

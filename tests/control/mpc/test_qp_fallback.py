@@ -29,7 +29,8 @@ def test_off_by_default_and_out_of_the_hash_until_set():
         stack_preset("sofar-4"), mpc=dataclasses.replace(stack_preset("sofar-4").mpc, qp_fallback="daqp"))
     for preset in ("sofar-1", "sofar-4", "paper", "sofar-daqp"):
         assert stack_preset(preset).mpc.qp_fallback == "off"
-    assert stack_preset("sofar").mpc.qp_fallback == "daqp"  # the default since "sofar-6"
+    assert stack_preset("sofar-13").mpc.qp_fallback == "daqp"  # the default from "sofar-6" to "sofar-13"
+    assert stack_preset("sofar").mpc.qp_solver == "daqp"  # "sofar-17": DAQP solves every QP, none to fall back from
 
 
 def _piqp_always_fails(monkeypatch):
