@@ -99,7 +99,7 @@ class ComponentTimer:
         return timed
 
 
-COMPILED = ("compiled: PIQP (MPC QP)", "compiled: linearisation (generated C)", "compiled: DAQP (MIQP B&B)")
+COMPILED = ("compiled: MPC QP (PIQP or DAQP)", "compiled: linearisation (generated C)", "compiled: DAQP (MIQP B&B)")
 
 
 class _TimedModule:
@@ -149,15 +149,15 @@ def _instrument_kernels(env: SOfARRaceEnv, kernels: ComponentTimer):
 
     lin = env.stack.mpc._lin
     lin._eval = kernels.wrap(lin._eval, COMPILED[1])
-    piqp_call, daqp_module, bnb_kernel = backends._solve_piqp, solvers.daqp, solvers._bnb_solve
-    backends._solve_piqp = kernels.wrap(piqp_call, COMPILED[0])
+    qp_call, daqp_module, bnb_kernel = backends._solve_once, solvers.daqp, solvers._bnb_solve
+    backends._solve_once = kernels.wrap(qp_call, COMPILED[0])  # the MPC's QP by its backend (PIQP or DAQP)
     # the branch and bound: one compiled call (DAQP's C API from a kernel) or daqp.solve from Python
     solvers._bnb_solve = kernels.wrap(bnb_kernel, COMPILED[2])
     if daqp_module is not None:
         solvers.daqp = _TimedModule(daqp_module, kernels.wrap(daqp_module.solve, COMPILED[2]))
 
     def undo() -> None:
-        backends._solve_piqp = piqp_call
+        backends._solve_once = qp_call
         solvers.daqp = daqp_module
         solvers._bnb_solve = bnb_kernel
 

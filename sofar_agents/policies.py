@@ -204,12 +204,10 @@ NAMED_POLICIES: dict[str, str] = {
     "lagunaseca-interactive-sofar-6": "pasta_lagunaseca_interactive_sofar6.json",
     "lagunaseca-interactive-sofar-4": "pasta_lagunaseca_interactive_sofar4.json",
     "morl-dynamic": "pasta_morl_dynamic.json",
-    "morl-dynamic-sofar-17-sigmoid": "pasta_morl_dynamic_sofar17_sigmoid.json",
     "morl-dynamic-sofar-13": "pasta_morl_dynamic_sofar13.json",
     "morl-dynamic-sofar-13-sigmoid": "pasta_morl_dynamic_sofar13_sigmoid.json",
     "morl-dynamic-sofar-6": "pasta_morl_dynamic_sofar6.json",
     "morl-dynamic-sofar-4": "pasta_morl_dynamic_sofar4.json",
-    "morl-interactive-sofar-17-sigmoid": "pasta_morl_interactive_sofar17_sigmoid.json",
     "morl-interactive-sofar-13": "pasta_morl_interactive_sofar13.json",
     "morl-interactive-sofar-13-sigmoid": "pasta_morl_interactive_sofar13_sigmoid.json",
     "morl-interactive-sofar-6": "pasta_morl_interactive_sofar6.json",
@@ -231,9 +229,7 @@ recipes with ``"sofar-4"``; ``morl-dynamic-sofar-13`` and ``morl-interactive-sof
 ``morl-interactive-sofar-13-sigmoid`` and ``morl-dynamic-sofar-13-sigmoid``: the same recipes with the action
 squashed by a sigmoid instead of clipped and GAE lambda 0.99: faster at every preference than the clipped ones,
 weaker at the cautious end (``docs/decisions/pasta-preference.md``, ``results/interactive_dense/morl_sofar13/sigmoid/``,
-``results/dynamic/morl_sofar13/sigmoid/``); ``morl-interactive-sofar-17-sigmoid`` and ``morl-dynamic-sofar-17-sigmoid``:
-the sigmoid recipes with the default controller ``"sofar-17"`` (``results/interactive_dense/morl_sofar17/``,
-``results/dynamic/morl_sofar17/``). Their gamma falls as the safety weight grows
+``results/dynamic/morl_sofar13/sigmoid/``). Their gamma falls as the safety weight grows
 (``tests/agents/test_policies.py``, ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic
 world's first such policy, trained with ``"sofar-1"`` from the middle of the range."""
 
