@@ -1,15 +1,15 @@
 """A default's table started from a candidate's rows: :func:`adopt_rows`.
 
-When the default controller moves to a candidate preset, the candidate has usually run the same episodes already
-(its ``candidate_*`` manifests: the same seeds, the same configuration, another preset name). Its rows are then
-the new default's rows: the configuration hash is that of the resolved configuration, not of the name, so the
-episodes would be re-made bit for bit. :func:`adopt_rows` copies its fixed-gamma rows into the default manifest's
-CSV, with the ``stack`` column relabelled to the target manifest's preset and every other byte as it was, and writes
-a run record there that names the candidate's run. Rows of a policy (Adaptive, self-play: a ``policy_id``) are never
-adopted: the policy is not part of the configuration hash, and a moved default trains its policies again; ``python eval/manifest.py run TARGET`` then resumes from those rows
-and runs only what the candidate did not (the Adaptive rows, a policy of the new default), listing the
-candidate's run under ``earlier_runs``. ``python eval/manifest.py verify TARGET`` re-makes some of them to show
-the claim. Nothing is written unless every check passes.
+When the default controller moves to a candidate preset, the candidate has usually run the same episodes already (its
+``candidate_*`` manifests: the same seeds, the same configuration, another preset name). Its rows are then the new
+default's rows: the configuration hash is that of the resolved configuration, not of the name, so the episodes would be
+re-made bit for bit. :func:`adopt_rows` copies its fixed-gamma rows into the default manifest's CSV, with the ``stack``
+column relabelled to the target manifest's preset and every other byte as it was, and writes a run record there that
+names the candidate's run. Rows of a policy (Adaptive, self-play: a ``policy_id``) are never adopted: the policy is not
+part of the configuration hash, and a moved default trains its policies again. ``python eval/manifest.py run TARGET``
+then resumes from those rows and runs only what the candidate did not (the Adaptive rows, a policy of the new default),
+listing the candidate's run under ``earlier_runs``. ``python eval/manifest.py verify TARGET`` re-makes some of them to
+show the claim. Nothing is written unless every check passes.
 """
 
 from __future__ import annotations
@@ -30,13 +30,13 @@ ADOPTABLE_KINDS = ("table1", "table2", "multi-agent")
 
 def adopt_rows(target: Manifest, source: Manifest, root: str | os.PathLike) -> int:
     """Copy the fixed-gamma rows of ``source``'s CSV (no ``policy_id``) that are episodes of ``target`` into
-    ``target``'s CSV (under ``root``) and return how many. The two must be of one kind in :data:`ADOPTABLE_KINDS` and resolve to one configuration hash,
-    every adopted row must carry that hash and run ``target``'s scenario and duration, and none of their episodes
-    may be in ``target``'s CSV already; else ``ValueError`` naming what differs, and no file is written. The rows
-    keep their bytes but for the ``stack`` field (``target.stack``); they go after the rows the CSV has (or into a
-    new CSV with ``source``'s header, which an existing CSV must share). ``target``'s run record
-    (:func:`~.manifest.record_path`) gets ``source``'s run (commit, wall time, end) as an earlier run, with
-    ``adopted_from`` naming it, unless it has a record of its own already."""
+    ``target``'s CSV (under ``root``) and return how many. The two must be of one kind in :data:`ADOPTABLE_KINDS` and
+    resolve to one configuration hash, every adopted row must carry that hash and run ``target``'s scenario and
+    duration, and none of their episodes may be in ``target``'s CSV already; else ``ValueError`` naming what differs,
+    and no file is written. The rows keep their bytes but for the ``stack`` field (``target.stack``); they go after
+    the rows the CSV has (or into a new CSV with ``source``'s header, which an existing CSV must share). ``target``'s
+    run record (:func:`~.manifest.record_path`) gets ``source``'s run (commit, wall time, end) as an earlier run,
+    with ``adopted_from`` naming it, unless it has a record of its own already."""
     root = Path(root)
     if target.kind != source.kind or target.kind not in ADOPTABLE_KINDS:
         raise ValueError(f"rows are adopted between two manifests of one kind of {', '.join(ADOPTABLE_KINDS)}; "
