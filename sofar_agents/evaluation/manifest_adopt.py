@@ -9,7 +9,8 @@ names the candidate's run. Rows of a policy (Adaptive, self-play: a ``policy_id`
 part of the configuration hash, and a moved default trains its policies again. ``python eval/manifest.py run TARGET``
 then resumes from those rows and runs only what the candidate did not (the Adaptive rows, a policy of the new default),
 listing the candidate's run under ``earlier_runs``. ``python eval/manifest.py verify TARGET`` re-makes some of them to
-show the claim. Nothing is written unless every check passes.
+show the claim. The same holds for a second policy's Pareto front on the seeds of a first: its fixed-gamma rows are the
+first front's. Nothing is written unless every check passes.
 """
 
 from __future__ import annotations
@@ -24,8 +25,9 @@ from sofar_agents.evaluation.manifest import (Manifest, episode_ids, raw_rows, r
 
 __all__ = ["ADOPTABLE_KINDS", "adopt_rows"]
 
-ADOPTABLE_KINDS = ("table1", "table2", "multi-agent")
-"""Kinds whose CSV rows are whole episodes (races) that a manifest of the same configuration would re-make."""
+ADOPTABLE_KINDS = ("table1", "table2", "multi-agent", "pareto")
+"""Kinds whose CSV rows are whole episodes (races) that a manifest of the same configuration would re-make (a pareto
+manifest: its fixed gammas, when another policy's front is judged on the episodes of one that ran them)."""
 
 
 def adopt_rows(target: Manifest, source: Manifest, root: str | os.PathLike) -> int:

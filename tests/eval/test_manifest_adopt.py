@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 POLICY = "sofar_agents/checkpoints/pasta_lagunaseca_sofar13.json"
+MORL_POLICY = "results/interactive_dense/morl_sofar17/pasta_morl_interactive_sofar17_sigmoid.json"
 
 
 def _manifest(tmp_path: Path, name: str, stack: str, gammas: str, kind: str = "table1", duration: float = 0.3,
@@ -88,3 +89,24 @@ def test_a_source_without_rows_or_without_the_target_s_episodes_is_refused(candi
     with pytest.raises(ValueError, match="none of the fixed-gamma rows"):
         adopt_rows(_manifest(tmp_path, "t2", "sofar", "0.95"), source, ROOT)
     assert not (tmp_path / "t1").exists() and not (tmp_path / "t2").exists()
+
+
+def _pareto(tmp_path: Path, name: str, policy: str | None) -> mf.Manifest:
+    path = tmp_path / f"{name}.toml"
+    agent = f'adaptive = true\npolicy = "{policy}"\nsafety_weights = [0.9]\n' if policy else "adaptive = false\n"
+    path.write_text(f'kind = "pareto"\nout = "{tmp_path / name}"\nstack = "sofar-17"\nscenario = "interactive"\n'
+                    f'tracks = ["LagunaSeca"]\nrhos = [0.5]\nepisodes = 1\nduration = 0.3\ngammas = [0.05, 0.5]\n'
+                    f'{agent}')
+    return mf.load_manifest(path)
+
+
+def test_a_second_policy_s_front_adopts_the_fixed_gammas_of_the_first_and_runs_only_its_own(tmp_path):
+    first = _pareto(tmp_path, "first", None)
+    mf.run_manifest(first, ROOT, workers=1, progress=False)
+    second = _pareto(tmp_path, "second", MORL_POLICY)
+    assert adopt_rows(second, first, ROOT) == 2
+    adopted = (tmp_path / "second" / second.csv_name).read_text().splitlines()
+    assert adopted == (tmp_path / "first" / first.csv_name).read_text().splitlines()  # the same preset's name
+    mf.run_manifest(second, ROOT, workers=1, progress=False)
+    after = (tmp_path / "second" / second.csv_name).read_text().splitlines()
+    assert after[:3] == adopted and len(after) == 4 and after[3].split(",")[1].startswith("pasta w=0.9/")
