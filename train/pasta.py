@@ -85,6 +85,7 @@ from sofar_env.compile import warm_up, world_of
 from sofar_env.configs.objectives import REFERENCE_PREFERENCE  # the objectives' registry
 from sofar_env.scenarios import SCENARIOS
 from sofar_env.stack.config import STACK_PRESETS
+from sofar_env.tracks import TRACK_NAMES
 from sofar_env.vector import async_vector_env, available_cpus
 
 logger = logging.getLogger("train.pasta")
@@ -116,6 +117,9 @@ class Args:
     ``--env-id``)."""
     decision_interval: Annotated[int, positive_int] | None = None
     """If set, passed to the environment as ``decision_interval`` (simulator steps per action)."""
+    circuits: list[str] | None = None
+    """Train on several circuits of ``--env-id``'s world, passed as the ``track`` keyword: env i runs the circuit
+    i modulo their number, so ``--n-envs`` must be a multiple of it (default: ``--env-id``'s circuit)."""
     total_steps: Annotated[int, positive_int] = 1_000_000
     """Environment steps to train for, counted over all envs (including resumed steps)."""
     n_envs: Annotated[int, positive_int] | None = None
@@ -191,7 +195,8 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
     or hyper-parameters that do not fit together, is a usage error: message on stderr, exit status 2.
     """
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    add_dataclass_options(parser, Args, "run", choices={"stack": STACK_PRESETS, "scenario": SCENARIOS})
+    add_dataclass_options(parser, Args, "run", choices={"stack": STACK_PRESETS, "scenario": SCENARIOS,
+                                                         "circuits": TRACK_NAMES})
     add_dataclass_options(parser, PASTAConfig, "PASTA hyper-parameters")
     parser._option_string_actions["--mu-decay-steps"].help = (
         "Length of the linear decay of the target mu from --mu-max to --mu-min, in environment steps over "
@@ -225,6 +230,14 @@ def parse_args(argv: list[str] | None = None) -> tuple[Args, dict[str, Any]]:
         parser.error("--address needs --backend ray")
     if args.n_envs is None:
         args.n_envs = args.num_workers if args.num_workers is not None else 1
+    if args.circuits is not None:
+        if args.multi_agent:
+            parser.error("--circuits trains single-car envs; --multi-agent races on --env-id's circuit")
+        if len(set(args.circuits)) != len(args.circuits):
+            parser.error(f"--circuits names a circuit twice: {' '.join(args.circuits)}")
+        if args.n_envs % len(args.circuits):
+            parser.error(f"--n-envs {args.n_envs} is not a multiple of the {len(args.circuits)} --circuits "
+                         "(every circuit gets as many envs)")
     if args.resume is None:  # the hyper-parameters together (a resumed run checks them against its own)
         check_dataclass_options(parser, PASTAConfig, overrides)
     if args.num_workers is None and args.backend == "processes":
@@ -305,7 +318,8 @@ def make_vec_env(args: Args) -> Any:
 
             return RaceVectorEnv(fns)
     else:
-        fns = [make_env(args.env_id, env_kwargs, args) for _ in range(args.n_envs)]
+        circuits = [{"track": c} for c in args.circuits] if args.circuits else [{}]
+        fns = [make_env(args.env_id, {**env_kwargs, **circuits[i % len(circuits)]}, args) for i in range(args.n_envs)]
     if args.backend == "ray":
         from sofar_agents.pasta.ray_rollout import RayEnvPool
 
@@ -395,6 +409,7 @@ def main(argv: list[str] | None = None) -> Path:
         "env_id": args.env_id,
         "env_kwargs": env_kwargs_of(args),
         "decision_interval": args.decision_interval,
+        "circuits": args.circuits,
         "n_envs": args.n_envs,
         "pin_workers": args.pin_workers,
         "backend": args.backend,

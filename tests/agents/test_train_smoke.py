@@ -176,3 +176,32 @@ def test_pasta_script_trains_in_the_interactive_world(tmp_path: Path) -> None:
         obs, _, terminated, truncated, info = env.step(gamma)
         done = terminated or truncated
     assert info["sim_time"] > 0.0
+
+
+def test_circuits_give_each_env_its_circuit_and_bad_lists_are_usage_errors(tmp_path: Path) -> None:
+    """``--circuits``: env i runs circuit i modulo their number, recorded in the checkpoint; a repeated circuit,
+    an env count that is not a multiple of them, an unknown name or self-play is refused before anything runs."""
+    import sofar_env  # noqa: F401
+
+    script = _pasta_script()
+    args, _ = script.parse_args(["--circuits", "Monza", "Kentucky", "--n-envs", "4", "--backend", "local",
+                                 "--env-kwargs", '{"race": {"duration": 1.0}}'])
+    vec = script.make_vec_env(args)
+    try:
+        vec.reset(seed=0)
+        tracks = [t.name for t in vec.get_attr("track")]  # the circuit an env races on, known after its reset
+    finally:
+        vec.close()
+    assert tracks == ["Monza", "Kentucky", "Monza", "Kentucky"]
+    for bad, match in ([["--circuits", "Monza", "Monza", "--n-envs", "2"], "twice"],
+                       [["--circuits", "Monza", "Kentucky", "--n-envs", "3"], "not a multiple"],
+                       [["--circuits", "Spa"], "invalid choice"],
+                       [["--circuits", "Monza", "--multi-agent"], "single-car"]):
+        proc = _run("pasta.py", *bad, "--out", str(tmp_path / "never"), returncode=2)
+        assert match in proc.stderr, proc.stderr
+    assert not (tmp_path / "never").exists()
+    out = tmp_path / "two"
+    _run("pasta.py", "--scenario", "dynamic", "--circuits", "LagunaSeca", "Monza", "--n-envs", "2", "--backend",
+         "local", "--total-steps", "64", "--n-steps", "32", "--seed", "5", "--out", str(out), "--no-progress",
+         "--n-epochs", "1", "--env-kwargs", '{"race": {"duration": 2.0}}')
+    assert json.loads((out / "pasta_final.json").read_text())["training"]["circuits"] == ["LagunaSeca", "Monza"]
