@@ -204,10 +204,12 @@ NAMED_POLICIES: dict[str, str] = {
     "lagunaseca-interactive-sofar-6": "pasta_lagunaseca_interactive_sofar6.json",
     "lagunaseca-interactive-sofar-4": "pasta_lagunaseca_interactive_sofar4.json",
     "morl-dynamic": "pasta_morl_dynamic.json",
+    "morl-dynamic-sofar-17": "pasta_morl_dynamic_sofar17_circuits_seed82.json",
     "morl-dynamic-sofar-13": "pasta_morl_dynamic_sofar13.json",
     "morl-dynamic-sofar-13-sigmoid": "pasta_morl_dynamic_sofar13_sigmoid.json",
     "morl-dynamic-sofar-6": "pasta_morl_dynamic_sofar6.json",
     "morl-dynamic-sofar-4": "pasta_morl_dynamic_sofar4.json",
+    "morl-interactive-sofar-17": "pasta_morl_interactive_sofar17_sigmoid_seed91.json",
     "morl-interactive-sofar-13": "pasta_morl_interactive_sofar13.json",
     "morl-interactive-sofar-13-sigmoid": "pasta_morl_interactive_sofar13_sigmoid.json",
     "morl-interactive-sofar-6": "pasta_morl_interactive_sofar6.json",
@@ -229,8 +231,11 @@ recipes with ``"sofar-4"``; ``morl-dynamic-sofar-13`` and ``morl-interactive-sof
 ``morl-interactive-sofar-13-sigmoid`` and ``morl-dynamic-sofar-13-sigmoid``: the same recipes with the action
 squashed by a sigmoid instead of clipped and GAE lambda 0.99: faster at every preference than the clipped ones,
 weaker at the cautious end (``docs/decisions/pasta-preference.md``, ``results/interactive_dense/morl_sofar13/sigmoid/``,
-``results/dynamic/morl_sofar13/sigmoid/``). Their gamma falls as the safety weight grows
-(``tests/agents/test_policies.py``, ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic
+``results/dynamic/morl_sofar13/sigmoid/``); ``morl-interactive-sofar-17``: the dense sigmoid recipe with the default
+controller (training seed 91; ``results/interactive_dense/morl_sofar17/``); ``morl-dynamic-sofar-17``: the dynamic
+sigmoid recipe with the default controller, trained on all four circuits (``train/pasta.py --circuits``, training
+seed 82; ``results/dynamic/morl_sofar17/``). Their gamma falls as the safety weight
+grows (``tests/agents/test_policies.py``, ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic
 world's first such policy, trained with ``"sofar-1"`` from the middle of the range."""
 
 

@@ -12,6 +12,7 @@ Usage (from the repository root, with the package installed)::
     python train/pasta.py --backend ray --num-workers 4     # envs in Ray actors (pip install "sofar[ray]")
     python train/pasta.py --backend ray --address auto --num-workers 16 --n-envs 16   # on a Ray cluster
     python train/pasta.py --multi-agent --cars 4            # self-play: one shared policy drives 4 cars of a race
+    python train/pasta.py --circuits LagunaSeca Monza Indianapolis Kentucky --n-envs 4   # one env per circuit
     tensorboard --logdir runs
 
 Every PASTA hyper-parameter (``sofar_agents.PASTAConfig``) is also an option, e.g.

@@ -133,7 +133,8 @@ def test_every_named_policy_ships_and_loads_by_name():
 @pytest.mark.parametrize("name", ["morl-dynamic", "morl-dynamic-sofar-4", "morl-interactive-sofar-4",
                                   "morl-dynamic-sofar-6", "morl-interactive-sofar-6", "morl-dynamic-sofar-13",
                                   "morl-interactive-sofar-13", "morl-interactive-sofar-13-sigmoid",
-                                  "morl-dynamic-sofar-13-sigmoid"])
+                                  "morl-dynamic-sofar-13-sigmoid", "morl-interactive-sofar-17",
+                                  "morl-dynamic-sofar-17"])
 def test_the_shipped_morl_policies_lower_gamma_as_safety_weighs_more(name):
     """The documented direction of the preference input, on fixed states: the mean gamma over a set of
     observations falls as the safety weight grows (overtakes weight 0.9 minus it), and by a margin."""
