@@ -47,7 +47,8 @@ EXTRA_STRATEGIES: dict[str, set[str]] = {
                                      "interactive_dense_morl_pareto_seed10300_sofar_13",
                                      "interactive_dense_morl_pareto_seed10500_sofar_13",
                                      "dynamic_morl_pareto_seed10300_sofar_13", "dynamic_morl_pareto_seed10500_sofar_13",
-                                     "dynamic_morl_pareto_seed22500_sofar_17_sigmoid")
+                                     "dynamic_morl_pareto_seed22500_sofar_17_sigmoid",
+                                     "interactive_dense_morl_pareto_seed22500_sofar_17_sigmoid_seed91")
 }
 """Rows of a pareto file that are not its manifest's episodes (same configuration hash; the SB3 zip that made them is
 not committed), documented in the manifest."""
