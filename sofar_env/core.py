@@ -189,6 +189,7 @@ class ControlledRace:
             self.speed_factors = tuple(float(speed_factors[i % len(speed_factors)]) for i in range(self.n_cars))
         self.remove_crashed = bool(remove_crashed)
         self._weights = config.reward_weights.as_array()
+        self._stall_steps = config.stall_steps  # a derived value, read at every control step
         self.track = None
         self.race = None
         self.stacks: list = []
@@ -334,7 +335,7 @@ class ControlledRace:
         tallies = {i: DecisionTally() for i in live}
         running = list(live)
         controls = np.zeros((self.n_cars, 2))
-        stall_steps = self.config.stall_steps
+        stall_steps = self._stall_steps
         for _ in range(self.config.decision_interval):
             controls[:] = 0.0
             outs = {}

@@ -35,6 +35,7 @@ import numpy as np
 import piqp
 import scipy.sparse as sp
 
+from ..._jit import kernel
 from .assembly import all_finite
 from .layout import QPStructure
 from .types import MPCConfig
@@ -107,7 +108,23 @@ def dcbf_margin(qs: QPStructure, z: np.ndarray, hu: np.ndarray) -> np.ndarray:
     rows = qs.cbf_rows
     if qs.backend == "piqp" and qs.solver is not None:
         return qs.solver.result.s_u[rows]
-    return hu[rows] - (qs.G @ z)[rows]
+    g = qs.G
+    return _csc_margin(g.data, g.indices, g.indptr, z, hu, rows)
+
+
+@kernel
+def _csc_margin(data, indices, indptr, z, hu, rows):
+    """``hu[rows] - (G @ z)[rows]`` for ``G`` in CSC form (``data, indices, indptr``), to the bit: the product
+    accumulated from zero column by column, as scipy's ``csc_matvec`` does."""
+    y = np.zeros(hu.shape[0])
+    for j in range(indptr.shape[0] - 1):
+        zj = z[j]
+        for p in range(indptr[j], indptr[j + 1]):
+            y[indices[p]] += data[p] * zj
+    out = np.empty(rows.shape[0])
+    for r in range(rows.shape[0]):
+        out[r] = hu[rows[r]] - y[rows[r]]
+    return out
 
 
 def _solve_piqp(qs: QPStructure, data: tuple, cfg: MPCConfig):

@@ -53,6 +53,7 @@ import numpy as np
 
 from ..._jit import kernel
 from ...planning import daqp_c
+from .assembly import all_finite
 from .layout import N_FIXED
 
 __all__ = ["CondensedDAQP", "DAQP_ITER_LIMIT", "DAQP_PRIMAL_TOL"]
@@ -373,7 +374,7 @@ class CondensedDAQP:
     def _checked(v: np.ndarray, flag: int, iters: int) -> tuple[np.ndarray | None, int, str]:
         if flag not in _OK:
             return None, iters, f"daqp exit flag {flag}"
-        if not np.all(np.isfinite(v)):
+        if not all_finite(v):
             return None, iters, f"daqp returned non-finite values (exit flag {flag})"
         return v, iters, ""
 

@@ -61,10 +61,11 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ...configs.mpc import BarrierParams
 from ...vehicle import AV21, VehicleParams
 from ..barrier import barrier_table
 from ..codegen import CodegenInfo
@@ -79,7 +80,7 @@ from .types import (STATUS_FALLBACK_BRAKE, STATUS_FALLBACK_SHIFT, STATUS_SOLVED,
                     MPCStageData, validate_arguments)
 from .warmstart import PlanShift, cold_guess
 
-__all__ = ["MPCDCBF"]
+__all__ = ["MPCDCBF", "DeferredBarrierMin"]
 
 logger = logging.getLogger(__name__)
 
@@ -95,6 +96,31 @@ _BOX_DROP_DISTANCE = np.array([2.0, 0.15, np.inf, np.inf, np.inf, 5.0, 0.08])
 _ROWS_CHECK_TOL = 1e-6
 # A restart's solution replaces the warm-started one when its largest DCBF slack is smaller by this [-]
 _RESTART_GAIN = 1e-3
+
+
+@dataclass(frozen=True)
+class DeferredBarrierMin:
+    """``h``, or ``min(partial, h)``, with ``h`` the smallest barrier value of the state ``x0`` (5,) against the
+    opponent rows ``opponents`` (M >= 1, 3 or 4) by :func:`~sofar_env.control.barrier.barrier_table`, evaluated
+    when called: :attr:`MPCResult.barrier_min <.types.MPCResult.barrier_min>` of a solve. The arrays are the
+    solve's own copies."""
+
+    partial: float | None
+    x0: np.ndarray
+    opponents: np.ndarray
+    params: BarrierParams
+
+    @classmethod
+    def of(cls, x0: np.ndarray, opponents: np.ndarray, params: BarrierParams,
+           partial: float | None = None) -> DeferredBarrierMin | float:
+        """The deferred value; without opponents ``partial`` (inf if None) at once."""
+        if not len(opponents):
+            return math.inf if partial is None else partial
+        return cls(partial, x0.copy(), opponents.copy(), params)
+
+    def __call__(self) -> float:
+        h = barrier_table(self.x0[None, :], self.opponents[None, :, :3], self.params)[2]
+        return h if self.partial is None else min(self.partial, h)
 
 
 class MPCDCBF:
@@ -218,7 +244,7 @@ class MPCDCBF:
         dt0 = float(self._dts[0])
         if abs(x0[4]) > p.steer_max + dt0 * p.steer_rate_max or x0[3] < -dt0 * p.a_max:
             # the hard bounds on delta_1 (or v_1 >= 0) cannot be met: the QP would be infeasible
-            bmin = barrier_table(x0[None, :], opp[None, :, :3], cfg.barrier)[2] if len(opp) else math.inf
+            bmin = DeferredBarrierMin.of(x0, opp, cfg.barrier)
             return self._fallback(x0, "state outside the reach of the hard bounds", t_start, 0, 0, bmin, 0)
         cold = self._xg is None
         xbar, ubar = self._guess(x0, opp)
@@ -281,7 +307,7 @@ class MPCDCBF:
             break
 
         if len(opp) > n_cand:  # opponents outside the window: evaluate h numerically
-            barrier_min = min(barrier_min, barrier_table(x0[None, :], opp[None, :, :3], cfg.barrier)[2])
+            barrier_min = DeferredBarrierMin.of(x0, opp, cfg.barrier, barrier_min)
         if z is None or not (all_finite(xbar) and all_finite(ubar)):
             return self._fallback(x0, message or "non-finite iterate", t_start, qp_iters, sqp_iters,
                                   barrier_min, m)
@@ -301,7 +327,7 @@ class MPCDCBF:
         self._xg, self._ug = self._shift(xbar, ubar)
         self._plan_age = 0
         return MPCResult(u=self._clip_input(ubar[0]), x_pred=x_pred, u_pred=u_pred, status=STATUS_SOLVED,
-                         success=True, slack=slack, barrier_min=barrier_min,
+                         success=True, slack=slack, h_now=barrier_min,
                          solve_time=time.perf_counter() - t_start, qp_iterations=qp_iters,
                          sqp_iterations=sqp_iters, barrier_slack_first=first, n_opponents=m, qp_time=qp_time,
                          qp_fallbacks=self.n_qp_fallbacks - fallbacks)
@@ -325,7 +351,7 @@ class MPCDCBF:
             self._xg, self._ug = None, None
         logger.debug("MPC solve failed (%s); %s, failure #%d", message, status, self.n_failures)
         return MPCResult(u=u, x_pred=x_pred, u_pred=u_pred, status=status, success=False,
-                         slack={"lat_acc": 0.0, "track": 0.0, "barrier": 0.0}, barrier_min=barrier_min,
+                         slack={"lat_acc": 0.0, "track": 0.0, "barrier": 0.0}, h_now=barrier_min,
                          solve_time=time.perf_counter() - t_start, qp_iterations=qp_iters,
                          sqp_iterations=sqp_iters, barrier_slack_first=0.0, n_opponents=m)
 
@@ -429,7 +455,7 @@ class MPCDCBF:
         self._xg, self._ug = self._shift(sol.x, sol.u)
         self._plan_age = 0
         return MPCResult(u=self._clip_input(sol.u[0]), x_pred=sol.x, u_pred=sol.u, status=STATUS_SOLVED,
-                         success=True, slack=slack, barrier_min=barrier_min,
+                         success=True, slack=slack, h_now=barrier_min,
                          solve_time=time.perf_counter() - t_start, qp_iterations=sol.iterations,
                          sqp_iterations=1, barrier_slack_first=first, n_opponents=m)
 

@@ -264,7 +264,7 @@ class ReferenceNumericsMPC:
         u = self._command(x0, ubar[0, 0], xbar[1, 4])
         self._shift(xbar, ubar)
         return MPCResult(u=u, x_pred=x_pred, u_pred=ubar.copy(), status=STATUS_SOLVED, success=True, slack=slack,
-                         barrier_min=self._barrier_min(x0, slots, real), solve_time=time.perf_counter() - t_start,
+                         h_now=self._barrier_min(x0, slots, real), solve_time=time.perf_counter() - t_start,
                          qp_iterations=iters, sqp_iterations=1, barrier_slack_first=first,
                          n_opponents=int(real.sum()))
 
@@ -307,5 +307,5 @@ class ReferenceNumericsMPC:
         logger.debug("reference-numerics MPC: HPIPM status %d after %d iterations; zero command", status, iters)
         return MPCResult(u=u, x_pred=x_pred, u_pred=ubar.copy(), status=STATUS_ZERO_COMMAND, success=False,
                          slack={"lat_acc": 0.0, "track": 0.0, "barrier": 0.0},
-                         barrier_min=self._barrier_min(x0, slots, real), solve_time=time.perf_counter() - t_start,
+                         h_now=self._barrier_min(x0, slots, real), solve_time=time.perf_counter() - t_start,
                          qp_iterations=iters, sqp_iterations=1, barrier_slack_first=0.0, n_opponents=int(real.sum()))

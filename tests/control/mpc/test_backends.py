@@ -4,6 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from sofar_env.control.mpc import MPCConfig, MPCDCBF
 from sofar_env.control.mpc.backends import dcbf_margin, solve_qp
@@ -44,6 +45,25 @@ def test_piqp_and_osqp_solve_the_same_qp(last_qp):
     hu, rows = piqp_qs.data()[3], piqp_qs.cbf_rows
     np.testing.assert_allclose(dcbf_margin(piqp_qs, z_p, hu), hu[rows] - (piqp_qs.G @ z_p)[rows], atol=1e-6)
     assert dcbf_margin(osqp_qs, z_o, hu).shape == (len(qs.cbf_rows),)
+
+
+def test_the_compiled_dcbf_margin_is_scipys_product_to_the_bit(last_qp):
+    """Without PIQP's own slacks, dcbf_margin is ``h_u - G z`` of the DCBF rows, the same bits as scipy's sparse
+    product, on the closed loop's last QP and on random sparse data with a random row selection."""
+    from sofar_env.control.mpc.backends import _csc_margin
+
+    mpc, qs = last_qp
+    osqp_qs = _copy(qs, dataclasses.replace(mpc.config, qp_solver="osqp"), mpc._lin)
+    data = osqp_qs.data()
+    z = np.random.default_rng(0).normal(size=qs.nz)
+    hu, rows = data[3], qs.cbf_rows
+    assert len(rows) and np.array_equal(dcbf_margin(osqp_qs, z, hu), hu[rows] - (osqp_qs.G @ z)[rows])
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        g = sp.random(30, 25, density=0.3, format="csc", random_state=rng)
+        z, hu = rng.normal(size=25) * 1e3, rng.normal(size=30)
+        sel = rng.choice(30, size=rng.integers(1, 30), replace=False)
+        assert np.array_equal(_csc_margin(g.data, g.indices, g.indptr, z, hu, sel), hu[sel] - (g @ z)[sel])
 
 
 def test_solver_trouble_is_returned_not_raised(last_qp):

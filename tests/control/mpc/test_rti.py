@@ -216,6 +216,31 @@ def test_heading_extent_reaches_the_compiled_barrier(cache_dir):
     assert values[0.0] > 0.0 > values[2.45]  # clear for aligned cars, inside the widened ellipse
 
 
+def test_barrier_min_is_deferred_and_the_eager_value_to_the_bit(cache_dir):
+    """MPCResult.barrier_min of opponents outside the MPC's window is evaluated on first access, from the solve's
+    own copies: the value of the eager barrier_table call to the bit, whatever the caller does to its arrays after
+    the solve; the result pickles and copies with it."""
+    import copy
+    import pickle
+
+    from sofar_env.control.barrier import BarrierParams, barrier_table
+    from sofar_env.control.mpc.rti import DeferredBarrierMin
+
+    x0 = np.array([0.0, 0.4, 0.05, 40.0, 0.0])
+    opp = np.array([[30.0, 1.0, 35.0, 0.1], [400.0, -2.0, 30.0, 0.0]])  # the second far outside the window
+    for params in (BarrierParams(), BarrierParams(heading_extent=2.45)):
+        cfg = MPCConfig(cache_dir=cache_dir, barrier=params)
+        res = MPCDCBF(cfg).solve(x0.copy(), make_stage(v_ref=40.0, half_width=8.0), opp, 0.3)
+        assert res.success and isinstance(res.h_now, DeferredBarrierMin)
+        inside = float(res.h_now.partial)
+        expected = min(inside, barrier_table(x0[None, :], opp[None, :, :3], params)[2])
+        opp[:] = 0.0  # the caller reuses its buffer: the result keeps what the solve saw
+        assert res.barrier_min == expected and inside >= expected
+        assert pickle.loads(pickle.dumps(res)).barrier_min == expected == copy.deepcopy(res).barrier_min
+        opp = np.array([[30.0, 1.0, 35.0, 0.1], [400.0, -2.0, 30.0, 0.0]])
+    assert DeferredBarrierMin.of(x0, np.zeros((0, 3)), BarrierParams()) == math.inf
+
+
 def test_the_input_clip_is_numpys(cache_dir):
     mpc = MPCDCBF(MPCConfig(cache_dir=cache_dir))
     lo, hi = mpc._box[0][:2], mpc._box[1][:2]
