@@ -85,6 +85,9 @@ class DecisionTally:
         self.off_track = False
         self.stalled = False
         self.min_h = math.inf
+        self.min_h_of: tuple | None = None
+        """The opponent rows and barrier of the last :attr:`min_h` (whose value the observation reuses when it
+        measures the same rows, from the same state, with the same barrier)."""
         self.nearest = math.inf
         self.gamma = math.nan
         self.last = None
@@ -96,6 +99,7 @@ class DecisionTally:
         arc length before the step [m/s]."""
         slack = float(out.mpc.slack.get("barrier", 0.0))
         self.min_h = min_barrier(race.track, race.frenet[car], opponents_after, barrier_params)
+        self.min_h_of = (opponents_after, barrier_params)
         self.nearest = race.nearest_distance(car)  # now: a crashed car may be removed from the race next
         self.vector += reward_vector(
             collision=events.collision, off_track=events.off_track, overtakes=events.overtakes,
@@ -379,7 +383,7 @@ class ControlledRace:
             info = self._info(tally, i)
             if terminated or truncated:
                 info["is_success"] = not terminated
-            out[i] = CarStep(self._observe(i), self._reward(tally.vector), terminated,
+            out[i] = CarStep(self._observe(i, tally), self._reward(tally.vector), terminated,
                              truncated, info)
         self.live = [i for i in live if not (out[i].terminated or out[i].truncated)]
         return out
@@ -412,11 +416,16 @@ class ControlledRace:
         self._sensed[car] = np.ascontiguousarray(rows[:, :3])
         self._sensed_ids[car] = ids
 
-    def _observe(self, car: int) -> np.ndarray:
-        """Car ``car``'s observation from what it senses (the layout of ``EnvConfig.observation``)."""
+    def _observe(self, car: int, tally: DecisionTally | None = None) -> np.ndarray:
+        """Car ``car``'s observation from what it senses (the layout of ``EnvConfig.observation``); ``tally``: the
+        decision just recorded, whose barrier value the extended layout reuses where it was measured on the very
+        rows the car senses (no sensor) with the same barrier (the car has not moved since)."""
         if self.config.observation == "paper":
             return observe(self.race, car, self._sensed[car])
-        return observe(self.race, car, self._sensed_rows[car], "extended", self.measured_barrier)
+        rows = self._sensed_rows[car]
+        same = tally is not None and tally.min_h_of is not None and tally.min_h_of[0] is rows \
+            and tally.min_h_of[1] is self.measured_barrier
+        return observe(self.race, car, rows, "extended", self.measured_barrier, tally.min_h if same else None)
 
     def _v2v_rows(self) -> list[np.ndarray]:
         """Each car's opponent rows for its controller under ``race.v2v`` (:mod:`sofar_env.v2v`): for every other

@@ -134,8 +134,10 @@ def _mean_curvature(track, s: float, speed: float) -> float:
     return float(np.add.reduce(np.asarray(track.curvature(s + speed * _TAU), float))) / _CURV_SAMPLES
 
 
-def extra_observation(track, ego_frenet, opponents, barrier_params) -> np.ndarray:
-    """The four physical values (float64) the extended observation appends, for opponent rows (s, n, v[, n_dot])."""
+def extra_observation(track, ego_frenet, opponents, barrier_params, min_h: float | None = None) -> np.ndarray:
+    """The four physical values (float64) the extended observation appends, for opponent rows (s, n, v[, n_dot]);
+    ``min_h``: :func:`~sofar_env.control.barrier.min_barrier` of these very arguments where the caller has it
+    already (None: computed here)."""
     from .control.barrier import min_barrier
 
     s = float(ego_frenet[0])
@@ -149,17 +151,21 @@ def extra_observation(track, ego_frenet, opponents, barrier_params) -> np.ndarra
             seen.append((g, row[3] if len(row) == 4 else 0.0))
     seen.sort(key=lambda r: r[0])
     seen += [(hi, 0.0)] * (2 - len(seen))
-    h = min_barrier(track, ego_frenet, rows, barrier_params) if len(rows) else np.inf
+    if min_h is not None:
+        h = min_h
+    else:
+        h = min_barrier(track, ego_frenet, rows, barrier_params) if len(rows) else np.inf
     return np.array([seen[0][1], seen[1][1], float(ego_frenet[2]), min(h, EXTENDED_HIGH[15])])
 
 
 def observe(race, car: int = 0, opponents: np.ndarray | None = None, layout: str = "paper",
-            barrier_params=None) -> np.ndarray:
+            barrier_params=None, min_h: float | None = None) -> np.ndarray:
     """Observation (12,) or, with ``layout="extended"``, (16,) float32 of controlled car ``car`` of ``race``.
 
     ``opponents`` may pass ``race.opponent_frenet(car)`` when the caller has it already (rows (s, n, v), or
     (s, n, v, n_dot) with a sensor's lateral rates); ``barrier_params`` (the MPC's
-    :class:`~sofar_env.control.barrier.BarrierParams`) are needed for the extended layout.
+    :class:`~sofar_env.control.barrier.BarrierParams`) are needed for the extended layout, and ``min_h`` may pass
+    the car's smallest barrier value against these rows with these parameters (:func:`extra_observation`).
     """
     if opponents is None:
         opponents = race.opponent_frenet(car)
@@ -168,7 +174,7 @@ def observe(race, car: int = 0, opponents: np.ndarray | None = None, layout: str
     opponents = np.asarray(opponents, float)
     out = np.empty(16, np.float32)
     _scale_row(raw_observation(race.track, race.frenet[car], opponents[:, :3]), OBS_LOW, OBS_HIGH, _SPAN, out[:12])
-    extra = extra_observation(race.track, race.frenet[car], opponents, barrier_params)
+    extra = extra_observation(race.track, race.frenet[car], opponents, barrier_params, min_h)
     _scale_clipped(extra, _EXT_LOW, _EXT_HIGH, _EXT_SPAN, out[12:])  # 2 (clip(extra) - lo) / span - 1
     return out
 
