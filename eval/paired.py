@@ -36,6 +36,15 @@ front, their episodes pooled) every point that is not a fixed gamma (a
 policy at each preference, an SB3 policy) is compared with the fixed gamma nearest to its mean gamma and with the
 best fixed gamma (and with the strategies of `--b`, if given): success by the exact McNemar test, overtakes per
 hour by the Wilcoxon signed-rank test (sofar_agents.evaluation.pareto_paired).
+
+With `--target-power N` (CSVs of one or more seed sets, pooled): for each fixed gamma, how often it would itself
+come within `--margin` (default 0.02) of the best fixed gamma's success on a fresh set of N episodes, resampled
+with their outcomes under every fixed gamma kept together (sofar_agents.evaluation.target_power): the chance a
+policy that *is* that fixed gamma has to meet the safety-first target of a Pareto front:
+
+    python eval/paired.py --target-power 40 \
+        results/interactive_dense/morl_sofar17/train_seed91/seed21500/pareto_episodes.csv \
+        results/interactive_dense/morl_sofar17/train_seed91/seed22500/pareto_episodes.csv
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ import argparse
 import sys
 
 from sofar_agents import evaluation as ev
+from sofar_agents.cli_types import positive_int
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -63,15 +73,24 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--pareto", action="store_true",
                    help="pareto_episodes.csv files (one front's seed sets, pooled): each policy point against the "
                         "nearest and the best fixed gamma")
+    p.add_argument("--target-power", type=positive_int, default=None, metavar="N",
+                   help="per fixed gamma: how often it is within --margin of the best fixed gamma's success on N "
+                        "resampled episodes of the pooled CSVs")
+    p.add_argument("--margin", type=float, default=0.02, help="with --target-power: the target's margin (default "
+                                                               "0.02, two points)")
     p.add_argument("--out", default=None, help="also write the Markdown table to this file")
     return p.parse_args(argv)
 
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    mode = _before_after if args.before_after else _pareto if args.pareto else _paired
+    mode = (_before_after if args.before_after else _pareto if args.pareto
+            else _target_power if args.target_power is not None else _paired)
     if args.races and not args.before_after:
         print("error: --races goes with --before-after", file=sys.stderr)
+        return 2
+    if args.target_power is not None and (args.before_after or args.pareto):
+        print("error: --target-power goes with neither --before-after nor --pareto", file=sys.stderr)
         return 2
     try:
         text = mode(args)
@@ -100,6 +119,15 @@ def _pareto(args: argparse.Namespace) -> str:
     name = " + ".join(sets)
     return (f"Paired comparisons of the points of {name} with the fixed gammas:\n\n"
             + format_pareto_paired(rows, name, args.b or ()))
+
+
+def _target_power(args: argparse.Namespace) -> str:
+    from sofar_agents.evaluation.target_power import format_target_power, target_power
+
+    sets = ev.read_seed_sets(args.csv)
+    resamples = 20000
+    n, rows = target_power(sets, args.target_power, args.margin, resamples)
+    return f"Seed sets {', '.join(sets)}.\n\n" + format_target_power(n, rows, args.target_power, args.margin, resamples)
 
 
 def _before_after(args: argparse.Namespace) -> str:
