@@ -53,7 +53,7 @@ import argparse
 import sys
 
 from sofar_agents import evaluation as ev
-from sofar_agents.cli_types import positive_int
+from sofar_agents.cli_types import float_in, positive_int
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -76,8 +76,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--target-power", type=positive_int, default=None, metavar="N",
                    help="per fixed gamma: how often it is within --margin of the best fixed gamma's success on N "
                         "resampled episodes of the pooled CSVs")
-    p.add_argument("--margin", type=float, default=0.02, help="with --target-power: the target's margin (default "
-                                                               "0.02, two points)")
+    p.add_argument("--margin", type=float_in(0.0, 1.0), default=0.02,
+                   help="with --target-power: the target's margin, a share in [0, 1] (default 0.02, two points)")
     p.add_argument("--out", default=None, help="also write the Markdown table to this file")
     return p.parse_args(argv)
 

@@ -105,3 +105,27 @@ def test_interactive_ids_observe_sixteen_values_and_paper_ids_twelve():
     # the first twelve values are the paper layout of the same state
     flat = gym.make("SOfAR-Monza-Interactive-v0", observation="paper", race=short)
     assert np.array_equal(flat.reset(seed=1)[0], obs[:12])
+
+
+@pytest.mark.parametrize("sensor", [False, True])
+def test_the_extended_barrier_value_is_that_of_the_sensed_rows(sensor):
+    """After a step the extended layout's barrier value is min_barrier of the rows the car senses, from its state now:
+    without a sensor the decision's value (the same rows, reused), with one the sensor's rows (computed anew)."""
+    import gymnasium as gym
+
+    import sofar_env  # noqa: F401
+    from sofar_env.control.barrier import min_barrier
+    from sofar_env.observation import EXTENDED_HIGH, extra_observation
+
+    race = {"duration": 3.0, "sensor": {"enabled": sensor}}
+    env = gym.make("SOfAR-LagunaSeca-Interactive-v0", race=race, rho=0.3)
+    env.reset(seed=4)
+    core = env.unwrapped.core
+    for _ in range(5):
+        obs, *_ = env.step(np.array([0.3], np.float32))
+        rows = core._sensed_rows[0]
+        h = min_barrier(core.track, core.race.frenet[0], rows, core.measured_barrier)
+        assert (rows is core._opponents[0]) is not sensor
+        expected = extra_observation(core.track, core.race.frenet[0], rows, core.measured_barrier)
+        assert expected[3] == min(h, EXTENDED_HIGH[15])
+        assert np.array_equal(obs, core._observe(0))  # the reused value is the one computed afresh
