@@ -64,7 +64,7 @@ def test_no_numeric_flag_takes_a_bare_int_or_float(path, parse_only):
             "bench/bench_train.py": ["--compare", "HEAD"], "eval/reference_numerics.py": ["sweep"],
             "eval/manifest.py": ["list"], "eval/pasta_preference.py": ["probe"],
             "eval/stall_probe.py": ["x.csv", "--out", "x"],
-            "eval/off_tracks.py": ["--replay", "x.csv", "--out", "x"],
+            "eval/off_tracks.py": ["--replay", "x.csv", "--out", "x"], "eval/safety_signals.py": ["--out", "x"],
             "eval/training_env.py": ["record", "--checkpoint", "x.json", "--out", "x.npz"]}.get(path, [])
     parser = _run(path, argv).parser
     actions = list(parser._actions)
