@@ -10,8 +10,9 @@ rho values, ``--episodes`` per pair, ``--duration`` seconds, the default control
 per step, the candidates the environment already measures: the MPC's largest DCBF slack (``info["barrier_slack"]``),
 how deep the car is inside the nearest barrier ellipse (``max(0, -info["min_barrier"])``), the steps inside one,
 and the steps closer than ``--near`` metres to an opponent's reference point (``info["nearest_opponent_m"]``).
-Writes ``safety_signals.csv`` (one row per episode and gamma) and ``safety_signals.md`` (per gamma: failures and
-the per-step means), each atomically, with the command, the commit and the wall time.
+Writes ``safety_signals.csv`` (one row per episode and gamma, with its configuration hash) and ``safety_signals.md``
+(per gamma: failures and the per-step means), each atomically, with the command, the commit, the hash and the wall
+time.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import io
 import json
 import logging
 import math
+import shlex
 import subprocess
 import sys
 import time
@@ -35,7 +37,7 @@ from sofar_agents.evaluation.files import write_text_atomic
 logger = logging.getLogger("safety_signals")
 
 COLUMNS = ("track", "rho", "seed", "gamma", "steps", "failed", "slack_sum", "depth_sum", "inside_steps",
-           "near_steps")
+           "near_steps", "config_hash")
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -62,13 +64,14 @@ def run_episode(task: tuple) -> dict:
     import numpy as np
 
     import sofar_env  # noqa: F401  (registers the ids)
+    from sofar_env.config_hash import config_hash
 
     track, rho, seed, gamma, scenario, kwargs, duration, near = task
     env_id = f"SOfAR-{track}-v0" if scenario == "paper" else f"SOfAR-{track}-{scenario.capitalize()}-v0"
     env = gym.make(env_id, rho=rho, race={"duration": duration}, timing_info=False, **kwargs)
     env.reset(seed=seed)
     row = {"track": track, "rho": rho, "seed": seed, "gamma": gamma, "steps": 0, "failed": 0, "slack_sum": 0.0,
-           "depth_sum": 0.0, "inside_steps": 0, "near_steps": 0}
+           "depth_sum": 0.0, "inside_steps": 0, "near_steps": 0, "config_hash": config_hash(env.unwrapped.config)}
     action = np.array([gamma], np.float32)
     while True:
         _, _, terminated, truncated, info = env.step(action)
@@ -125,7 +128,9 @@ def main(argv=None) -> int:
     w.writerows(rows)
     write_text_atomic(out / "safety_signals.csv", buf.getvalue())
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    text = (f"`python eval/safety_signals.py {' '.join(sys.argv[1:] if argv is None else argv)}` at {commit or '?'}, "
+    command = shlex.join(["python", "eval/safety_signals.py", *(sys.argv[1:] if argv is None else argv)])
+    hashes = ", ".join(sorted({r["config_hash"] for r in rows}))
+    text = (f"`{command}` at {commit or '?'}, config hash {hashes}, "
             f"{len(tasks)} episodes in {wall:.0f} s.\n\n" + summary(rows, args.near))
     write_text_atomic(out / "safety_signals.md", text)
     logger.info("wrote %s", out / "safety_signals.md")

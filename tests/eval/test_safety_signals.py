@@ -28,6 +28,7 @@ def test_one_short_episode_counts_its_steps():
     row = script.run_episode(("Monza", 0.5, 3, 0.3, "interactive", {}, 0.5, 8.0))
     assert row["steps"] == 5 and row["failed"] == 0 and row["gamma"] == 0.3
     assert 0 <= row["inside_steps"] <= 5 and row["slack_sum"] >= 0.0 and row["depth_sum"] >= 0.0
+    assert len(row["config_hash"]) == 12
 
 
 @pytest.mark.parametrize("argv, message", [
