@@ -92,13 +92,14 @@ def record_multi(episodes: int, steps: int, extra: dict | None = None) -> dict[s
 
 
 def record(args: argparse.Namespace) -> int:
-    from sofar_env.registration import DYNAMIC_IDS, ENV_IDS, INTERACTIVE_IDS
+    from sofar_env.registration import DYNAMIC_IDS, DYNAMIC_V1_IDS, ENV_IDS, INTERACTIVE_IDS, INTERACTIVE_V1_IDS
 
     t0 = time.perf_counter()
     data: dict[str, np.ndarray] = {}
     variants = [{}] + [dict(v.split("=", 1) for v in args.variant)] if args.variant else [{}]
-    ids = ((ENV_IDS if "paper" in args.worlds else ()) + (INTERACTIVE_IDS if "interactive" in args.worlds else ())
-           + (DYNAMIC_IDS if "dynamic" in args.worlds else ()))
+    by_world = {"paper": ENV_IDS, "interactive": INTERACTIVE_IDS, "dynamic": DYNAMIC_IDS,
+                "interactive-2": INTERACTIVE_V1_IDS, "dynamic-2": DYNAMIC_V1_IDS}
+    ids = tuple(env_id for world, world_ids in by_world.items() if world in args.worlds for env_id in world_ids)
     for env_id in ids:
         for extra in variants:
             data.update(record_single(env_id, args.episodes, args.steps, extra))
@@ -140,8 +141,10 @@ def main(argv: list[str] | None = None) -> int:
     rec.add_argument("--out", required=True, help="output .npz file")
     rec.add_argument("--episodes", type=positive_int, default=3, help="episodes per id (default 3)")
     rec.add_argument("--steps", type=positive_int, default=300, help="control steps per episode (default 300)")
-    rec.add_argument("--worlds", nargs="+", default=["paper"], choices=("paper", "interactive", "dynamic"),
-                     help="record the ids of these worlds (default: paper; the PettingZoo race is always recorded)")
+    rec.add_argument("--worlds", nargs="+", default=["paper"],
+                     choices=("paper", "interactive", "dynamic", "interactive-2", "dynamic-2"),
+                     help="record the ids of these worlds (default: paper; interactive-2 and dynamic-2: the v1 ids; the "
+                          "PettingZoo race is always recorded)")
     rec.add_argument("--variant", nargs="*", default=[], metavar="KEY=VALUE",
                      help="also record every id, and the PettingZoo race, with these keyword arguments (strings; "
                           "e.g. stack=sofar-1 to compare a controller across a change of the default)")

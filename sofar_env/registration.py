@@ -14,6 +14,13 @@ points are ``"module:function"`` strings (:mod:`sofar_env.factory`), so the spec
 with ``disable_env_checker=True`` because the entry points apply Gymnasium's passive checker
 themselves in scalar mode and leave it off in vector mode (see :mod:`sofar_env.factory`).
 
+Version 1 of the two interactive worlds (``SOfAR-LagunaSeca-Interactive-v1``, ``SOfAR-LagunaSeca-Dynamic-v1``:
+``scenario="interactive-2"`` and ``"dynamic-2"``) differs from version 0 in one rule of the opponent field: a squeezed
+opponent drops back only for a car level with it, ahead of it or faster, so that a car standing behind it no longer
+holds it at a standstill (the squeeze deadlock of version 0, :mod:`sofar_env.scenarios`). Version 0 stays registered
+unchanged: its tables and the policies trained in it refer to it; ``gymnasium.make`` without a version takes the
+latest.
+
 The ids pass ``track=`` (and ``scenario=``) to the entry point; a ``config`` mapping that names another
 track or world is refused (:func:`~sofar_env.config.make_env_config`), and ``track=`` / ``scenario=``
 given to ``gymnasium.make`` replace the id's. The ids are registered without ``max_episode_steps``: an
@@ -28,7 +35,8 @@ import gymnasium as gym
 
 from .constants import CIRCUITS
 
-__all__ = ["TRACKS", "ENV_IDS", "INTERACTIVE_IDS", "DYNAMIC_IDS", "CUSTOM_ID", "MAX_EPISODE_STEPS", "register_envs"]
+__all__ = ["TRACKS", "ENV_IDS", "INTERACTIVE_IDS", "DYNAMIC_IDS", "INTERACTIVE_V1_IDS", "DYNAMIC_V1_IDS", "CUSTOM_ID",
+           "MAX_EPISODE_STEPS", "register_envs"]
 
 TRACKS = CIRCUITS
 """Circuits with a registered environment."""
@@ -38,6 +46,10 @@ INTERACTIVE_IDS = tuple(f"SOfAR-{name}-Interactive-v0" for name in TRACKS)
 """The interactive-world ids (``scenario="interactive"``, :mod:`sofar_env.scenarios`)."""
 DYNAMIC_IDS = tuple(f"SOfAR-{name}-Dynamic-v0" for name in TRACKS)
 """The interactive world on the dynamic tyre plant (``scenario="dynamic"``)."""
+INTERACTIVE_V1_IDS = tuple(f"SOfAR-{name}-Interactive-v1" for name in TRACKS)
+"""Version 1 of the interactive world (``scenario="interactive-2"``: without the squeeze deadlock)."""
+DYNAMIC_V1_IDS = tuple(f"SOfAR-{name}-Dynamic-v1" for name in TRACKS)
+"""Version 1 of the dynamic world (``scenario="dynamic-2"``: without the squeeze deadlock)."""
 CUSTOM_ID = "SOfAR-Custom-v0"
 """A circuit of your own: ``track=`` a circuit folder or a :class:`~sofar_env.tracks.Track` (required; any world
 through ``scenario=``)."""
@@ -59,10 +71,11 @@ def _register(env_id: str, entry_point: str, vector_entry_point: str, kwargs: di
 
 
 def register_envs() -> None:
-    """Register every id of :data:`ENV_IDS`, :data:`INTERACTIVE_IDS`, :data:`DYNAMIC_IDS` and :data:`CUSTOM_ID`
-    (idempotent)."""
+    """Register every id of :data:`ENV_IDS`, :data:`INTERACTIVE_IDS`, :data:`DYNAMIC_IDS`, :data:`INTERACTIVE_V1_IDS`,
+    :data:`DYNAMIC_V1_IDS` and :data:`CUSTOM_ID` (idempotent)."""
     for ids, extra in ((ENV_IDS, {}), (INTERACTIVE_IDS, {"scenario": "interactive"}),
-                       (DYNAMIC_IDS, {"scenario": "dynamic"})):
+                       (DYNAMIC_IDS, {"scenario": "dynamic"}), (INTERACTIVE_V1_IDS, {"scenario": "interactive-2"}),
+                       (DYNAMIC_V1_IDS, {"scenario": "dynamic-2"})):
         for name, env_id in zip(TRACKS, ids):
             _register(env_id, ENTRY_POINT, VECTOR_ENTRY_POINT, {"track": name, **extra})
     _register(CUSTOM_ID, CUSTOM_ENTRY_POINT, CUSTOM_VECTOR_ENTRY_POINT, {})

@@ -8,17 +8,37 @@ from pettingzoo.test import parallel_api_test
 
 import sofar_env  # noqa: F401
 from sofar_env.multi_agent import parallel_env
-from sofar_env.registration import DYNAMIC_IDS, INTERACTIVE_IDS
+from sofar_env.registration import DYNAMIC_IDS, DYNAMIC_V1_IDS, INTERACTIVE_IDS, INTERACTIVE_V1_IDS
 from sofar_env.scenarios import SCENARIOS, scenario_overrides
 
 SHORT = {"race": {"duration": 3.0}}
 
 
-@pytest.mark.parametrize("ids, scenario", [(INTERACTIVE_IDS, "interactive"), (DYNAMIC_IDS, "dynamic")])
+@pytest.mark.parametrize("ids, scenario", [(INTERACTIVE_IDS, "interactive"), (DYNAMIC_IDS, "dynamic"),
+                                           (INTERACTIVE_V1_IDS, "interactive-2"), (DYNAMIC_V1_IDS, "dynamic-2")])
 def test_world_ids_are_registered_with_their_scenario(ids, scenario):
     assert len(ids) == 4
     for env_id in ids:
         assert gym.spec(env_id).kwargs["scenario"] == scenario
+
+
+@pytest.mark.parametrize("env_id", [INTERACTIVE_V1_IDS[2], DYNAMIC_V1_IDS[1]])
+def test_version_1_ids_pass_the_checker_and_differ_from_version_0_in_the_squeeze_rule_only(env_id):
+    """v1 is v0 with ``race.opponents.traffic.yield_to_any`` off (the squeeze deadlock's fix), nothing else; an id
+    without a version is the latest."""
+    from dataclasses import asdict
+
+    from gymnasium.utils.env_checker import check_env
+
+    v1 = gym.make(env_id, config=SHORT)
+    check_env(v1.unwrapped, skip_render_check=True)
+    v0 = gym.make(env_id.replace("-v1", "-v0"), config=SHORT)
+    a, b = asdict(v0.unwrapped.config.race), asdict(v1.unwrapped.config.race)
+    assert a["opponents"]["traffic"].pop("yield_to_any") is True
+    assert b["opponents"]["traffic"].pop("yield_to_any") is False
+    assert a == b
+    with pytest.warns(UserWarning):
+        assert gym.make(env_id[:-3], config=SHORT).spec.id == env_id
 
 
 def test_scenario_sets_the_world_and_user_keys_win():

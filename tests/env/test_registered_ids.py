@@ -7,7 +7,7 @@ import pytest
 import sofar_env  # noqa: F401  (registers the ids)
 from sofar_env.errors import ConfigError
 from sofar_env.multi_agent import parallel_env
-from sofar_env.registration import CUSTOM_ID, DYNAMIC_IDS, ENV_IDS, INTERACTIVE_IDS
+from sofar_env.registration import CUSTOM_ID, DYNAMIC_IDS, DYNAMIC_V1_IDS, ENV_IDS, INTERACTIVE_IDS, INTERACTIVE_V1_IDS
 from sofar_env.tracks import Track
 
 FAST = {"n_opponents": 0, "use_miqp": False}  # a lone car: about 1 ms per step
@@ -35,7 +35,8 @@ def test_episodes_last_the_configured_duration(env_id, config, decisions):
     env.close()
 
 
-@pytest.mark.parametrize("env_id", [*ENV_IDS, *INTERACTIVE_IDS, *DYNAMIC_IDS, CUSTOM_ID])
+@pytest.mark.parametrize("env_id", [*ENV_IDS, *INTERACTIVE_IDS, *DYNAMIC_IDS, *INTERACTIVE_V1_IDS, *DYNAMIC_V1_IDS,
+                                    CUSTOM_ID])
 def test_no_id_registers_a_step_limit(env_id):
     assert gym.spec(env_id).max_episode_steps is None
 
