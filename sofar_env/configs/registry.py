@@ -429,12 +429,12 @@ latency; the extended 16-value observation. Kinematic plant."""),
 (the ``-Dynamic-v0`` ids), with what makes the kinematic controller fit it: the car's yaw-rate loop, limits
 inside the tyres' grip at the lowest mu, starts at 0.5-0.7 of the profile, and the controller settings
 ``speed_factor`` 0.7, ``mpc.track_margin`` 2.2 m and calmer steering weights (applied on top of any preset)."""),
-    "interactive-2": Entry(World(_version_2(_INTERACTIVE)), """A candidate next version of ``"interactive"``, not the
-default: a squeezed opponent drops back only for a car or ego level with it, ahead of it or faster
+    "interactive-2": Entry(World(_version_2(_INTERACTIVE)), """Version 1 of ``"interactive"`` (the
+``-Interactive-v1`` ids): a squeezed opponent drops back only for a car or ego level with it, ahead of it or faster
 (``race.opponents.traffic.yield_to_any = False``). In ``"interactive"`` a car squeezed by a standing ego a car length
 behind it brakes to a standstill and stays squeezed while both stand, which holds the ego until the stall rule ends the
 episode (most stalls of the default controller; ``docs/decisions/interactive-opponents.md``)."""),
-    "dynamic-2": Entry(World(_version_2(_DYNAMIC)), """A candidate next version of ``"dynamic"``, not the default: the
+    "dynamic-2": Entry(World(_version_2(_DYNAMIC)), """Version 1 of ``"dynamic"`` (the ``-Dynamic-v1`` ids): the
 dynamic world with the squeezed-opponent rule of ``"interactive-2"``."""),
 }
 """The worlds: name -> Entry(World, doc), in the order of ``SCENARIOS``."""
