@@ -25,6 +25,7 @@ import time
 import numpy as np
 
 from sofar_agents.cli_types import positive_int
+from sofar_env.registration import WORLD_IDS
 
 logger = logging.getLogger("trajectories")
 
@@ -92,14 +93,10 @@ def record_multi(episodes: int, steps: int, extra: dict | None = None) -> dict[s
 
 
 def record(args: argparse.Namespace) -> int:
-    from sofar_env.registration import DYNAMIC_IDS, DYNAMIC_V1_IDS, ENV_IDS, INTERACTIVE_IDS, INTERACTIVE_V1_IDS
-
     t0 = time.perf_counter()
     data: dict[str, np.ndarray] = {}
     variants = [{}] + [dict(v.split("=", 1) for v in args.variant)] if args.variant else [{}]
-    by_world = {"paper": ENV_IDS, "interactive": INTERACTIVE_IDS, "dynamic": DYNAMIC_IDS,
-                "interactive-2": INTERACTIVE_V1_IDS, "dynamic-2": DYNAMIC_V1_IDS}
-    ids = tuple(env_id for world, world_ids in by_world.items() if world in args.worlds for env_id in world_ids)
+    ids = tuple(env_id for world, world_ids in WORLD_IDS.items() if world in args.worlds for env_id in world_ids)
     for env_id in ids:
         for extra in variants:
             data.update(record_single(env_id, args.episodes, args.steps, extra))
@@ -142,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     rec.add_argument("--episodes", type=positive_int, default=3, help="episodes per id (default 3)")
     rec.add_argument("--steps", type=positive_int, default=300, help="control steps per episode (default 300)")
     rec.add_argument("--worlds", nargs="+", default=["paper"],
-                     choices=("paper", "interactive", "dynamic", "interactive-2", "dynamic-2"),
+                     choices=tuple(WORLD_IDS),
                      help="record the ids of these worlds (default: paper; interactive-2 and dynamic-2: the v1 ids; the "
                           "PettingZoo race is always recorded)")
     rec.add_argument("--variant", nargs="*", default=[], metavar="KEY=VALUE",

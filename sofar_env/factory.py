@@ -41,7 +41,7 @@ from typing import Any
 import gymnasium as gym
 
 from .env import SOfARRaceEnv
-from .registration import CUSTOM_ID, DYNAMIC_IDS, DYNAMIC_V1_IDS, ENV_IDS, INTERACTIVE_IDS, INTERACTIVE_V1_IDS
+from .registration import CUSTOM_ID, ENV_IDS, WORLD_IDS
 from .tracks import Track
 
 __all__ = ["make_env", "make_custom_env", "make_vector_env", "make_custom_vector_env", "load_custom_track"]
@@ -171,8 +171,7 @@ def _circuit_id(kwargs: Mapping[str, Any]) -> str:
     """The registered id whose arguments (circuit, world) ``kwargs`` carry, else an id of their circuit, else the
     first one. It names the specs of the environments; ``kwargs`` (which hold the circuit and the world) make them."""
     scenario = kwargs.get("scenario")
-    world_ids = {None: ENV_IDS, "paper": ENV_IDS, "interactive": INTERACTIVE_IDS, "dynamic": DYNAMIC_IDS,
-                 "interactive-2": INTERACTIVE_V1_IDS, "dynamic-2": DYNAMIC_V1_IDS}
+    world_ids = {None: ENV_IDS, **WORLD_IDS}
     for ids in (world_ids.get(scenario, ()) if scenario is None or isinstance(scenario, str) else (), ENV_IDS):
         for env_id in ids:
             if gym.spec(env_id).kwargs.get("track") == kwargs.get("track"):

@@ -35,8 +35,8 @@ import gymnasium as gym
 
 from .constants import CIRCUITS
 
-__all__ = ["TRACKS", "ENV_IDS", "INTERACTIVE_IDS", "DYNAMIC_IDS", "INTERACTIVE_V1_IDS", "DYNAMIC_V1_IDS", "CUSTOM_ID",
-           "MAX_EPISODE_STEPS", "register_envs"]
+__all__ = ["TRACKS", "ENV_IDS", "INTERACTIVE_IDS", "DYNAMIC_IDS", "INTERACTIVE_V1_IDS", "DYNAMIC_V1_IDS", "WORLD_IDS",
+           "CUSTOM_ID", "MAX_EPISODE_STEPS", "register_envs"]
 
 TRACKS = CIRCUITS
 """Circuits with a registered environment."""
@@ -50,6 +50,9 @@ INTERACTIVE_V1_IDS = tuple(f"SOfAR-{name}-Interactive-v1" for name in TRACKS)
 """Version 1 of the interactive world (``scenario="interactive-2"``: without the squeeze deadlock)."""
 DYNAMIC_V1_IDS = tuple(f"SOfAR-{name}-Dynamic-v1" for name in TRACKS)
 """Version 1 of the dynamic world (``scenario="dynamic-2"``: without the squeeze deadlock)."""
+WORLD_IDS: dict[str, tuple[str, ...]] = {"paper": ENV_IDS, "interactive": INTERACTIVE_IDS, "dynamic": DYNAMIC_IDS,
+                                          "interactive-2": INTERACTIVE_V1_IDS, "dynamic-2": DYNAMIC_V1_IDS}
+"""The registered ids of each world (``scenario``), in the order of :data:`TRACKS`."""
 CUSTOM_ID = "SOfAR-Custom-v0"
 """A circuit of your own: ``track=`` a circuit folder or a :class:`~sofar_env.tracks.Track` (required; any world
 through ``scenario=``)."""
@@ -73,9 +76,8 @@ def _register(env_id: str, entry_point: str, vector_entry_point: str, kwargs: di
 def register_envs() -> None:
     """Register every id of :data:`ENV_IDS`, :data:`INTERACTIVE_IDS`, :data:`DYNAMIC_IDS`, :data:`INTERACTIVE_V1_IDS`,
     :data:`DYNAMIC_V1_IDS` and :data:`CUSTOM_ID` (idempotent)."""
-    for ids, extra in ((ENV_IDS, {}), (INTERACTIVE_IDS, {"scenario": "interactive"}),
-                       (DYNAMIC_IDS, {"scenario": "dynamic"}), (INTERACTIVE_V1_IDS, {"scenario": "interactive-2"}),
-                       (DYNAMIC_V1_IDS, {"scenario": "dynamic-2"})):
+    for world, ids in WORLD_IDS.items():
+        extra = {} if world == "paper" else {"scenario": world}
         for name, env_id in zip(TRACKS, ids):
             _register(env_id, ENTRY_POINT, VECTOR_ENTRY_POINT, {"track": name, **extra})
     _register(CUSTOM_ID, CUSTOM_ENTRY_POINT, CUSTOM_VECTOR_ENTRY_POINT, {})
