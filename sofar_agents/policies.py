@@ -174,6 +174,7 @@ def load_policy(path: str | Path, preference: Any = None, obs_dim: int | None = 
 SHIPPED_POLICIES: dict[tuple[str, str], str] = {
     ("sofar-17", "paper"): "pasta_lagunaseca_sofar17.json",
     ("sofar-17", "interactive"): "pasta_lagunaseca_interactive_sofar17.json",
+    ("sofar-17", "interactive-2"): "pasta_lagunaseca_interactive2_sofar17.json",
     ("sofar-13", "paper"): "pasta_lagunaseca_sofar13.json",
     ("sofar-13", "interactive"): "pasta_lagunaseca_interactive_sofar13.json",
     ("sofar-6", "paper"): "pasta_lagunaseca_sofar6.json",
@@ -187,7 +188,9 @@ SHIPPED_POLICIES: dict[tuple[str, str], str] = {
 """The shipped PASTA policies, by (controller preset they were trained with, world scenario): all trained on
 Laguna Seca only; ``"sofar"`` looks up the default controller's version (``"sofar-17"``). The interactive ones
 were trained with a field of 8 opponents (``n_opponents=8``), the dense field of the interactive world, and observe
-the interactive world's 16 values. The ``"sofar-13"``, ``"sofar-6"``, ``"sofar-4"`` and ``"sofar-1"`` ones were
+the interactive world's 16 values; ``"interactive"`` is the world of the ``-Interactive-v0`` ids, ``"interactive-2"``
+that of the ``-Interactive-v1`` ids (the same recipe and training seed in the world without the squeeze deadlock).
+The ``"sofar-13"``, ``"sofar-6"``, ``"sofar-4"`` and ``"sofar-1"`` ones were
 trained with the former defaults and made their tables, by the same recipes."""
 
 
@@ -200,6 +203,7 @@ NAMED_POLICIES: dict[str, str] = {
     "lagunaseca-paper": "pasta_lagunaseca_paper.json",
     "lagunaseca-interactive": "pasta_lagunaseca_interactive.json",
     "lagunaseca-interactive-sofar-17": "pasta_lagunaseca_interactive_sofar17.json",
+    "lagunaseca-interactive-2-sofar-17": "pasta_lagunaseca_interactive2_sofar17.json",
     "lagunaseca-interactive-sofar-13": "pasta_lagunaseca_interactive_sofar13.json",
     "lagunaseca-interactive-sofar-6": "pasta_lagunaseca_interactive_sofar6.json",
     "lagunaseca-interactive-sofar-4": "pasta_lagunaseca_interactive_sofar4.json",
@@ -220,23 +224,25 @@ NAMED_POLICIES: dict[str, str] = {
 ``lagunaseca-interactive-sofar-4``: the same recipes with ``"sofar-4"``, the second; ``lagunaseca-sofar-6`` and
 ``lagunaseca-interactive-sofar-6``: with ``"sofar-6"``, the third; ``lagunaseca-sofar-13`` and
 ``lagunaseca-interactive-sofar-13``: with ``"sofar-13"``, the fourth; ``lagunaseca-sofar-17`` and
-``lagunaseca-interactive-sofar-17``: the same recipes with the default controller. ``morl-dynamic-sofar-6`` and
-``morl-interactive-sofar-6``: the preference-conditioned policies of the dynamic and the dense interactive world
-(8 opponents), trained with ``"sofar-6"`` (the default before ``"sofar-13"``) on Laguna Seca, started at the
-cautious end of the gamma range with a preference drawn every 64 decisions along the safety-overtakes path
-(``preference_sampling="trade-off"``); ``morl-dynamic-sofar-4`` and ``morl-interactive-sofar-4``: the same
-recipes with ``"sofar-4"``; ``morl-dynamic-sofar-13`` and ``morl-interactive-sofar-13``: with ``"sofar-13"``
-(the default before ``"sofar-17"``; fronts: ``results/interactive_dense/morl_sofar13/``,
-``results/dynamic/morl_sofar13/``);
+``lagunaseca-interactive-sofar-17``: the same recipes with the default controller;
+``lagunaseca-interactive-2-sofar-17``: the interactive recipe with the default controller in the world of the
+``-Interactive-v1`` ids. ``morl-dynamic-sofar-6`` and ``morl-interactive-sofar-6``: the preference-conditioned
+policies of the dynamic and the dense interactive world (8 opponents), trained with ``"sofar-6"`` (the default
+before ``"sofar-13"``) on Laguna Seca, started at the cautious end of the gamma range with a preference drawn every
+64 decisions along the safety-overtakes path (``preference_sampling="trade-off"``); ``morl-dynamic-sofar-4`` and
+``morl-interactive-sofar-4``: the same recipes with ``"sofar-4"``; ``morl-dynamic-sofar-13`` and
+``morl-interactive-sofar-13``: with ``"sofar-13"`` (the default before ``"sofar-17"``; fronts:
+``results/interactive_dense/morl_sofar13/``, ``results/dynamic/morl_sofar13/``);
 ``morl-interactive-sofar-13-sigmoid`` and ``morl-dynamic-sofar-13-sigmoid``: the same recipes with the action
 squashed by a sigmoid instead of clipped and GAE lambda 0.99: faster at every preference than the clipped ones,
-weaker at the cautious end (``docs/decisions/pasta-preference.md``, ``results/interactive_dense/morl_sofar13/sigmoid/``,
-``results/dynamic/morl_sofar13/sigmoid/``); ``morl-interactive-sofar-17``: the dense sigmoid recipe with the default
-controller (training seed 91; ``results/interactive_dense/morl_sofar17/``); ``morl-dynamic-sofar-17``: the dynamic
-sigmoid recipe with the default controller, trained on all four circuits (``train/pasta.py --circuits``, training
-seed 82; ``results/dynamic/morl_sofar17/``). Their gamma falls as the safety weight
-grows (``tests/agents/test_policies.py``, ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic
-world's first such policy, trained with ``"sofar-1"`` from the middle of the range."""
+weaker at the cautious end (``docs/decisions/pasta-preference.md``,
+``results/interactive_dense/morl_sofar13/sigmoid/``, ``results/dynamic/morl_sofar13/sigmoid/``);
+``morl-interactive-sofar-17``: the dense sigmoid recipe with the default controller (training seed 91;
+``results/interactive_dense/morl_sofar17/``); ``morl-dynamic-sofar-17``: the dynamic sigmoid recipe with the default
+controller, trained on all four circuits (``train/pasta.py --circuits``, training seed 82;
+``results/dynamic/morl_sofar17/``). Their gamma falls as the safety weight grows (``tests/agents/test_policies.py``,
+``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic world's first such policy, trained with
+``"sofar-1"`` from the middle of the range."""
 
 
 def named_policy_path(name: str) -> Path:

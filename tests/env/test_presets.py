@@ -43,6 +43,8 @@ def test_paper_preset_never_follows_where_the_default_stack_does():
                                                    ("sofar-17", "paper", "pasta_lagunaseca_sofar17.json"),
                                                    ("sofar-17", "interactive",
                                                     "pasta_lagunaseca_interactive_sofar17.json"),
+                                                   ("sofar", "interactive-2",
+                                                    "pasta_lagunaseca_interactive2_sofar17.json"),
                                                    ("sofar-13", "paper", "pasta_lagunaseca_sofar13.json"),
                                                    ("sofar-13", "interactive",
                                                     "pasta_lagunaseca_interactive_sofar13.json"),
@@ -58,7 +60,7 @@ def test_shipped_policies_load_by_name(stack, scenario, name):
     path = default_policy_path(stack=stack, scenario=scenario)
     assert path.name == name
     policy = load_policy(path)
-    suffix = "-Interactive-v0" if scenario == "interactive" else "-v0"
+    suffix = {"interactive": "-Interactive-v0", "interactive-2": "-Interactive-v1"}.get(scenario, "-v0")
     env = gym.make(f"SOfAR-LagunaSeca{suffix}", stack=stack)
     obs, _ = env.reset(seed=0)
     gamma = float(np.asarray(policy(obs)).reshape(-1)[0])
@@ -75,6 +77,11 @@ def test_the_default_controller_has_its_own_policies():
                                default_policy_path(stack="sofar-6", scenario=scenario),
                                default_policy_path(stack="sofar-4", scenario=scenario),
                                default_policy_path(stack="sofar-1", scenario=scenario))
+    # each version of the interactive world has its own policy (same recipe and seed, trained in that world)
+    assert default_policy_path(stack="sofar", scenario="interactive-2") != default_policy_path(stack="sofar",
+                                                                                              scenario="interactive")
+    with pytest.raises(ValueError, match="no shipped PASTA policy"):
+        default_policy_path(stack="sofar-13", scenario="interactive-2")
     with pytest.raises(ValueError, match="no shipped PASTA policy"):
         default_policy_path(stack="sofar-3")
     with pytest.raises(ValueError, match="no shipped PASTA policy"):
