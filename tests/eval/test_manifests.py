@@ -318,3 +318,30 @@ def test_the_cli_runs_several_manifests_in_one_pass_and_lists_one_controller_s(t
     caplog.clear()
     assert cli.main(["--folder", str(tmp_path), "list", "--stack", "paper"]) == 0
     assert "b: table1" in caplog.text and "a: table1" not in caplog.text
+
+
+HEADLINE_WORLD_TABLES = {"interactive_table1": "Interactive", "interactive_seed9900": "Interactive",
+                         "interactive_dense_table1": "Interactive", "interactive_dense_table2": "Interactive",
+                         "interactive_dense_seed9900": "Interactive", "interactive_dense_figures": "Interactive",
+                         "dynamic_table1": "Dynamic", "dynamic_seed9900": "Dynamic"}
+"""The default's headline tables of the interactive and dynamic worlds, by the family of ids they describe."""
+
+
+@pytest.mark.parametrize("name", HEADLINE_WORLD_TABLES)
+def test_headline_tables_are_made_in_the_world_of_the_newest_ids_and_keep_the_former_one(name: str) -> None:
+    """A headline table describes the world ``gym.make`` gives without a version (the newest id); the table of the
+    version before is kept under ``NAME_v0`` with the default pinned, its rows in that world."""
+    import gymnasium as gym
+    from gymnasium.envs.registration import find_highest_version
+
+    import sofar_env  # noqa: F401  (registers the ids)
+
+    family = f"SOfAR-LagunaSeca-{HEADLINE_WORLD_TABLES[name]}"
+    newest = gym.spec(f"{family}-v{find_highest_version(None, family)}")
+    m = mf.load_manifest(ROOT / "experiments" / f"{name}.toml")
+    assert m.stack == "sofar" and m.scenario == newest.kwargs["scenario"]
+    before = mf.load_manifest(ROOT / "experiments" / f"{name}_v0.toml")
+    assert before.scenario == gym.spec(f"{family}-v0").kwargs["scenario"] != m.scenario
+    assert before.stack != "sofar" and before.kind == m.kind and before.seed == m.seed
+    rows = mf.raw_rows(ROOT / before.out / before.csv_name)
+    assert {r["scenario"] for r in rows} == {before.scenario} and {r["stack"] for r in rows} == {before.stack}
