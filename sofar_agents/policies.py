@@ -214,6 +214,8 @@ NAMED_POLICIES: dict[str, str] = {
     "morl-dynamic-sofar-6": "pasta_morl_dynamic_sofar6.json",
     "morl-dynamic-sofar-4": "pasta_morl_dynamic_sofar4.json",
     "morl-interactive-sofar-17": "pasta_morl_interactive_sofar17_sigmoid_seed91.json",
+    "morl-interactive-2-sofar-17": "pasta_morl_interactive2_sofar17_sigmoid_seed91.json",
+    "morl-dynamic-2-sofar-17": "pasta_morl_dynamic2_sofar17_circuits_seed82.json",
     "morl-interactive-sofar-13": "pasta_morl_interactive_sofar13.json",
     "morl-interactive-sofar-13-sigmoid": "pasta_morl_interactive_sofar13_sigmoid.json",
     "morl-interactive-sofar-6": "pasta_morl_interactive_sofar6.json",
@@ -240,7 +242,10 @@ weaker at the cautious end (``docs/decisions/pasta-preference.md``,
 ``morl-interactive-sofar-17``: the dense sigmoid recipe with the default controller (training seed 91;
 ``results/interactive_dense/morl_sofar17/``); ``morl-dynamic-sofar-17``: the dynamic sigmoid recipe with the default
 controller, trained on all four circuits (``train/pasta.py --circuits``, training seed 82;
-``results/dynamic/morl_sofar17/``). Their gamma falls as the safety weight grows (``tests/agents/test_policies.py``,
+``results/dynamic/morl_sofar17/``). ``morl-interactive-2-sofar-17`` and ``morl-dynamic-2-sofar-17``: the same two
+recipes and training seeds re-trained in the world of the ``-v1`` ids (``scenario="interactive-2"``,
+``"dynamic-2"``; fronts: ``results/interactive_dense/morl_sofar17_v1/``, ``results/dynamic/morl_sofar17_v1/``).
+Their gamma falls as the safety weight grows (``tests/agents/test_policies.py``,
 ``docs/decisions/pasta-preference.md``). ``morl-dynamic``: the dynamic world's first such policy, trained with
 ``"sofar-1"`` from the middle of the range."""
 

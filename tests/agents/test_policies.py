@@ -130,23 +130,18 @@ def test_every_named_policy_ships_and_loads_by_name():
         named_policy_path("morl")
 
 
-WORLD_V1_MORL = ("results/interactive_dense/morl_sofar17_v1/pasta_morl_interactive2_sofar17_sigmoid_seed91.json",
-                 "results/dynamic/morl_sofar17_v1/pasta_morl_dynamic2_sofar17_circuits_seed82.json")
-"""The preference-conditioned policies re-trained in world version 1 (committed with their fronts, not shipped)."""
-
-
 @pytest.mark.parametrize("name", ["morl-dynamic", "morl-dynamic-sofar-4", "morl-interactive-sofar-4",
                                   "morl-dynamic-sofar-6", "morl-interactive-sofar-6", "morl-dynamic-sofar-13",
                                   "morl-interactive-sofar-13", "morl-interactive-sofar-13-sigmoid",
                                   "morl-dynamic-sofar-13-sigmoid", "morl-interactive-sofar-17",
-                                  "morl-dynamic-sofar-17", *WORLD_V1_MORL])
+                                  "morl-dynamic-sofar-17", "morl-interactive-2-sofar-17",
+                                  "morl-dynamic-2-sofar-17"])
 def test_the_shipped_morl_policies_lower_gamma_as_safety_weighs_more(name):
     """The documented direction of the preference input, on fixed states: the mean gamma over a set of
-    observations falls as the safety weight grows (overtakes weight 0.9 minus it), and by a margin. The committed
-    version-1 re-trainings (``results/*/morl_sofar17_v1/``) too."""
+    observations falls as the safety weight grows (overtakes weight 0.9 minus it), and by a margin."""
     from sofar_agents.evaluation.preference_probe import safety_preferences
 
-    policy = load_policy(Path(__file__).resolve().parents[2] / name if name in WORLD_V1_MORL else name)
+    policy = load_policy(name)
     obs = np.random.default_rng(0).uniform(-0.5, 0.5, (200, policy.obs_dim)).astype(np.float32)
     means = []
     for w in safety_preferences([0.1, 0.3, 0.5, 0.7, 0.9]):
