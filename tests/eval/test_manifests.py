@@ -52,7 +52,8 @@ EXTRA_STRATEGIES: dict[str, set[str]] = {
                                      "interactive_dense_morl_pareto_seed22500_world2_sofar_17",
                                      "interactive_dense_morl_pareto_seed25100_world2_sofar_17",
                                      "dynamic_morl_pareto_seed22500_world2_sofar_17",
-                                     "dynamic_morl_pareto_seed25100_world2_sofar_17")
+                                     "dynamic_morl_pareto_seed25100_world2_sofar_17",
+                                     "dynamic_morl_pareto_seed26900_world2_sofar_17_reference")
 }
 """Rows of a pareto file that are not its manifest's episodes (same configuration hash; the SB3 zip that made them is
 not committed), documented in the manifest."""
